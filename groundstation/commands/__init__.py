@@ -1,0 +1,1 @@
+"""Sub-commands of the ``groundstation`` command line, one module each."""

@@ -1,0 +1,1 @@
+"""Closed-loop subspace identification: IEM and PO-MOESP."""
