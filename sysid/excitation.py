@@ -51,7 +51,7 @@ __all__ = [
 
 
 class ExcitationError(SysIdError, ValueError):
-    """Parameters of an excitation signal that cannot be honoured (one line, says what to change)."""
+    """Excitation parameters that cannot be honoured (one line, says what to change)."""
 
 
 LFSR_TAPS: dict[int, tuple[int, ...]] = {
@@ -233,7 +233,7 @@ def chirp(
     amplitude: float,
     sweep: str = "linear",
 ) -> np.ndarray:
-    """Frequency sweep :math:`u_k = A \\sin\\varphi(t_k)`, :math:`t_k = k\\,dt`, shape ``(n_samples,)``.
+    """Frequency sweep :math:`u_k = A \\sin\\varphi(t_k)`, :math:`t_k = k\\,dt`, shape ``(n,)``.
 
     With :math:`T = n\\,dt`: linear :math:`\\varphi = 2\\pi(f_0 t + (f_1 - f_0) t^2 / 2T)`;
     logarithmic :math:`\\varphi = 2\\pi f_0 T (r^{t/T} - 1) / \\ln r`, :math:`r = f_1 / f_0`.

@@ -109,8 +109,12 @@ def test_prbs_holds_chips_for_clock_period_with_given_amplitude():
 @pytest.mark.parametrize(("n", "p"), [(3, 1), (4, 1), (3, 2), (4, 3), (5, 2)])
 def test_persistence_order_matches_covariance_rank(n, p):
     """PE of order L: the L x L autocovariance matrix is positive definite; L + 1 is singular."""
-    u = prbs(n_samples=prbs_period(register_length=n, clock_period=p), register_length=n,
-             clock_period=p, seed=3)
+    u = prbs(
+        n_samples=prbs_period(register_length=n, clock_period=p),
+        register_length=n,
+        clock_period=p,
+        seed=3,
+    )
     r = np.real(np.fft.ifft(np.abs(np.fft.fft(u)) ** 2)) / u.size  # periodic autocovariance
     order = prbs_persistence_order(register_length=n, clock_period=p)
 
