@@ -1,0 +1,260 @@
+"""Emulated Crazyflie firmware: PID controller, legacy X mixer, RPYT commander, supervisor.
+
+Faithful to the conventions of crazyflie-firmware (``pid.c``, ``attitude_pid_controller.c``,
+``controller_pid.c``, ``power_distribution_quadrotor.c``, ``crtp_commander_rpyt.c``,
+``commander.c``, ``supervisor.c``):
+
+* The estimator's pitch is the *legacy* pitch ``theta_legacy = -theta`` (positive nose up), and the
+  rate loop is fed ``(gyro.x, -gyro.y, gyro.z)``; the yaw output is negated before mixing.
+* PID (``pid.c``): ``e = desired - measured``, ``u = kp e + ki sat(int e dt, i_limit)
+  + kd lpf(de/dt)``, the derivative passed through a 2nd-order Butterworth low-pass (20 Hz for
+  the rate loop, 10 Hz for the attitude loop); rate outputs saturate to ``+-32767``.
+* Mixer: ``r = roll/2``, ``p = pitch/2``; ``m1 = T - r + p + y``, ``m2 = T - r - p - y``,
+  ``m3 = T + r - p + y``, ``m4 = T + r + p - y``; if one exceeds 65535 all four are reduced by the
+  excess, then each is clipped at 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+__all__ = [
+    "RATE_LIMIT",
+    "Commander",
+    "Pid",
+    "PidController",
+    "Setpoint",
+    "Supervisor",
+    "mix_legacy_x",
+]
+
+RATE_LIMIT = 32767.0
+"""Saturation of the rate-loop outputs (``INT16_MAX``)."""
+MIN_THRUST = 1000
+MAX_THRUST = 60000
+WDT_LEVEL_OUT_MS = 500
+WDT_SHUTDOWN_MS = 2000
+IS_FLYING_HYSTERESIS_MS = 2000
+FLIGHT_THRESHOLD_PWM = 1000
+
+
+class Pid:
+    """One ``pid.c`` loop (units of the caller: deg and deg/s in, deg/s or PWM counts out)."""
+
+    __slots__ = ("_a1", "_a2", "_b0", "_b1", "_b2", "_d1", "_d2", "dt", "i_limit", "integ",
+                 "kd", "ki", "kp", "out_limit", "prev_error")
+
+    def __init__(self, *, kp: float, ki: float, kd: float, i_limit: float, out_limit: float,
+                 dt: float, cutoff_hz: float) -> None:
+        self.kp, self.ki, self.kd = kp, ki, kd
+        self.i_limit, self.out_limit, self.dt = i_limit, out_limit, dt
+        # lpf2p.c: 2nd-order Butterworth, direct form II.
+        fr = (1.0 / dt) / cutoff_hz
+        ohm = math.tan(math.pi / fr)
+        c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+        self._b0 = ohm * ohm / c
+        self._b1 = 2.0 * self._b0
+        self._b2 = self._b0
+        self._a1 = 2.0 * (ohm * ohm - 1.0) / c
+        self._a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
+        self.reset()
+
+    def reset(self) -> None:
+        """``pidReset``: clear integral, previous error and the derivative filter."""
+        self.integ = 0.0
+        self.prev_error = 0.0
+        self._d1 = self._d2 = 0.0
+
+    def update(self, error: float) -> float:
+        """One update with ``error = desired - measured``; returns the (limited) output."""
+        dt = self.dt
+        deriv = (error - self.prev_error) / dt
+        d0 = deriv - self._d1 * self._a1 - self._d2 * self._a2
+        fd = d0 * self._b0 + self._d1 * self._b1 + self._d2 * self._b2
+        self._d2, self._d1 = self._d1, d0
+        integ = self.integ + error * dt
+        lim = self.i_limit
+        if lim != 0.0:
+            integ = lim if integ > lim else -lim if integ < -lim else integ
+        self.integ = integ
+        out = self.kp * error + self.kd * fd + self.ki * integ
+        lim = self.out_limit
+        if lim != 0.0:
+            out = lim if out > lim else -lim if out < -lim else out
+        self.prev_error = error
+        return out
+
+
+def _cap_angle(a: float) -> float:
+    """``capAngle``: wrap degrees to [-180, 180)."""
+    return (a + 180.0) % 360.0 - 180.0
+
+
+class PidController:
+    """``controller_pid.c`` in RPYT mode: attitude (deg) -> rate (deg/s) -> int16 outputs."""
+
+    # name: (kp, ki, kd, i_limit), platform_defaults_cf2.h
+    GAINS: ClassVar[dict[str, tuple[float, float, float, float]]] = {
+        "roll_rate": (250.0, 500.0, 2.5, 33.3),
+        "pitch_rate": (250.0, 500.0, 2.5, 33.3),
+        "yaw_rate": (120.0, 16.7, 0.0, 166.7),
+        "roll": (6.0, 3.0, 0.0, 20.0),
+        "pitch": (6.0, 3.0, 0.0, 20.0),
+        "yaw": (6.0, 1.0, 0.35, 360.0),
+    }
+
+    def __init__(self, *, dt: float = 1.0 / 500.0, yaw_max_delta_deg: float = 0.0) -> None:
+        self.dt = dt
+        self.yaw_max_delta_deg = yaw_max_delta_deg
+        self.pids: dict[str, Pid] = {}
+        for name, (kp, ki, kd, il) in self.GAINS.items():
+            rate = name.endswith("_rate")
+            self.pids[name] = Pid(kp=kp, ki=ki, kd=kd, i_limit=il,
+                                  out_limit=RATE_LIMIT if rate else 0.0, dt=dt,
+                                  cutoff_hz=20.0 if rate else 10.0)
+        self.yaw_desired = 0.0
+        self.roll_out = self.pitch_out = self.yaw_out = 0.0
+
+    def reset(self, *, yaw_deg: float) -> None:
+        """``attitudeControllerResetAllPID`` and re-seed the integrated yaw setpoint."""
+        for pid in self.pids.values():
+            pid.reset()
+        self.yaw_desired = yaw_deg
+        self.roll_out = self.pitch_out = self.yaw_out = 0.0
+
+    def update(self, *, sp: Setpoint, roll: float, pitch_legacy: float, yaw: float,
+               gx: float, gy: float, gz: float) -> tuple[float, float, float]:
+        """One 500 Hz update; angles in deg (legacy pitch), gyro in deg/s (body, right-handed).
+
+        Returns ``(control.roll, control.pitch, control.yaw)`` in int16 units, yaw already
+        negated as ``controller_pid.c`` does.
+        """
+        yd = _cap_angle(self.yaw_desired + sp.yawrate * self.dt)
+        ymd = self.yaw_max_delta_deg
+        if ymd != 0.0:
+            delta = _cap_angle(yd - yaw)
+            if delta > ymd:
+                yd = yaw + ymd
+            elif delta < -ymd:
+                yd = yaw - ymd
+        self.yaw_desired = yd
+        p = self.pids
+        rr = p["roll"].update(sp.roll - roll)
+        pr = p["pitch"].update(sp.pitch - pitch_legacy)
+        ye = yd - yaw
+        ye = ye - 360.0 if ye > 180.0 else ye + 360.0 if ye < -180.0 else ye
+        yr = p["yaw"].update(ye)
+        self.roll_out = float(int(p["roll_rate"].update(rr - gx)))
+        self.pitch_out = float(int(p["pitch_rate"].update(pr + gy)))   # measured = -gyro.y
+        self.yaw_out = -float(int(p["yaw_rate"].update(yr - gz)))
+        return self.roll_out, self.pitch_out, self.yaw_out
+
+
+def mix_legacy_x(*, thrust: float, roll: float, pitch: float,
+                 yaw: float) -> tuple[int, int, int, int]:
+    """Legacy X mixer with the "reduce all four" saturation rule; returns PWM m1..m4 (0..65535)."""
+    r = int(roll / 2.0)
+    p = int(pitch / 2.0)
+    y = int(yaw)
+    t = int(thrust)
+    m1 = t - r + p + y
+    m2 = t - r - p - y
+    m3 = t + r - p + y
+    m4 = t + r + p - y
+    hi = max(m1, m2, m3, m4)
+    red = hi - 65535 if hi > 65535 else 0
+    return (max(m1 - red, 0), max(m2 - red, 0), max(m3 - red, 0), max(m4 - red, 0))
+
+
+@dataclass(slots=True)
+class Setpoint:
+    """What the controller is asked for: deg, legacy pitch (nose up > 0), deg/s, PWM counts."""
+
+    roll: float = 0.0
+    pitch: float = 0.0
+    yawrate: float = 0.0
+    thrust: float = 0.0
+
+
+class Commander:
+    """``crtp_commander_rpyt.c`` decoding plus the ``commander.c`` setpoint watchdog."""
+
+    def __init__(self) -> None:
+        self.thrust_locked = True
+        self.priority_disabled = True      # COMMANDER_PRIORITY_DISABLE at boot
+        self.sp = Setpoint()
+        self.timestamp_ms = 0
+
+    def rpyt(self, *, roll: float, pitch: float, yawrate: float, thrust: int,
+             now_ms: int) -> None:
+        """Decode one legacy RPYT packet (values exactly as on the wire)."""
+        if self.priority_disabled:
+            self.thrust_locked = True
+        if thrust == 0:
+            self.thrust_locked = False
+        t = 0 if (self.thrust_locked or thrust < MIN_THRUST) else min(thrust, MAX_THRUST)
+        self.sp = Setpoint(roll=roll, pitch=pitch, yawrate=yawrate, thrust=float(t))
+        self.timestamp_ms = now_ms
+        self.priority_disabled = False
+
+    def stop(self, *, now_ms: int) -> None:
+        """The generic commander's stop setpoint: the null setpoint, motors off."""
+        self.sp = Setpoint()
+        self.timestamp_ms = now_ms
+        self.priority_disabled = False
+
+    def notify_stop(self, *, remain_valid_ms: int, now_ms: int) -> None:
+        """``commanderNotifySetpointsStop``: the setpoint expires in ``remain_valid_ms``."""
+        setback = min(WDT_SHUTDOWN_MS - remain_valid_ms, now_ms)
+        self.timestamp_ms = now_ms - setback
+
+    def age_ms(self, now_ms: int) -> int:
+        """Milliseconds since the current setpoint was set."""
+        return now_ms - self.timestamp_ms
+
+    def current(self, *, now_ms: int) -> Setpoint:
+        """The setpoint the stabilizer uses now, after the watchdog."""
+        age = now_ms - self.timestamp_ms
+        if age > WDT_SHUTDOWN_MS:
+            self.sp = Setpoint()
+        elif age > WDT_LEVEL_OUT_MS:
+            self.priority_disabled = True
+            sp = self.sp
+            if sp.roll or sp.pitch or sp.yawrate:
+                self.sp = Setpoint(thrust=sp.thrust)
+        return self.sp
+
+
+class Supervisor:
+    """``supervisor.c``, reduced to what a user can observe: arming, flying, level-out, lock."""
+
+    def __init__(self, *, auto_arm: bool = True) -> None:
+        self.armed = auto_arm
+        self.locked = False
+        self.latest_thrust_ms = -1
+        self.is_flying = False
+        self.state = "ReadyToFly" if auto_arm else "PreFlChecksPassed"
+
+    def update(self, *, now_ms: int, motor_sum: int, setpoint_age_ms: int) -> bool:
+        """Update at 1 kHz; returns whether the motors may run. Sets ``locked`` on timeout."""
+        if self.locked:
+            return False
+        if motor_sum > FLIGHT_THRESHOLD_PWM:
+            self.latest_thrust_ms = now_ms
+        self.is_flying = (self.latest_thrust_ms >= 0
+                          and now_ms - self.latest_thrust_ms < IS_FLYING_HYSTERESIS_MS)
+        if not self.armed:
+            self.state = "PreFlChecksPassed"
+            return False
+        if self.is_flying and setpoint_age_ms > WDT_SHUTDOWN_MS:
+            self.locked = True
+            self.is_flying = False
+            self.state = "Locked"
+            return False
+        if self.is_flying:
+            self.state = "WarningLevelOut" if setpoint_age_ms > WDT_LEVEL_OUT_MS else "Flying"
+        else:
+            self.state = "ReadyToFly"
+        return True

@@ -1,0 +1,325 @@
+"""SimVehicle: a simulated Crazyflie 2.1 (physics at 1 kHz plus emulated firmware).
+
+This is the object the CRTP side (``groundstation/sim/crtp.py``) drives. Everything it exposes is
+what the real vehicle exposes on the wire: log variables, parameters, console text, commander
+input. Sign conventions are the firmware's (see docs/simulator.md): ``stabilizer.pitch`` is the
+legacy pitch, positive nose up; ``gyro`` is right-handed in the body frame (x forward, y left,
+z up); a wire pitch of ``-10`` (what ``cflib`` sends for ``send_setpoint(pitch=+10)``) tilts the
+nose down, so ``stabilizer.pitch`` settles at ``-10`` and ``gyro.y`` is positive while it tilts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import random
+from collections.abc import Callable
+from typing import ClassVar
+
+from groundstation.errors import GroundStationError
+from groundstation.sim.firmware import Commander, PidController, Supervisor, mix_legacy_x
+from groundstation.sim.physics import Battery, RigidBody, VehicleConstants, motor_thrust_n
+from groundstation.sim.sensors import NoiseModel, Sensors
+
+__all__ = ["SimConfigError", "SimVehicle"]
+
+log = logging.getLogger(__name__)
+
+_DT_S = 0.001          # physics / stabilizer tick
+_PID_DT_S = 0.002      # attitude and rate loops, 500 Hz
+_FIRMWARE_REVISION0 = 0x2024_0A00   # arbitrary but stable identifier of the emulated build
+
+
+class SimConfigError(GroundStationError, ValueError):
+    """A simulator option is unknown or out of range."""
+
+
+class SimVehicle:
+    """A simulated Crazyflie 2.1: rigid-body physics at 1 kHz + emulated firmware (PID, mixer,
+    commander, supervisor, sensors). Deterministic for a given seed. Not thread-safe: the owner
+    (the CRTP side) calls it from one thread only.
+
+    ``overrides`` set fields of :class:`~groundstation.sim.physics.VehicleConstants` (e.g.
+    ``mass_kg=0.030``), of :class:`~groundstation.sim.sensors.NoiseModel` (e.g.
+    ``gyro_vib_dps=0``), or ``auto_arm`` (default True, as on a CF2.1).
+    """
+
+    LOG_VARIABLES: ClassVar[dict[str, str]] = {
+        "acc.x": "float", "acc.y": "float", "acc.z": "float",
+        "gyro.x": "float", "gyro.y": "float", "gyro.z": "float",
+        "stabilizer.roll": "float", "stabilizer.pitch": "float", "stabilizer.yaw": "float",
+        "stabilizer.thrust": "float",
+        "motor.m1": "uint16_t", "motor.m2": "uint16_t", "motor.m3": "uint16_t",
+        "motor.m4": "uint16_t",
+        "pm.vbat": "float", "pm.batteryLevel": "uint8_t",
+        "controller.cmd_thrust": "float", "controller.cmd_roll": "float",
+        "controller.cmd_pitch": "float", "controller.cmd_yaw": "float",
+        "stateEstimate.x": "float", "stateEstimate.y": "float", "stateEstimate.z": "float",
+    }
+
+    PARAMS: ClassVar[dict[str, str]] = {
+        **{f"{g}.{a}_{k}": "float" for g in ("pid_rate", "pid_attitude")
+           for a in ("roll", "pitch", "yaw") for k in ("kp", "ki", "kd")},
+        "stabilizer.estimator": "uint8_t",
+        "stabilizer.controller": "uint8_t",
+        "stabilizer.stop": "uint8_t",
+        "commander.enHighLevel": "uint8_t",
+        "pm.lowVoltage": "float",
+        "pm.criticalLowVoltage": "float",
+        "firmware.revision0": "uint32_t",
+        "firmware.revision1": "uint16_t",
+        "firmware.modified": "uint8_t",
+    }
+    PARAMS_READ_ONLY = frozenset({"firmware.revision0", "firmware.revision1", "firmware.modified"})
+
+    def __init__(self, *, seed: int = 0, vbat_full: float = 4.15, **overrides: float) -> None:
+        const_fields = {f.name for f in dataclasses.fields(VehicleConstants)}
+        noise_fields = {f.name for f in dataclasses.fields(NoiseModel)}
+        auto_arm = bool(overrides.pop("auto_arm", True))
+        unknown = sorted(set(overrides) - const_fields - noise_fields)
+        if unknown:
+            raise SimConfigError(
+                f"unknown simulator option(s) {unknown}; choose from "
+                f"{sorted(const_fields | noise_fields | {'auto_arm'})}")
+        if not 3.0 < vbat_full <= 4.25:
+            raise SimConfigError(f"vbat_full={vbat_full} V is not a LiPo voltage; use 3.0..4.25 V")
+        self.const = VehicleConstants(**{k: float(v) for k, v in overrides.items()
+                                         if k in const_fields})
+        noise = NoiseModel(**{k: float(v) for k, v in overrides.items() if k in noise_fields})
+        self._rng = random.Random(seed)
+        self.body = RigidBody(c=self.const)
+        self.battery = Battery(full_v=vbat_full, c=self.const)
+        self.sensors = Sensors(rng=self._rng, noise=noise)
+        self.controller = PidController(dt=_PID_DT_S)
+        self.commander = Commander()
+        self.supervisor = Supervisor(auto_arm=auto_arm)
+        self._tick = 0
+        self._pwm = (0, 0, 0, 0)
+        self._targets = (0.0, 0.0, 0.0, 0.0)
+        self._control = (0.0, 0.0, 0.0, 0.0)   # thrust, roll, pitch, yaw (mixer inputs)
+        self._att = (0.0, 0.0, 0.0)             # roll, legacy pitch, yaw, deg
+        self._emergency_stop = False
+        self._low_warned = False
+        self.stop_count = 0
+        self._console: list[str] = [
+            "SYS: ----------------------------\n",
+            "SYS: Crazyflie 2.1 (simulated by groundstation.sim) is up and running!\n",
+        ]
+        self._params: dict[str, float] = {
+            "stabilizer.estimator": 1.0, "stabilizer.controller": 1.0, "stabilizer.stop": 0.0,
+            "commander.enHighLevel": 0.0, "pm.lowVoltage": 3.2, "pm.criticalLowVoltage": 3.0,
+            "firmware.revision0": float(_FIRMWARE_REVISION0), "firmware.revision1": 0.0,
+            "firmware.modified": 0.0,
+        }
+        self._log_getters = self._make_log_getters()
+
+    # ----------------------------------------------------------------- time
+    @property
+    def time_s(self) -> float:
+        """Simulation time since power-on, seconds."""
+        return self._tick * _DT_S
+
+    @property
+    def firmware_ms(self) -> int:
+        """Firmware tick in ms (what log packets carry)."""
+        return self._tick
+
+    def advance(self, dt_s: float) -> None:
+        """Step the 1 kHz loop by ``round(dt_s * 1000)`` ms."""
+        step = self._step
+        for _ in range(round(dt_s * 1000.0)):
+            step()
+
+    def _step(self) -> None:
+        self._tick = tick = self._tick + 1
+        body = self.body
+        if not tick & 1:
+            self._firmware_tick(tick)
+        t1, t2, t3, t4 = self._targets
+        body.step(t1=t1, t2=t2, t3=t3, t4=t4, dt=_DT_S)
+
+    def _firmware_tick(self, now: int) -> None:
+        """The 500 Hz part: sensors, estimator, commander, supervisor, controller, mixer."""
+        body, sensors = self.body, self.sensors
+        pwm = self._pwm
+        sensors.sample(body=body, duty=(pwm[0] + pwm[1] + pwm[2] + pwm[3]) / 262140.0)
+        roll, pitch, yaw = body.euler_deg()
+        pitch = -pitch                                    # legacy CF2 convention
+        self._att = (roll, pitch, yaw)
+        cmd = self.commander
+        sp = cmd.current(now_ms=now)
+        sup = self.supervisor
+        was_locked = sup.locked
+        may_run = sup.update(now_ms=now, motor_sum=pwm[0] + pwm[1] + pwm[2] + pwm[3],
+                             setpoint_age_ms=cmd.age_ms(now))
+        if sup.locked and not was_locked:
+            self.stop_count += 1
+            self._console.append("SUPERVISOR: Locked due to setpoint timeout, reboot required\n")
+        ctrl = self.controller
+        thrust = sp.thrust
+        if thrust == 0.0:
+            ctrl.reset(yaw_deg=yaw)
+            self._control = (0.0, 0.0, 0.0, 0.0)
+        else:
+            r, p, y = ctrl.update(sp=sp, roll=roll, pitch_legacy=pitch, yaw=yaw,
+                                  gx=sensors.gx, gy=sensors.gy, gz=sensors.gz)
+            self._control = (thrust, r, p, y)
+        if may_run and not self._emergency_stop and thrust != 0.0:
+            t, r, p, y = self._control
+            pwm = mix_legacy_x(thrust=t, roll=r, pitch=p, yaw=y)
+        else:
+            pwm = (0, 0, 0, 0)
+        self._pwm = pwm
+        duties = (pwm[0] / 65535.0, pwm[1] / 65535.0, pwm[2] / 65535.0, pwm[3] / 65535.0)
+        vbat = self.battery.update(duties=duties, dt_s=_PID_DT_S)
+        c = self.const
+        self._targets = tuple(motor_thrust_n(pwm=m, vbat_v=vbat, c=c) for m in pwm)
+        if not self._low_warned and vbat < self._params["pm.lowVoltage"] and not any(pwm):
+            self._low_warned = True
+            self._console.append(f"PM: Battery low ({vbat:.2f} V)\n")
+
+    # ----------------------------------------------------------------- commander
+    def commander_rpyt(self, *, roll: float, pitch: float, yawrate: float, thrust: int) -> None:
+        """A legacy RPYT setpoint exactly as decoded from the wire (``<fffH``)."""
+        self.commander.rpyt(roll=roll, pitch=pitch, yawrate=yawrate, thrust=int(thrust),
+                            now_ms=self._tick)
+
+    def commander_stop(self) -> None:
+        """The stop setpoint: motors off."""
+        self.commander.stop(now_ms=self._tick)
+        self.stop_count += 1
+
+    def commander_notify_stop(self, *, remain_valid_ms: int) -> None:
+        """Hand priority back; the last setpoint stays valid for ``remain_valid_ms``."""
+        self.commander.notify_stop(remain_valid_ms=int(remain_valid_ms), now_ms=self._tick)
+
+    def arm(self, *, armed: bool) -> None:
+        """Supervisor arming request (a CF2.1 is armed from power-on)."""
+        if not self.supervisor.locked:
+            self.supervisor.armed = bool(armed)
+
+    # ----------------------------------------------------------------- log, params, console
+    def _make_log_getters(self) -> dict[str, Callable[[], float]]:
+        s, b = self.sensors, self.body
+        g: dict[str, Callable[[], float]] = {
+            "acc.x": lambda: s.ax, "acc.y": lambda: s.ay, "acc.z": lambda: s.az,
+            "gyro.x": lambda: s.gx, "gyro.y": lambda: s.gy, "gyro.z": lambda: s.gz,
+            "stabilizer.roll": lambda: self._att[0], "stabilizer.pitch": lambda: self._att[1],
+            "stabilizer.yaw": lambda: self._att[2],
+            "stabilizer.thrust": lambda: self._control[0],
+            "pm.vbat": lambda: self.battery.voltage_v,
+            "pm.batteryLevel": lambda: float(round(100.0 * self.battery.charge)),
+            "controller.cmd_thrust": lambda: self._control[0],
+            "controller.cmd_roll": lambda: self._control[1],
+            "controller.cmd_pitch": lambda: self._control[2],
+            "controller.cmd_yaw": lambda: self._control[3],
+            "stateEstimate.x": lambda: b.x, "stateEstimate.y": lambda: b.y,
+            "stateEstimate.z": lambda: b.z,
+        }
+        for i in range(4):
+            g[f"motor.m{i + 1}"] = lambda i=i: float(self._pwm[i])
+        return g
+
+    def read_log(self, name: str) -> float:
+        """Current value of log variable ``name`` (units as in the firmware: g, deg/s, deg, V)."""
+        try:
+            return self._log_getters[name]()
+        except KeyError:
+            raise KeyError(f"no log variable {name!r}; see SimVehicle.LOG_VARIABLES") from None
+
+    def read_param(self, name: str) -> float:
+        """Current value of parameter ``name``."""
+        group, _, field = name.partition(".")
+        if group in ("pid_rate", "pid_attitude"):
+            pid = self._pid_for(name)
+            return getattr(pid, field.rsplit("_", 1)[1])
+        try:
+            return self._params[name]
+        except KeyError:
+            raise KeyError(f"no parameter {name!r}; see SimVehicle.PARAMS") from None
+
+    def write_param(self, name: str, value: float) -> None:
+        """Set parameter ``name``; PID gains and ``stabilizer.stop`` change the behaviour."""
+        if name in self.PARAMS_READ_ONLY:
+            log.warning("parameter %s is read-only; write ignored", name)
+            return
+        group, _, field = name.partition(".")
+        if group in ("pid_rate", "pid_attitude"):
+            setattr(self._pid_for(name), field.rsplit("_", 1)[1], float(value))
+            return
+        if name not in self._params:
+            raise KeyError(f"no parameter {name!r}; see SimVehicle.PARAMS")
+        if self.PARAMS[name].startswith(("uint", "int")):
+            value = float(int(value))
+        self._params[name] = float(value)
+        if name == "stabilizer.stop":
+            self._emergency_stop = bool(value)
+
+    def _pid_for(self, name: str):
+        if name not in self.PARAMS:
+            raise KeyError(f"no parameter {name!r}; see SimVehicle.PARAMS")
+        group, _, field = name.partition(".")
+        axis = field.rsplit("_", 1)[0]
+        return self.controller.pids[f"{axis}_rate" if group == "pid_rate" else axis]
+
+    def drain_console(self) -> list[str]:
+        """Console lines printed since the last call."""
+        out, self._console = self._console, []
+        return out
+
+    # ----------------------------------------------------------------- read-only state
+    @property
+    def is_flying(self) -> bool:
+        """The supervisor's is-flying flag (motors above idle within the last 2 s)."""
+        return self.supervisor.is_flying
+
+    @property
+    def is_locked(self) -> bool:
+        """True once the watchdog has stopped the motors in flight; only a new vehicle unlocks."""
+        return self.supervisor.locked
+
+    @property
+    def supervisor_state(self) -> str:
+        """Supervisor state name as in ``supervisor.c`` (e.g. ``ReadyToFly``, ``Flying``)."""
+        return self.supervisor.state
+
+    @property
+    def motors_pwm(self) -> tuple[int, int, int, int]:
+        """Motor PWM m1..m4, 0..65535."""
+        return self._pwm
+
+    @property
+    def position_m(self) -> tuple[float, float, float]:
+        """Position in the world frame (z up, origin at the take-off point), m."""
+        b = self.body
+        return (b.x, b.y, b.z)
+
+    @property
+    def attitude_deg(self) -> tuple[float, float, float]:
+        """(roll, pitch, yaw) in deg as logged by ``stabilizer.*`` (legacy pitch: nose up > 0)."""
+        return self._att
+
+    @property
+    def velocity_m_s(self) -> tuple[float, float, float]:
+        """Velocity in the world frame, m/s."""
+        b = self.body
+        return (b.vx, b.vy, b.vz)
+
+    @property
+    def duty_mean(self) -> float:
+        """Mean motor duty (0..1)."""
+        return sum(self._pwm) / 262140.0
+
+    def hover_pwm_estimate(self) -> float:
+        """PWM at which the four motors carry the weight at the present battery voltage."""
+        c = self.const
+        w = c.mass_kg * 9.81 / 4.0
+        lo, hi = 0.0, 65535.0
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if motor_thrust_n(pwm=mid, vbat_v=self.battery.voltage_v, c=c) < w:
+                lo = mid
+            else:
+                hi = mid
+        return math.floor(0.5 * (lo + hi))
