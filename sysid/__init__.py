@@ -16,8 +16,11 @@ from sysid.errors import (
     SysIdError,
 )
 from sysid.model import StateSpaceModel, load_model
+from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
+from sysid.validate import CompareResult, compare, fit_percent, stable_predictor
 
 __all__ = [
+    "CompareResult",
     "DataError",
     "DimensionError",
     "HorizonError",
@@ -26,6 +29,14 @@ __all__ = [
     "ModelFileError",
     "OrderError",
     "StateSpaceModel",
+    "Stream",
     "SysIdError",
+    "compare",
+    "detrend_data",
+    "fit_percent",
+    "iodata_from_streams",
     "load_model",
+    "stable_predictor",
+    "trim",
+    "zoh_resample",
 ]

@@ -1,0 +1,412 @@
+"""Model validation that means something for a quadrotor (issue 3 item 7; thesis section 4.4).
+
+Motor command to angular rate is close to an integrator, so pure simulation of a whole flight
+drifts even for a good model. :func:`compare` therefore offers, like MATLAB ``compare``:
+
+* **simulation** ``horizon=None``: :math:`x(k+1) = A x(k) + B u(k)`,
+  :math:`\\hat y(k) = C x(k) + D u(k)` from an initial state estimated by least squares, over the
+  whole record or, with ``window`` (seconds), over consecutive windows each with its own
+  :math:`x_0`. With the forced response :math:`y_f` (zero initial state) and the extended
+  observability matrix :math:`\\mathcal O_L = [C; CA; \\dots; CA^{L-1}]` (the thesis'
+  :math:`\\Gamma_L`, section 3.1.1),
+
+  .. math:: \\hat x_0 = \\arg\\min_{x_0} \\| \\mathrm{vec}(y - y_f) - \\mathcal O_L x_0 \\|_2 .
+
+* **k-step-ahead prediction** ``horizon=k``: the predictor form of the innovation model
+  (thesis eq. 3.18, with :math:`A_K = A - KC`, :math:`B_K = B - KD` as in eq. 3.23)
+
+  .. math:: \\hat x(j+1) = (A - KC)\\,\\hat x(j) + (B - KD)\\,u(j) + K\\,y(j)
+
+  gives :math:`\\hat x(j|j-1)`; from :math:`\\hat x(t-k+1|t-k)` the model is run open-loop for
+  :math:`k-1` steps to :math:`\\hat y(t|t-k) = C\\hat x(t|t-k) + D u(t)`. ``horizon=1`` is the
+  one-step predictor; a horizon longer than the record is simulation. The first :math:`k-1`
+  samples (no measurement old enough) are simulated from :math:`\\hat x_0`.
+
+The fit is MATLAB's NRMSE fit, per channel:
+:math:`100\\,(1 - \\|y - \\hat y\\| / \\|y - \\bar y\\|)`.
+
+Models whose predictor :math:`A - KC` is unstable are flagged (``predictor_stable``) and logged;
+:func:`stable_predictor` returns the model with the steady-state Kalman gain, which makes
+:math:`A - KC` stable whenever :math:`(A, C)` is detectable.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sysid.data import IOData, as_flights
+from sysid.errors import DataError, DimensionError, HorizonError
+from sysid.model import StateSpaceModel
+
+__all__ = [
+    "CompareResult",
+    "compare",
+    "estimate_x0",
+    "fit_percent",
+    "observability_matrix",
+    "predict",
+    "simulate_windows",
+    "stable_predictor",
+]
+
+log = logging.getLogger(__name__)
+
+#: Rows of the observability matrix growing beyond this factor (unstable A) are left out of
+#: the initial-state fit: they carry no usable information and overflow.
+_MAX_GROWTH = 1e8
+
+def fit_percent(y_true: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
+    """NRMSE fit per channel, percent: ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``, shape (l,).
+
+    ``y_true`` and ``y_sim`` are (N, l) (1-D is one channel). 100 is a perfect fit, 0 is no
+    better than the mean, negative is worse. A constant channel of ``y_true`` gets NaN.
+    """
+    y = np.asarray(y_true, dtype=float)
+    yh = np.asarray(y_sim, dtype=float)
+    if y.ndim == 1:
+        y = y[:, None]
+    if yh.ndim == 1:
+        yh = yh[:, None]
+    if y.shape != yh.shape:
+        raise DimensionError(f"y_true {y.shape} and y_sim {yh.shape} differ; pass equal shapes")
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        err = np.linalg.norm(y - yh, axis=0)
+        spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
+        fit = 100.0 * (1.0 - err / spread)
+    fit[spread == 0] = np.nan
+    fit[~np.isfinite(err)] = -np.inf
+    return fit
+
+
+def observability_matrix(*, A: np.ndarray, C: np.ndarray, length: int) -> np.ndarray:
+    """Extended observability matrix ``[C; CA; ...; CA^(L-1)]`` stacked as (L, l, n).
+
+    Built by doubling (``log2 L`` matrix products), so long records cost no Python loop.
+    """
+    n = A.shape[0]
+    powers = np.eye(n)[None]  # A^0 .. A^(2^j - 1), (2^j, n, n)
+    step = A.copy()  # A^(2^j)
+    while powers.shape[0] < length:
+        powers = np.concatenate([powers, powers @ step], axis=0)
+        step = step @ step
+    return C[None] @ powers[:length]
+
+
+def _run_states(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """States x(0..L-1) of ``x(k+1) = A x(k) + Bu[..., k, :]`` for a batch.
+
+    ``Bu`` is (W, L, n) (already multiplied input), ``x0`` (W, n); returns (W, L, n).
+    """
+    w, length, n = Bu.shape
+    x = np.empty((w, length, n))
+    cur = np.array(x0, dtype=float)
+    at = A.T
+    for k in range(length):
+        x[:, k] = cur
+        cur = cur @ at + Bu[:, k]
+    return x
+
+
+def _split_windows(n_samples: int, window: int) -> list[slice]:
+    """Consecutive windows of ``window`` samples; the remainder joins the last window."""
+    if window >= n_samples:
+        return [slice(0, n_samples)]
+    starts = list(range(0, n_samples - window + 1, window))
+    bounds = [*starts, n_samples]
+    return [slice(a, b) for a, b in itertools.pairwise(bounds)]
+
+
+def estimate_x0(
+    *, A: np.ndarray, C: np.ndarray, residual: np.ndarray
+) -> np.ndarray:
+    """Least-squares initial state(s) explaining ``residual = y - y_forced``.
+
+    ``residual`` is (L, l) or a batch (W, L, l); returns (n,) or (W, n). Uses
+    :func:`observability_matrix` and one least-squares solve for the whole batch.
+    """
+    r = np.asarray(residual, dtype=float)
+    single = r.ndim == 2
+    if single:
+        r = r[None]
+    w, length, _ = r.shape
+    with np.errstate(over="ignore", invalid="ignore"):
+        obs = observability_matrix(A=A, C=C, length=length)  # (L, l, n)
+        # An unstable A makes late rows explode: keep the samples where all is finite and sane.
+        size = np.abs(obs).max(axis=(1, 2), initial=0.0)
+    usable = np.isfinite(size) & (size <= _MAX_GROWTH * max(np.abs(C).max(initial=0.0), 1.0))
+    usable &= np.isfinite(r).all(axis=(0, 2))
+    if not usable.any():
+        return np.zeros(A.shape[0]) if single else np.zeros((w, A.shape[0]))
+    obs_k = obs[usable].reshape(-1, A.shape[0])
+    rhs = r[:, usable].reshape(w, -1).T
+    x0, *_ = np.linalg.lstsq(obs_k, rhs, rcond=None)
+    return x0.T[0] if single else x0.T
+
+
+def simulate_windows(
+    model: StateSpaceModel, *, u: np.ndarray, y: np.ndarray, window: int | None = None,
+    x0: str | np.ndarray = "estimate",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Simulate ``model`` over ``u`` (N, m), whole or in windows of ``window`` samples.
+
+    Each window starts from its own least-squares initial state fitted to ``y`` (N, l)
+    (``x0="estimate"``), from zero (``"zero"``), or, without windows, from a given (n,) state.
+    Returns ``(y_sim (N, l), x0s (W, n))``.
+    """
+    A, B, C, D = _matrices(model)
+    n_samples, n = u.shape[0], A.shape[0]
+    slices = _split_windows(n_samples, window or n_samples)
+    y_sim = np.empty((n_samples, C.shape[0]))
+    x0s = np.zeros((len(slices), n))
+    if not isinstance(x0, str):
+        if window is not None:
+            raise DataError("a given x0 needs window=None; use x0='estimate' with windows")
+        x0s[0] = _as_state(x0, n)
+    # Windows of equal length run as one batch: at most two lengths (the last may be longer).
+    for length in sorted({sl.stop - sl.start for sl in slices}):
+        idx = [i for i, sl in enumerate(slices) if sl.stop - sl.start == length]
+        uw = np.stack([u[slices[i]] for i in idx])  # (W, L, m)
+        yw = np.stack([y[slices[i]] for i in idx])
+        states = _run_states(A=A, Bu=uw @ B.T, x0=np.zeros((len(idx), n)))
+        y_forced = states @ C.T + uw @ D.T
+        if isinstance(x0, str) and x0 == "estimate":
+            x0s[idx] = estimate_x0(A=A, C=C, residual=yw - y_forced)
+        obs = observability_matrix(A=A, C=C, length=length)  # (L, l, n)
+        free = np.einsum("kln,wn->wkl", obs, x0s[idx])
+        for j, i in enumerate(idx):
+            y_sim[slices[i]] = y_forced[j] + free[j]
+    return y_sim, x0s
+
+
+def predict(
+    model: StateSpaceModel, *, u: np.ndarray, y: np.ndarray, horizon: int,
+    x0: str | np.ndarray = "estimate",
+) -> tuple[np.ndarray, np.ndarray]:
+    """``horizon``-step-ahead prediction of ``y`` (N, l) from ``u`` (N, m) (module docstring).
+
+    Returns ``(y_pred (N, l), x0 (n,))``; ``x0="estimate"`` fits the predictor's initial state
+    by least squares on the one-step prediction errors.
+    """
+    A, B, C, D = _matrices(model)
+    K = _gain(model)
+    n_samples, n = u.shape[0], A.shape[0]
+    if horizon < 1:
+        raise HorizonError(f"horizon = {horizon}; pass a positive number of steps (or None)")
+    ak = A - K @ C
+    bu = u @ (B - K @ D).T + y @ K.T  # predictor input term, (N, n)
+    forced = _run_states(A=ak, Bu=bu[None], x0=np.zeros((1, n)))[0]
+    if isinstance(x0, str):
+        if x0 == "estimate":
+            x0v = estimate_x0(A=ak, C=C, residual=y - forced @ C.T - u @ D.T)
+        else:
+            x0v = np.zeros(n)
+    else:
+        x0v = _as_state(x0, n)
+    # One-step predicted states x(j|j-1), (N, n): forced part plus the free response of x0.
+    xh = forced + _free_states(A=ak, x0=x0v, length=n_samples)
+    h = min(horizon, n_samples)
+    y_pred = np.empty((n_samples, C.shape[0]))
+    if h > 1:  # samples with no measurement h steps back: simulation from x0
+        xs = _run_states(A=A, Bu=(u[: h - 1] @ B.T)[None], x0=x0v[None])[0]
+        y_pred[: h - 1] = xs @ C.T + u[: h - 1] @ D.T
+    z = xh[: n_samples - h + 1]
+    for i in range(1, h):
+        z = z @ A.T + u[i - 1 : n_samples - h + i] @ B.T
+    y_pred[h - 1 :] = z @ C.T + u[h - 1 :] @ D.T
+    return y_pred, x0v
+
+
+def _free_states(*, A: np.ndarray, x0: np.ndarray, length: int) -> np.ndarray:
+    """``A^k x0`` for k = 0..length-1, (length, n)."""
+    return observability_matrix(A=A, C=np.eye(A.shape[0]), length=length) @ x0
+
+
+def _as_state(x0: object, n: int) -> np.ndarray:
+    arr = np.asarray(x0, dtype=float).reshape(-1)
+    if arr.shape != (n,):
+        raise DimensionError(f"x0 has {arr.size} entries; pass {n} (the model order) or 'estimate'")
+    return arr
+
+
+def _matrices(model: StateSpaceModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    return model.A, model.B, model.C, model.D
+
+
+def _gain(model: StateSpaceModel) -> np.ndarray:
+    return np.asarray(model.K, dtype=float)
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Outcome of :func:`compare`.
+
+    ``fit`` (l,) percent over all experiments together; ``fits`` (E, l) per experiment;
+    ``y_model`` / ``y_measured`` one (N_e, l) array per experiment; ``x0`` one (W_e, n) array
+    of initial states per experiment (W_e windows); ``horizon`` steps (None: simulation);
+    ``window`` samples (None: whole record); stability flags of the model (eig A) and of its
+    predictor (eig A - KC); ``diverged`` when the model output is not finite.
+    """
+
+    fit: np.ndarray
+    fits: np.ndarray
+    y_model: tuple[np.ndarray, ...]
+    y_measured: tuple[np.ndarray, ...]
+    x0: tuple[np.ndarray, ...]
+    horizon: int | None
+    window: int | None
+    model_stable: bool
+    predictor_stable: bool
+    diverged: bool
+    output_names: tuple[str, ...]
+
+    @property
+    def mode(self) -> str:
+        """``"simulation"``, ``"windowed simulation"`` or ``"k-step prediction"``."""
+        if self.horizon is not None:
+            return f"{self.horizon}-step prediction"
+        return "simulation" if self.window is None else "windowed simulation"
+
+    def summary(self) -> str:
+        """One line per output channel: name and fit in percent, then the flags."""
+        lines = [f"{self.mode}:"]
+        lines += [f"  {n}: {f:7.2f} %" for n, f in zip(self.output_names, self.fit, strict=True)]
+        if not self.model_stable:
+            lines.append("  model is unstable (max |eig A| >= 1)")
+        if not self.predictor_stable:
+            lines.append("  predictor A - KC is unstable: use sysid.stable_predictor(model)")
+        if self.diverged:
+            lines.append("  model output diverged (non-finite)")
+        return "\n".join(lines)
+
+
+def compare(
+    model: StateSpaceModel,
+    data: IOData | Sequence[IOData],
+    *,
+    horizon: int | None = None,
+    x0: str | np.ndarray = "estimate",
+    window: float | None = None,
+) -> CompareResult:
+    """Compare ``model`` with measured data: simulation or ``horizon``-step prediction.
+
+    ``data`` is one IOData or a list (each experiment its own initial state). ``window``
+    (seconds) splits each record into consecutive windows simulated from their own estimated
+    initial state (simulation only). ``x0`` is ``"estimate"`` (least squares), ``"zero"`` or an
+    (n,) state (single experiment, no windows). Returns a :class:`CompareResult`.
+    """
+    flights = as_flights(data)
+    A, B, C, _ = _matrices(model)
+    if (flights[0].n_inputs, flights[0].n_outputs) != (B.shape[1], C.shape[0]):
+        raise DimensionError(
+            f"model has {B.shape[1]} inputs/{C.shape[0]} outputs but data has "
+            f"{flights[0].n_inputs}/{flights[0].n_outputs}; select the matching channels"
+        )
+    if isinstance(x0, str) and x0 not in ("estimate", "zero"):
+        raise DataError(f"x0 = {x0!r}; use 'estimate', 'zero' or an array of the model order")
+    if not isinstance(x0, str) and len(flights) > 1:
+        raise DataError("a given x0 fits one experiment; pass one IOData or x0='estimate'")
+    if horizon is not None and window is not None:
+        raise HorizonError("window applies to simulation; pass either horizon or window")
+    dt = flights[0].dt
+    win = None
+    if window is not None:
+        win = round(window / dt)
+        if win < 1 or win * C.shape[0] < A.shape[0]:
+            raise HorizonError(
+                f"window {window} s is {win} samples, too short to estimate {A.shape[0]} states "
+                f"from {C.shape[0]} outputs; use window >= {-(-A.shape[0] // C.shape[0]) * dt} s"
+            )
+    model_stable = model.is_stable
+    pred_stable = model.predictor_is_stable
+    if horizon is not None and pred_stable is False:
+        log.warning("predictor A - KC is unstable (max |eig| >= 1); "
+                    "predictions may diverge: use sysid.stable_predictor(model)")
+    outs, x0s = [], []
+    for d in flights:
+        with np.errstate(over="ignore", invalid="ignore"):
+            if horizon is None:
+                yh, xs = simulate_windows(model, u=d.u, y=d.y, window=win, x0=x0)
+            else:
+                yh, xv = predict(model, u=d.u, y=d.y, horizon=int(horizon), x0=x0)
+                xs = xv[None]
+        outs.append(yh)
+        x0s.append(xs)
+    fits = np.array([fit_percent(d.y, yh) for d, yh in zip(flights, outs, strict=True)])
+    fit = fit_percent(np.vstack([d.y for d in flights]), np.vstack(outs))
+    diverged = not all(np.isfinite(o).all() for o in outs)
+    names = tuple(model.output_names)
+    return CompareResult(
+        fit=fit, fits=fits, y_model=tuple(outs), y_measured=tuple(d.y for d in flights),
+        x0=tuple(x0s), horizon=horizon, window=win, model_stable=model_stable,
+        predictor_stable=pred_stable, diverged=diverged, output_names=names,
+    )
+
+
+def _kalman_gain(
+    *, A: np.ndarray, C: np.ndarray, K: np.ndarray, noise_cov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Steady-state Kalman gain of the innovation model ``(A, C, K, noise_cov)``.
+
+    The model is a state-space noise description with process noise :math:`w = Ke`,
+    measurement noise :math:`v = e`: :math:`Q = K R K^T`, :math:`S = K R`, :math:`R`. The
+    stabilising solution :math:`P` of the filter DARE gives
+    :math:`K' = (A P C^T + S)(C P C^T + R)^{-1}` and innovation covariance
+    :math:`R' = C P C^T + R`. If :math:`A - KC` is already stable, :math:`P = 0` and
+    :math:`K' = K`; otherwise the zeros of the noise model outside the unit circle are
+    reflected inside (same output spectrum, minimum-phase factor). Returns ``(K', R')``.
+    """
+    from scipy.linalg import solve_discrete_are
+
+    q, s = K @ noise_cov @ K.T, K @ noise_cov
+    try:
+        p = solve_discrete_are(A.T, C.T, q, noise_cov, s=s)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise DataError(
+            f"no stabilising Kalman gain: (A, C) is not detectable or A - KC has a pole on the "
+            f"unit circle ({exc}); re-identify with another order or horizons"
+        ) from exc
+    r_new = C @ p @ C.T + noise_cov
+    return (A @ p @ C.T + s) @ np.linalg.inv(r_new), r_new
+
+
+def stable_predictor(
+    model: StateSpaceModel,
+    *,
+    data: IOData | Sequence[IOData] | None = None,
+    noise_cov: np.ndarray | None = None,
+) -> StateSpaceModel:
+    """The model with a stable one-step predictor: K replaced by the steady-state Kalman gain.
+
+    The gain comes from the DARE of the model's own noise description (see
+    :func:`_kalman_gain`) with innovation covariance ``noise_cov`` (l, l), else
+    ``model.noise_cov``, else the identity (for a single output the gain does not depend on it).
+    A, B, C, D are unchanged, so simulation is unchanged; ``A - K C`` becomes stable whenever
+    ``(A, C)`` is detectable. The returned ``noise_cov`` is the new innovation covariance, or,
+    if ``data`` is given, the covariance of the new predictor's one-step errors on it.
+    A model whose predictor is already stable is returned as it is.
+    """
+    if model.predictor_is_stable:
+        return model
+    ell = model.n_outputs
+    r = noise_cov if noise_cov is not None else model.noise_cov
+    r = np.eye(ell) if r is None else np.asarray(r, dtype=float)
+    if r.shape != (ell, ell):
+        raise DimensionError(f"noise_cov has shape {r.shape}; pass ({ell}, {ell})")
+    k_new, r_new = _kalman_gain(A=model.A, C=model.C, K=model.K, noise_cov=r)
+    before = float(np.max(np.abs(model.predictor_poles())))
+    out = model.replace(K=k_new, noise_cov=r_new, provenance={
+        **model.provenance, "predictor": "steady-state Kalman gain (sysid.stable_predictor)",
+        "predictor_radius_before": before,
+    })
+    if data is not None:
+        errs = [d.y - predict(out, u=d.u, y=d.y, horizon=1)[0] for d in as_flights(data)]
+        res = np.vstack(errs)
+        out = out.replace(noise_cov=np.atleast_2d(np.cov(res, rowvar=False)))
+    log.info("predictor stabilised: max |eig(A - KC)| %.4f -> %.4f", before,
+             float(np.max(np.abs(out.predictor_poles()))))
+    return out
