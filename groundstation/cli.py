@@ -51,9 +51,9 @@ def main(verbose: int) -> None:
 
 
 def _register() -> None:
-    from groundstation.commands import demo, info
+    from groundstation.commands import demo, info, sim
 
-    for module in (info, demo):
+    for module in (info, demo, sim):
         main.add_command(module.command)
 
 

@@ -1,0 +1,54 @@
+"""``groundstation sim``: simulated Crazyflies over UDP for cflib scripts and cfclient."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import click
+
+from groundstation.sim.udp import UdpServer
+
+__all__ = ["command"]
+
+logger = logging.getLogger(__name__)
+
+
+@click.command("sim")
+@click.option("--port", default=19850, show_default=True, type=int,
+              help="UDP port of the first vehicle; vehicle i listens on PORT + i.")
+@click.option("--count", default=1, show_default=True, type=click.IntRange(1, 10),
+              help="Number of vehicles (cflib scans ports 19850-19859).")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to bind; 0.0.0.0 serves other machines too.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0),
+              help="Random seed of the first vehicle (vehicle i uses SEED + i).")
+@click.option("--duration", default=0.0, type=click.FloatRange(0.0), hidden=True,
+              help="Stop after this many seconds (0: run until Ctrl-C).")
+def command(port: int, count: int, host: str, seed: int, duration: float) -> None:
+    """Serve simulated Crazyflie 2.1s over UDP, in real time, until Ctrl-C.
+
+    Each vehicle speaks CRTP like real firmware (log and param TOCs, log blocks, commander,
+    supervisor watchdog) with simulated physics. Any cflib >= 0.1.32 program or the Crazyflie
+    client connects to udp://HOST:PORT; a client that goes silent in flight leaves the vehicle
+    to its watchdog, as a real one.
+
+    \b
+    Examples:
+      groundstation sim --port 19850 --count 2
+      cfclient                      (Scan finds udp://127.0.0.1:19850, then Connect)
+      python -c "import cflib.crtp; from cflib.crazyflie import Crazyflie; \\
+        from cflib.crazyflie.syncCrazyflie import SyncCrazyflie; cflib.crtp.init_drivers(); \\
+        scf = SyncCrazyflie('udp://127.0.0.1:19850', cf=Crazyflie()); scf.open_link(); \\
+        print(scf.cf.param.get_value('pm.lowVoltage')); scf.close_link()"
+    """
+    with UdpServer(host=host, port=port, count=count, seed=seed) as server:
+        for uri in server.uris:
+            click.echo(f"simulated Crazyflie on {uri}")
+        click.echo("Ctrl-C to stop")
+        start = time.monotonic()
+        try:
+            while not duration or time.monotonic() - start < duration:
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            click.echo("stopping")
