@@ -27,6 +27,7 @@ __all__ = [
     "PidController",
     "Setpoint",
     "Supervisor",
+    "battery_compensated_pwm",
     "mix_legacy_x",
 ]
 
@@ -166,6 +167,20 @@ def mix_legacy_x(*, thrust: float, roll: float, pitch: float,
     hi = max(m1, m2, m3, m4)
     red = hi - 65535 if hi > 65535 else 0
     return (max(m1 - red, 0), max(m2 - red, 0), max(m3 - red, 0), max(m4 - red, 0))
+
+
+def battery_compensated_pwm(*, ithrust: float, vbat_v: float) -> int:
+    """``motorsSetRatio`` with ``ENABLE_THRUST_BAT_COMPENSATED`` (``motors.c``, brushed motors).
+
+    ``t = 60 ithrust / 65536``, ``u = -0.0006239 t^2 + 0.088 t`` (the motor voltage wanted, V),
+    ``pwm = 65535 min(u / vbat, 1)``; below 2 V the battery reading is not trusted and ``ithrust``
+    passes unchanged. Makes thrust independent of the battery until the cell is too low.
+    """
+    if vbat_v < 2.0:
+        return int(ithrust)
+    t = ithrust * (60.0 / 65536.0)
+    ratio = (-0.0006239 * t * t + 0.088 * t) / vbat_v
+    return int((ratio if ratio < 1.0 else 1.0) * 65535.0)
 
 
 @dataclass(slots=True)

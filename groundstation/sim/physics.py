@@ -51,9 +51,9 @@ class VehicleConstants:
     angular_drag_n_m_s: float = 2.0e-7         # small body-rate damping, N m / (rad/s)
     battery_capacity_c: float = 250e-3 * 3600  # 250 mAh in coulomb
     battery_empty_v: float = 3.0               # open-circuit voltage at 0 % charge
-    battery_r_ohm: float = 0.20                # internal resistance incl. connectors
+    battery_r_ohm: float = 0.13                # internal resistance incl. connectors
     battery_idle_a: float = 0.10               # electronics, radio
-    battery_k_a: float = 1.3                   # motor current per duty**1.5
+    battery_k_a: float = 1.0                   # motor current per duty**1.5
 
 
 def motor_thrust_n(*, pwm: float, vbat_v: float, c: VehicleConstants) -> float:

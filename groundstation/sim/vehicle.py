@@ -12,14 +12,25 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import random
 from collections.abc import Callable
 from typing import ClassVar
 
 from groundstation.errors import GroundStationError
-from groundstation.sim.firmware import Commander, PidController, Supervisor, mix_legacy_x
-from groundstation.sim.physics import Battery, RigidBody, VehicleConstants, motor_thrust_n
+from groundstation.sim.firmware import (
+    Commander,
+    PidController,
+    Supervisor,
+    battery_compensated_pwm,
+    mix_legacy_x,
+)
+from groundstation.sim.physics import (
+    GRAVITY_M_S2,
+    Battery,
+    RigidBody,
+    VehicleConstants,
+    motor_thrust_n,
+)
 from groundstation.sim.sensors import NoiseModel, Sensors
 
 __all__ = ["SimConfigError", "SimVehicle"]
@@ -35,6 +46,15 @@ class SimConfigError(GroundStationError, ValueError):
     """A simulator option is unknown or out of range."""
 
 
+def _noise_value(name: str, v: object) -> object:
+    """A noise override: biases are one number; levels one number (all axes) or three."""
+    if "bias" in name:
+        return float(v)  # type: ignore[arg-type]
+    if isinstance(v, int | float):
+        return (float(v),) * 3
+    return tuple(float(x) for x in v)  # type: ignore[union-attr]
+
+
 class SimVehicle:
     """A simulated Crazyflie 2.1: rigid-body physics at 1 kHz + emulated firmware (PID, mixer,
     commander, supervisor, sensors). Deterministic for a given seed. Not thread-safe: the owner
@@ -42,7 +62,9 @@ class SimVehicle:
 
     ``overrides`` set fields of :class:`~groundstation.sim.physics.VehicleConstants` (e.g.
     ``mass_kg=0.030``), of :class:`~groundstation.sim.sensors.NoiseModel` (e.g.
-    ``gyro_vib_dps=0``), or ``auto_arm`` (default True, as on a CF2.1).
+    ``gyro_vib_dps=0``), ``auto_arm`` (default True, as on a CF2.1) or ``start_z_m`` (start at rest
+    in the air at this height with the motors spinning at hover thrust, as if released from a
+    hand; for hover tests. Send setpoints at once or the motors spin down).
     """
 
     LOG_VARIABLES: ClassVar[dict[str, str]] = {
@@ -52,7 +74,9 @@ class SimVehicle:
         "stabilizer.thrust": "float",
         "motor.m1": "uint16_t", "motor.m2": "uint16_t", "motor.m3": "uint16_t",
         "motor.m4": "uint16_t",
-        "pm.vbat": "float", "pm.batteryLevel": "uint8_t",
+        "pwm.m1_pwm": "uint32_t", "pwm.m2_pwm": "uint32_t", "pwm.m3_pwm": "uint32_t",
+        "pwm.m4_pwm": "uint32_t",
+        "pm.vbat": "float", "pm.vbatMV": "uint16_t", "pm.batteryLevel": "uint8_t",
         "controller.cmd_thrust": "float", "controller.cmd_roll": "float",
         "controller.cmd_pitch": "float", "controller.cmd_yaw": "float",
         "stateEstimate.x": "float", "stateEstimate.y": "float", "stateEstimate.z": "float",
@@ -77,16 +101,18 @@ class SimVehicle:
         const_fields = {f.name for f in dataclasses.fields(VehicleConstants)}
         noise_fields = {f.name for f in dataclasses.fields(NoiseModel)}
         auto_arm = bool(overrides.pop("auto_arm", True))
+        start_z_m = float(overrides.pop("start_z_m", 0.0))
         unknown = sorted(set(overrides) - const_fields - noise_fields)
         if unknown:
             raise SimConfigError(
                 f"unknown simulator option(s) {unknown}; choose from "
-                f"{sorted(const_fields | noise_fields | {'auto_arm'})}")
+                f"{sorted(const_fields | noise_fields | {'auto_arm', 'start_z_m'})}")
         if not 3.0 < vbat_full <= 4.25:
             raise SimConfigError(f"vbat_full={vbat_full} V is not a LiPo voltage; use 3.0..4.25 V")
         self.const = VehicleConstants(**{k: float(v) for k, v in overrides.items()
                                          if k in const_fields})
-        noise = NoiseModel(**{k: float(v) for k, v in overrides.items() if k in noise_fields})
+        noise = NoiseModel(**{k: _noise_value(k, v) for k, v in overrides.items()
+                              if k in noise_fields})
         self._rng = random.Random(seed)
         self.body = RigidBody(c=self.const)
         self.battery = Battery(full_v=vbat_full, c=self.const)
@@ -95,7 +121,8 @@ class SimVehicle:
         self.commander = Commander()
         self.supervisor = Supervisor(auto_arm=auto_arm)
         self._tick = 0
-        self._pwm = (0, 0, 0, 0)
+        self._pwm = (0, 0, 0, 0)               # mixer outputs (motor.m1..m4)
+        self._duty_pwm = (0, 0, 0, 0)          # after battery compensation (pwm.m1_pwm..)
         self._targets = (0.0, 0.0, 0.0, 0.0)
         self._control = (0.0, 0.0, 0.0, 0.0)   # thrust, roll, pitch, yaw (mixer inputs)
         self._att = (0.0, 0.0, 0.0)             # roll, legacy pitch, yaw, deg
@@ -106,6 +133,11 @@ class SimVehicle:
             "SYS: ----------------------------\n",
             "SYS: Crazyflie 2.1 (simulated by groundstation.sim) is up and running!\n",
         ]
+        if start_z_m > 0.0:   # released from a hand with the motors at hover thrust
+            b = self.body
+            b.z, b.on_ground = start_z_m, False
+            b.f1 = b.f2 = b.f3 = b.f4 = self.const.mass_kg * GRAVITY_M_S2 / 4.0
+            self._targets = (b.f1, b.f2, b.f3, b.f4)
         self._params: dict[str, float] = {
             "stabilizer.estimator": 1.0, "stabilizer.controller": 1.0, "stabilizer.stop": 0.0,
             "commander.enHighLevel": 0.0, "pm.lowVoltage": 3.2, "pm.criticalLowVoltage": 3.0,
@@ -143,7 +175,8 @@ class SimVehicle:
         """The 500 Hz part: sensors, estimator, commander, supervisor, controller, mixer."""
         body, sensors = self.body, self.sensors
         pwm = self._pwm
-        sensors.sample(body=body, duty=(pwm[0] + pwm[1] + pwm[2] + pwm[3]) / 262140.0)
+        out = self._duty_pwm
+        sensors.sample(body=body, duty=(out[0] + out[1] + out[2] + out[3]) / 262140.0)
         roll, pitch, yaw = body.euler_deg()
         pitch = -pitch                                    # legacy CF2 convention
         self._att = (roll, pitch, yaw)
@@ -171,10 +204,13 @@ class SimVehicle:
         else:
             pwm = (0, 0, 0, 0)
         self._pwm = pwm
-        duties = (pwm[0] / 65535.0, pwm[1] / 65535.0, pwm[2] / 65535.0, pwm[3] / 65535.0)
+        vbat = self.battery.voltage_v
+        out = tuple(battery_compensated_pwm(ithrust=m, vbat_v=vbat) if m else 0 for m in pwm)
+        self._duty_pwm = out
+        duties = (out[0] / 65535.0, out[1] / 65535.0, out[2] / 65535.0, out[3] / 65535.0)
         vbat = self.battery.update(duties=duties, dt_s=_PID_DT_S)
         c = self.const
-        self._targets = tuple(motor_thrust_n(pwm=m, vbat_v=vbat, c=c) for m in pwm)
+        self._targets = tuple(motor_thrust_n(pwm=m, vbat_v=vbat, c=c) for m in out)
         if not self._low_warned and vbat < self._params["pm.lowVoltage"] and not any(pwm):
             self._low_warned = True
             self._console.append(f"PM: Battery low ({vbat:.2f} V)\n")
@@ -209,6 +245,7 @@ class SimVehicle:
             "stabilizer.yaw": lambda: self._att[2],
             "stabilizer.thrust": lambda: self._control[0],
             "pm.vbat": lambda: self.battery.voltage_v,
+            "pm.vbatMV": lambda: float(round(1000.0 * self.battery.voltage_v)),
             "pm.batteryLevel": lambda: float(round(100.0 * self.battery.charge)),
             "controller.cmd_thrust": lambda: self._control[0],
             "controller.cmd_roll": lambda: self._control[1],
@@ -219,6 +256,7 @@ class SimVehicle:
         }
         for i in range(4):
             g[f"motor.m{i + 1}"] = lambda i=i: float(self._pwm[i])
+            g[f"pwm.m{i + 1}_pwm"] = lambda i=i: float(self._duty_pwm[i])
         return g
 
     def read_log(self, name: str) -> float:
@@ -286,7 +324,10 @@ class SimVehicle:
 
     @property
     def motors_pwm(self) -> tuple[int, int, int, int]:
-        """Motor PWM m1..m4, 0..65535."""
+        """Motor commands m1..m4 (0..65535) as logged by ``motor.m1..m4``: the mixer output.
+
+        The duty actually applied after battery compensation is logged as ``pwm.m1_pwm..``.
+        """
         return self._pwm
 
     @property
@@ -308,18 +349,23 @@ class SimVehicle:
 
     @property
     def duty_mean(self) -> float:
-        """Mean motor duty (0..1)."""
-        return sum(self._pwm) / 262140.0
+        """Mean motor duty cycle (0..1) after battery compensation."""
+        return sum(self._duty_pwm) / 262140.0
 
-    def hover_pwm_estimate(self) -> float:
-        """PWM at which the four motors carry the weight at the present battery voltage."""
+    def hover_thrust(self) -> int:
+        """Thrust command (1000..60000) that carries the weight with level attitude.
+
+        With battery compensation the motor voltage depends on the command only, so this does not
+        change as the battery sags (until the compensation saturates near 3.3 V at hover).
+        """
         c = self.const
-        w = c.mass_kg * 9.81 / 4.0
+        weight = c.mass_kg * GRAVITY_M_S2 / 4.0
         lo, hi = 0.0, 65535.0
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if motor_thrust_n(pwm=mid, vbat_v=self.battery.voltage_v, c=c) < w:
+            pwm = battery_compensated_pwm(ithrust=mid, vbat_v=4.0)
+            if motor_thrust_n(pwm=pwm, vbat_v=4.0, c=c) < weight:
                 lo = mid
             else:
                 hi = mid
-        return math.floor(0.5 * (lo + hi))
+        return round(0.5 * (lo + hi))
