@@ -17,6 +17,7 @@ from sysid.errors import (
 )
 from sysid.model import StateSpaceModel, load_model
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
+from sysid.sweep import SweepResult, select_order, sweep
 from sysid.validate import CompareResult, compare, fit_percent, stable_predictor
 
 __all__ = [
@@ -30,13 +31,16 @@ __all__ = [
     "OrderError",
     "StateSpaceModel",
     "Stream",
+    "SweepResult",
     "SysIdError",
     "compare",
     "detrend_data",
     "fit_percent",
     "iodata_from_streams",
     "load_model",
+    "select_order",
     "stable_predictor",
+    "sweep",
     "trim",
     "zoh_resample",
 ]

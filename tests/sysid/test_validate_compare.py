@@ -152,3 +152,16 @@ def test_compare_rejects_bad_requests() -> None:
         compare(system, data, x0=np.zeros(3))
     with pytest.raises(DimensionError, match="2 inputs/2 outputs"):
         compare(system, IOData(u=data.u[:, :1], y=data.y, dt=1.0))
+
+
+def test_iem_model_of_rate_loop_validates_like_the_true_model() -> None:
+    from sysid.iem import iem
+
+    system, ident = _rate_loop(seed=20)
+    _, fresh = _rate_loop(seed=21)
+    model = iem(ident, order=2, past=20, future=10)
+    for kwargs in ({"horizon": 1}, {"horizon": 5}, {"window": 0.5}):
+        got = compare(model, fresh, **kwargs).fit[0]
+        truth = compare(system, fresh, **kwargs).fit[0]
+        assert got > 80.0 and abs(got - truth) < 1.0, kwargs
+    assert compare(model, fresh).fit[0] < 0.0  # whole-record simulation drifts away
