@@ -149,7 +149,8 @@ def _pair_task(
         t0 = time.perf_counter()
         try:
             model = fn(list(data), order=order, past=past, future=future, **kwargs)
-            res = compare(model, list(validation), horizon=horizon, window=window)
+            res = compare(model, list(validation), horizon=horizon, window=window,
+                          warn=False)
         except (SysIdError, np.linalg.LinAlgError) as exc:
             rows.append(_failed(past, future, order, exc, time.perf_counter() - t0, ell))
             continue

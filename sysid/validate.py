@@ -193,7 +193,7 @@ def predict(
     by least squares on the one-step prediction errors.
     """
     A, B, C, D = _matrices(model)
-    K = _gain(model)
+    K = model.K
     n_samples, n = u.shape[0], A.shape[0]
     if horizon < 1:
         raise HorizonError(f"horizon = {horizon}; pass a positive number of steps (or None)")
@@ -208,7 +208,7 @@ def predict(
     else:
         x0v = _as_state(x0, n)
     # One-step predicted states x(j|j-1), (N, n): forced part plus the free response of x0.
-    xh = forced + _free_states(A=ak, x0=x0v, length=n_samples)
+    xh = forced + observability_matrix(A=ak, C=np.eye(n), length=n_samples) @ x0v
     h = min(horizon, n_samples)
     y_pred = np.empty((n_samples, C.shape[0]))
     if h > 1:  # samples with no measurement h steps back: simulation from x0
@@ -221,11 +221,6 @@ def predict(
     return y_pred, x0v
 
 
-def _free_states(*, A: np.ndarray, x0: np.ndarray, length: int) -> np.ndarray:
-    """``A^k x0`` for k = 0..length-1, (length, n)."""
-    return observability_matrix(A=A, C=np.eye(A.shape[0]), length=length) @ x0
-
-
 def _as_state(x0: object, n: int) -> np.ndarray:
     arr = np.asarray(x0, dtype=float).reshape(-1)
     if arr.shape != (n,):
@@ -235,10 +230,6 @@ def _as_state(x0: object, n: int) -> np.ndarray:
 
 def _matrices(model: StateSpaceModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return model.A, model.B, model.C, model.D
-
-
-def _gain(model: StateSpaceModel) -> np.ndarray:
-    return np.asarray(model.K, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -291,13 +282,15 @@ def compare(
     horizon: int | None = None,
     x0: str | np.ndarray = "estimate",
     window: float | None = None,
+    warn: bool = True,
 ) -> CompareResult:
     """Compare ``model`` with measured data: simulation or ``horizon``-step prediction.
 
     ``data`` is one IOData or a list (each experiment its own initial state). ``window``
     (seconds) splits each record into consecutive windows simulated from their own estimated
     initial state (simulation only). ``x0`` is ``"estimate"`` (least squares), ``"zero"`` or an
-    (n,) state (single experiment, no windows). Returns a :class:`CompareResult`.
+    (n,) state (single experiment, no windows). ``warn=False`` skips the logged warning for an
+    unstable predictor (the flag is set either way). Returns a :class:`CompareResult`.
     """
     flights = as_flights(data)
     A, B, C, _ = _matrices(model)
@@ -323,7 +316,7 @@ def compare(
             )
     model_stable = model.is_stable
     pred_stable = model.predictor_is_stable
-    if horizon is not None and pred_stable is False:
+    if warn and horizon is not None and not pred_stable:
         log.warning("predictor A - KC is unstable (max |eig| >= 1); "
                     "predictions may diverge: use sysid.stable_predictor(model)")
     outs, x0s = [], []
