@@ -115,6 +115,8 @@ class PidController:
             self.pids[name] = Pid(kp=kp, ki=ki, kd=kd, i_limit=il,
                                   out_limit=RATE_LIMIT if rate else 0.0, dt=dt,
                                   cutoff_hz=20.0 if rate else 10.0)
+        self._ordered = tuple(self.pids[n] for n in ("roll", "pitch", "yaw", "roll_rate",
+                                                       "pitch_rate", "yaw_rate"))
         self.yaw_desired = 0.0
         self.roll_out = self.pitch_out = self.yaw_out = 0.0
 
@@ -141,15 +143,15 @@ class PidController:
             elif delta < -ymd:
                 yd = yaw - ymd
         self.yaw_desired = yd
-        p = self.pids
-        rr = p["roll"].update(sp.roll - roll)
-        pr = p["pitch"].update(sp.pitch - pitch_legacy)
+        p = self._ordered
+        rr = p[0].update(sp.roll - roll)
+        pr = p[1].update(sp.pitch - pitch_legacy)
         ye = yd - yaw
         ye = ye - 360.0 if ye > 180.0 else ye + 360.0 if ye < -180.0 else ye
-        yr = p["yaw"].update(ye)
-        self.roll_out = float(int(p["roll_rate"].update(rr - gx)))
-        self.pitch_out = float(int(p["pitch_rate"].update(pr + gy)))   # measured = -gyro.y
-        self.yaw_out = -float(int(p["yaw_rate"].update(yr - gz)))
+        yr = p[2].update(ye)
+        self.roll_out = float(int(p[3].update(rr - gx)))
+        self.pitch_out = float(int(p[4].update(pr + gy)))   # measured = -gyro.y
+        self.yaw_out = -float(int(p[5].update(yr - gz)))
         return self.roll_out, self.pitch_out, self.yaw_out
 
 

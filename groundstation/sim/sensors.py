@@ -71,9 +71,13 @@ class NoiseModel:
 class Sensors:
     """Holds the latest gyro (deg/s) and accelerometer (g) sample."""
 
+    _BLOCK = 6 * 4096   # normals drawn per numpy call (one list index per sample afterwards)
+
     def __init__(self, *, rng: random.Random, noise: NoiseModel | None = None) -> None:
         self.noise = noise or NoiseModel()
-        self._gauss = rng.gauss
+        self._np_rng = np.random.default_rng(rng.getrandbits(64))
+        self._normals: list[float] = []
+        self._k = 0
         nm = self.noise
         self.bias_g = tuple(rng.gauss(0.0, nm.gyro_bias_dps) for _ in range(3))
         self.bias_a = tuple(rng.gauss(0.0, nm.acc_bias_g) for _ in range(3))
@@ -84,15 +88,20 @@ class Sensors:
     def sample(self, *, body: RigidBody, duty: float) -> None:
         """Take one sample of the body's state with mean motor duty ``duty`` (0..1)."""
         nm = self.noise
-        g = self._gauss
+        k0 = self._k
+        if k0 + 6 > len(self._normals):
+            self._normals = self._np_rng.standard_normal(self._BLOCK).tolist()
+            k0 = 0
+        self._k = k0 + 6
+        n0, n1, n2, n3, n4, n5 = self._normals[k0:k0 + 6]
         d2 = duty * duty
         gr, gv, ar, av = nm.gyro_rest_dps, nm.gyro_vib_dps, nm.acc_rest_g, nm.acc_vib_g
         bg, ba = self.bias_g, self.bias_a
         k = 180.0 / math.pi
-        self.gx = body.p * k + bg[0] + (gr[0] + gv[0] * d2) * g(0.0, 1.0)
-        self.gy = body.q * k + bg[1] + (gr[1] + gv[1] * d2) * g(0.0, 1.0)
-        self.gz = body.r * k + bg[2] + (gr[2] + gv[2] * d2) * g(0.0, 1.0)
+        self.gx = body.p * k + bg[0] + (gr[0] + gv[0] * d2) * n0
+        self.gy = body.q * k + bg[1] + (gr[1] + gv[1] * d2) * n1
+        self.gz = body.r * k + bg[2] + (gr[2] + gv[2] * d2) * n2
         ig = 1.0 / GRAVITY_M_S2
-        self.ax = body.sfx * ig + ba[0] + (ar[0] + av[0] * d2) * g(0.0, 1.0)
-        self.ay = body.sfy * ig + ba[1] + (ar[1] + av[1] * d2) * g(0.0, 1.0)
-        self.az = body.sfz * ig + ba[2] + (ar[2] + av[2] * d2) * g(0.0, 1.0)
+        self.ax = body.sfx * ig + ba[0] + (ar[0] + av[0] * d2) * n3
+        self.ay = body.sfy * ig + ba[1] + (ar[1] + av[1] * d2) * n4
+        self.az = body.sfz * ig + ba[2] + (ar[2] + av[2] * d2) * n5

@@ -159,17 +159,16 @@ class SimVehicle:
 
     def advance(self, dt_s: float) -> None:
         """Step the 1 kHz loop by ``round(dt_s * 1000)`` ms."""
-        step = self._step
+        body_step = self.body.step
+        fw = self._firmware_tick
+        tick = self._tick
         for _ in range(round(dt_s * 1000.0)):
-            step()
-
-    def _step(self) -> None:
-        self._tick = tick = self._tick + 1
-        body = self.body
-        if not tick & 1:
-            self._firmware_tick(tick)
-        t1, t2, t3, t4 = self._targets
-        body.step(t1=t1, t2=t2, t3=t3, t4=t4, dt=_DT_S)
+            tick += 1
+            self._tick = tick
+            if not tick & 1:
+                fw(tick)
+            t1, t2, t3, t4 = self._targets
+            body_step(t1, t2, t3, t4, _DT_S)
 
     def _firmware_tick(self, now: int) -> None:
         """The 500 Hz part: sensors, estimator, commander, supervisor, controller, mixer."""
@@ -205,12 +204,19 @@ class SimVehicle:
             pwm = (0, 0, 0, 0)
         self._pwm = pwm
         vbat = self.battery.voltage_v
-        out = tuple(battery_compensated_pwm(ithrust=m, vbat_v=vbat) if m else 0 for m in pwm)
+        bc = battery_compensated_pwm
+        out = (bc(ithrust=pwm[0], vbat_v=vbat) if pwm[0] else 0,
+               bc(ithrust=pwm[1], vbat_v=vbat) if pwm[1] else 0,
+               bc(ithrust=pwm[2], vbat_v=vbat) if pwm[2] else 0,
+               bc(ithrust=pwm[3], vbat_v=vbat) if pwm[3] else 0)
         self._duty_pwm = out
         duties = (out[0] / 65535.0, out[1] / 65535.0, out[2] / 65535.0, out[3] / 65535.0)
         vbat = self.battery.update(duties=duties, dt_s=_PID_DT_S)
         c = self.const
-        self._targets = tuple(motor_thrust_n(pwm=m, vbat_v=vbat, c=c) for m in out)
+        self._targets = (motor_thrust_n(pwm=out[0], vbat_v=vbat, c=c),
+                         motor_thrust_n(pwm=out[1], vbat_v=vbat, c=c),
+                         motor_thrust_n(pwm=out[2], vbat_v=vbat, c=c),
+                         motor_thrust_n(pwm=out[3], vbat_v=vbat, c=c))
         if not self._low_warned and vbat < self._params["pm.lowVoltage"] and not any(pwm):
             self._low_warned = True
             self._console.append(f"PM: Battery low ({vbat:.2f} V)\n")

@@ -1,0 +1,156 @@
+"""Firmware emulation: mixer, PID, battery compensation, commander and supervisor behaviour."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from groundstation.importers import read_usd
+from groundstation.sim.firmware import (
+    RATE_LIMIT,
+    Pid,
+    battery_compensated_pwm,
+    mix_legacy_x,
+)
+from groundstation.sim.vehicle import SimConfigError, SimVehicle
+from tests.sim_physics.conftest import fly
+
+CRAZYPAD = "/work/shared/data/crazypad"
+
+
+def test_mixer_signs_and_reduce_all_four_rule():
+    assert mix_legacy_x(thrust=30000, roll=2000, pitch=0, yaw=0) == (29000, 29000, 31000, 31000)
+    assert mix_legacy_x(thrust=30000, roll=0, pitch=2000, yaw=0) == (31000, 29000, 29000, 31000)
+    assert mix_legacy_x(thrust=30000, roll=0, pitch=0, yaw=500) == (30500, 29500, 30500, 29500)
+    # m1 = 64000 - 0 + 3000 = 67000 exceeds 65535 by 1465: all four lose 1465.
+    m = mix_legacy_x(thrust=64000, roll=0, pitch=6000, yaw=0)
+    assert m == (65535, 61000 - 1465, 61000 - 1465, 65535)
+    assert mix_legacy_x(thrust=1000, roll=0, pitch=-6000, yaw=0)[0] == 0    # clipped at 0
+
+
+def test_battery_compensation_matches_the_real_log():
+    ev = read_usd(f"{CRAZYPAD}/motor_E8_log00").events["fixedFrequency"]
+    m, pwm = ev.values["motor.m1"].astype(float), ev.values["pwm.m1_pwm"].astype(float)
+    vbat = ev.values["pm.vbatMV"].astype(float) / 1000.0
+    on = np.flatnonzero(m > 20000)[::50]
+    sim = np.array([battery_compensated_pwm(ithrust=m[i], vbat_v=vbat[i]) for i in on])
+    # The firmware uses its filtered vbat, the log the 100 Hz sample: agree to 1 %.
+    assert np.abs(sim / pwm[on] - 1.0).max() < 0.01
+    assert battery_compensated_pwm(ithrust=60000, vbat_v=2.8) == 65535   # saturates
+
+
+def test_pid_integral_limit_and_output_saturation():
+    pid = Pid(kp=250.0, ki=500.0, kd=0.0, i_limit=33.3, out_limit=RATE_LIMIT, dt=0.002,
+              cutoff_hz=20.0)
+    for _ in range(10000):
+        out = pid.update(1000.0)
+    assert pid.integ == pytest.approx(33.3)
+    assert out == RATE_LIMIT
+    pid.reset()
+    assert pid.update(1.0) == pytest.approx(250.0 + 500.0 * 0.002, rel=0.01)
+
+
+def test_thrust_lock_until_a_zero_thrust_setpoint():
+    v = SimVehicle(seed=1)
+    fly(v, seconds=0.5, thrust=45000)
+    assert v.motors_pwm == (0, 0, 0, 0) and v.position_m[2] == 0.0
+    fly(v, seconds=0.05, thrust=0)
+    fly(v, seconds=0.2, thrust=45000)
+    assert min(v.motors_pwm) > 40000
+    fly(v, seconds=0.2, thrust=500)              # below MIN_THRUST: motors off, no lock
+    assert v.motors_pwm == (0, 0, 0, 0)
+    fly(v, seconds=0.05, thrust=65000)           # clamped to 60000
+    assert v.read_log("stabilizer.thrust") == 60000
+
+
+def test_watchdog_levels_out_after_500_ms_then_locks_after_2_s(hovering):
+    fly(hovering, seconds=1.5, roll=15.0)
+    assert hovering.attitude_deg[0] > 12.0
+    fly(hovering, seconds=0.45, setpoints=False)
+    assert hovering.attitude_deg[0] > 12.0 and hovering.supervisor_state == "Flying"
+    fly(hovering, seconds=0.5, setpoints=False)
+    assert abs(hovering.attitude_deg[0]) < 3.0          # levelled, thrust kept
+    assert hovering.supervisor_state == "WarningLevelOut" and min(hovering.motors_pwm) > 30000
+    fly(hovering, seconds=1.1, setpoints=False)
+    assert hovering.is_locked and hovering.motors_pwm == (0, 0, 0, 0)
+    assert hovering.stop_count == 1 and hovering.supervisor_state == "Locked"
+    assert any("Locked" in line for line in hovering.drain_console())
+    fly(hovering, seconds=0.1, thrust=0)
+    fly(hovering, seconds=0.5)                            # locked until re-created
+    assert hovering.motors_pwm == (0, 0, 0, 0)
+
+
+def test_level_out_relocks_thrust(hovering):
+    fly(hovering, seconds=0.5)
+    fly(hovering, seconds=0.6, setpoints=False)           # > 500 ms: priority disabled
+    fly(hovering, seconds=0.1)                            # thrust > 0 straight away: locked
+    assert hovering.motors_pwm == (0, 0, 0, 0)
+    fly(hovering, seconds=0.02, thrust=0)
+    fly(hovering, seconds=0.1)
+    assert min(hovering.motors_pwm) > 30000
+
+
+def test_stop_setpoint_stops_motors_without_locking(hovering):
+    fly(hovering, seconds=0.5)
+    hovering.commander_stop()
+    hovering.advance(0.004)
+    assert hovering.motors_pwm == (0, 0, 0, 0) and hovering.stop_count == 1
+    hovering.advance(3.0)                   # not a watchdog lock: motors were stopped on purpose
+    assert not hovering.is_locked and not hovering.is_flying
+
+
+def test_notify_stop_lets_the_setpoint_expire(hovering):
+    fly(hovering, seconds=2.5)       # the firmware cannot age a setpoint past power-on
+    hovering.commander_notify_stop(remain_valid_ms=100)
+    hovering.advance(0.09)
+    assert min(hovering.motors_pwm) > 30000
+    hovering.advance(0.02)
+    assert hovering.motors_pwm == (0, 0, 0, 0)
+
+
+def test_disarmed_vehicle_keeps_motors_off():
+    v = SimVehicle(seed=1, auto_arm=False)
+    assert v.supervisor_state == "PreFlChecksPassed"
+    fly(v, seconds=0.05, thrust=0)
+    fly(v, seconds=0.2, thrust=45000)
+    assert v.motors_pwm == (0, 0, 0, 0)
+    v.arm(armed=True)
+    fly(v, seconds=0.2, thrust=45000)
+    assert min(v.motors_pwm) > 40000
+
+
+def test_params_read_write_change_behaviour(hovering):
+    assert hovering.read_param("pid_rate.roll_kp") == 250.0
+    assert hovering.read_param("pid_attitude.yaw_kd") == 0.35
+    hovering.write_param("pid_attitude.roll_kp", 0.0)
+    hovering.write_param("pid_attitude.roll_ki", 0.0)
+    log = fly(hovering, seconds=1.0, roll=10.0)
+    assert abs(log[-1, 6]) < 1.0                         # no attitude loop: roll not tracked
+    hovering.write_param("stabilizer.stop", 1)
+    fly(hovering, seconds=0.05)
+    assert hovering.motors_pwm == (0, 0, 0, 0)
+    rev = hovering.read_param("firmware.revision0")
+    hovering.write_param("firmware.revision0", 1)        # read-only: ignored
+    assert hovering.read_param("firmware.revision0") == rev
+    with pytest.raises(KeyError, match=r"pid_rate\.nope"):
+        hovering.write_param("pid_rate.nope", 1.0)
+
+
+def test_log_and_param_tables_are_complete():
+    v = SimVehicle()
+    for name in v.LOG_VARIABLES:
+        assert isinstance(v.read_log(name), float)
+    for name in v.PARAMS:
+        assert isinstance(v.read_param(name), float)
+    assert v.LOG_VARIABLES["motor.m1"] == "uint16_t" and v.LOG_VARIABLES["pm.vbat"] == "float"
+    assert v.firmware_ms == 0 and v.time_s == 0.0
+    v.advance(0.0204)
+    assert v.firmware_ms == 20 and v.time_s == pytest.approx(0.020)
+    assert v.drain_console() and v.drain_console() == []
+
+
+def test_unknown_override_is_a_one_line_error():
+    with pytest.raises(SimConfigError, match=r"unknown simulator option.*mass"):
+        SimVehicle(mass=0.03)
+    with pytest.raises(SimConfigError, match="vbat_full"):
+        SimVehicle(vbat_full=5.0)
