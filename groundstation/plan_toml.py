@@ -1,0 +1,221 @@
+"""Locate keys of a TOML document by line, and read its tables with typed, closed schemas.
+
+:mod:`tomllib` parses TOML but reports no positions. :func:`key_lines` scans the (already valid)
+text once and maps every key path, e.g. ``("phase", 2, "roll", "amplitude")`` for the
+``amplitude`` key of the third ``[[phase]]``'s ``roll`` table, to its 1-based line; it follows
+``[table]`` and ``[[array]]`` headers, dotted keys, inline tables, and skips multi-line arrays
+and strings. :class:`TomlTable` refuses unknown keys (with a "did you mean" hint), wrong types
+and out-of-range numbers, each as a one-line :class:`~groundstation.errors.PlanError` that reads
+``FILE:LINE: key.path: problem; what to change``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+from typing import Any
+
+from groundstation.errors import PlanError
+
+__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines"]
+
+_KEY = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
+_DOTTED = re.compile(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*")
+_INLINE_KEY = re.compile(rf"[{{,]\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*=")
+
+
+def _parts(dotted: str) -> list[str]:
+    return [p.strip("\"'") for p in re.findall(_KEY, dotted)]
+
+
+def _value_end(lines: list[str], row: int, col: int) -> int:
+    """Index of the last line of the value starting at ``lines[row][col]`` (arrays, strings)."""
+    depth, quote = 0, None
+    while row < len(lines):
+        line, pos = lines[row], col
+        while pos < len(line):
+            if quote:  # inside a multi-line string
+                if line.startswith(quote, pos):
+                    pos, quote = pos + 3, None
+                else:
+                    pos += 2 if quote == '"""' and line[pos] == "\\" else 1
+                continue
+            c = line[pos]
+            if line.startswith(('"""', "'''"), pos):
+                quote, pos = line[pos : pos + 3], pos + 3
+                continue
+            if c == "#":
+                break
+            if c in "\"'":
+                pos += 1
+                while pos < len(line) and line[pos] != c:
+                    pos += 2 if c == '"' and line[pos] == "\\" else 1
+            depth += (c in "[{") - (c in "]}")
+            pos += 1
+        if depth <= 0 and quote is None:
+            return row
+        row, col = row + 1, 0
+    return len(lines) - 1
+
+
+def key_lines(text: str) -> dict[tuple, int]:
+    """Map key paths such as ``("phase", 2, "roll", "amplitude")`` to 1-based line numbers."""
+    lines = text.splitlines()
+    where: dict[tuple, int] = {}
+    arrays: dict[tuple, int] = {}  # resolved path of an array of tables -> its last index
+    current: tuple = ()
+    row = 0
+    while row < len(lines):
+        stripped = lines[row].lstrip()
+        if stripped.startswith("["):
+            double = stripped.startswith("[[")
+            match = _DOTTED.match(stripped, 2 if double else 1)
+            path: tuple = ()
+            for part in _parts(match.group(1)) if match else []:
+                path += (part,)
+                if path in arrays and not (double and len(path) == len(_parts(match.group(1)))):
+                    path += (arrays[path],)
+            if double:
+                arrays[path] = arrays.get(path, -1) + 1
+                path += (arrays[path],)
+            current = path
+            where.setdefault(path, row + 1)
+        elif stripped and not stripped.startswith("#"):
+            match = _DOTTED.match(lines[row])
+            if match and lines[row][match.end() : match.end() + 1] == "=":
+                path = current + tuple(_parts(match.group(1)))
+                for k in range(len(current) + 1, len(path) + 1):
+                    where.setdefault(path[:k], row + 1)
+                end = _value_end(lines, row, match.end() + 1)
+                value = lines[row][match.end() + 1 :].lstrip()
+                if value.startswith("{"):
+                    for inner in _INLINE_KEY.finditer(value):
+                        where.setdefault(path + tuple(_parts(inner.group(1))), row + 1)
+                row = end
+        row += 1
+    return where
+
+
+def dotted(path: tuple) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+
+
+REQUIRED = object()
+
+
+class TomlSource:
+    """The plan text, its key lines, and the one way to build an error that points into it."""
+
+    def __init__(self, *, text: str, source: str) -> None:
+        self.source = source
+        self.lines = key_lines(text)
+
+    def line(self, path: tuple) -> int | None:
+        for k in range(len(path), 0, -1):
+            if path[:k] in self.lines:
+                return self.lines[path[:k]]
+        return None
+
+    def error(self, path: tuple, message: str) -> PlanError:
+        line = self.line(path)
+        where = f"{self.source}:{line}" if line else self.source
+        return PlanError(f"{where}: {dotted(path)}: {message}")
+
+    def ref(self, path: tuple) -> str:
+        """``vehicle.max_roll_deg (line 9)``: how a message names a second key."""
+        line = self.line(path)
+        return dotted(path) + (f" (line {line})" if line else "")
+
+
+class TomlTable:
+    """A TOML table: :meth:`allow` closes its key set; typed getters raise errors naming key and
+    line."""
+
+    def __init__(self, src: TomlSource, path: tuple, data: Any) -> None:
+        if not isinstance(data, dict):
+            raise src.error(path, f"must be a table, got {type(data).__name__} {data!r}")
+        self.src, self.path, self.data = src, path, data
+
+    def allow(self, allowed: set[str]) -> TomlTable:
+        """Refuse any key outside ``allowed`` (typos must not pass silently); returns self."""
+        for key in self.data:
+            if key not in allowed:
+                near = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.5)
+                names = ", ".join(sorted(allowed))
+                hint = f"did you mean '{near[0]}'? " if near else ""
+                raise self.src.error(
+                    (*self.path, key), f"unknown key '{key}'; {hint}(allowed: {names})"
+                )
+        return self
+
+    def pwm(self, key: str, *, default: Any = REQUIRED) -> int:
+        """A thrust command in PWM units, an integer 0-65535."""
+        return self.number(key, lo=0, hi=65535, unit="PWM", kind=int, default=default)
+
+    def get(self, key: str, kind: type, *, default: Any = REQUIRED, unit: str = "") -> Any:
+        path = (*self.path, key)
+        if key not in self.data:
+            if default is REQUIRED:
+                raise self.src.error(path, f"missing required key '{key}' ({kind.__name__})")
+            return default
+        value = self.data[key]
+        numeric = isinstance(value, int | float) and not isinstance(value, bool)
+        if kind is float and numeric:
+            return float(value)
+        if kind is int and numeric and float(value).is_integer():
+            return int(value)
+        if kind in (str, dict, list) and isinstance(value, kind):
+            return value
+        want = {float: "a number", int: "an integer", str: "a string"}.get(kind, kind.__name__)
+        raise self.src.error(path, f"{value!r} is not {want}{f' in {unit}' if unit else ''}")
+
+    def number(
+        self,
+        key: str,
+        *,
+        lo: float,
+        hi: float,
+        unit: str,
+        default: Any = REQUIRED,
+        kind: type = float,
+        lo_open: bool = False,
+    ) -> Any:
+        """A number within ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``), refused otherwise."""
+        value = self.get(key, kind, default=default, unit=unit)
+        if value is not None and (value < lo or (lo_open and value == lo) or value > hi):
+            low = f"> {lo:g}" if lo_open else f">= {lo:g}"
+            raise self.src.error(
+                (*self.path, key),
+                f"{value:g} {unit} is out of range; use a value {low} and <= {hi:g} {unit}",
+            )
+        return value
+
+    def choice(self, key: str, options: tuple[str, ...], *, default: Any = REQUIRED) -> str:
+        value = self.get(key, str, default=default)
+        if value not in options:
+            raise self.src.error((*self.path, key), f"'{value}' is not one of {list(options)}")
+        return value
+
+    def ticks(
+        self,
+        key: str,
+        *,
+        rate_hz: float,
+        default: Any = REQUIRED,
+        lo: float = 0.0,
+        hi: float = 3600.0,
+        lo_open: bool = True,
+    ) -> int:
+        """A time in s that must be a whole number of setpoint periods; returned in ticks."""
+        seconds = self.number(key, lo=lo, hi=hi, unit="s", default=default, lo_open=lo_open)
+        exact = seconds * rate_hz
+        ticks = round(exact)
+        if abs(ticks - exact) > 1e-6:
+            raise self.src.error(
+                (*self.path, key),
+                f"{seconds:g} s is not a whole number of setpoint periods "
+                f"({1 / rate_hz:g} s at {rate_hz:g} Hz); use "
+                f"{math.floor(exact) / rate_hz:g} or {math.ceil(exact) / rate_hz:g} s",
+            )
+        return ticks
