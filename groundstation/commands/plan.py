@@ -1,0 +1,266 @@
+"""``groundstation plan check PLAN`` and ``groundstation plan show PLAN``.
+
+``check`` validates a plan (errors name key and line; exit 2) and prints the phase timeline, the
+duration, the setpoint count, and for each PRBS its period, clock period and order of persistent
+excitation; ``show`` draws the setpoints per axis in the terminal or dumps the schedule as JSON.
+PLAN is a path or the name of a shipped plan (``flightplans/NAME.toml``).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from typing import Any
+
+import click
+import numpy as np
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from groundstation.plans import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
+from sysid.excitation import prbs_shift
+
+__all__ = ["command", "plot_lines", "summarize"]
+
+SHIFT_WARN_TICKS = 20
+"""PRBS axes closer than this many ticks (2 s at 10 Hz) are flagged: correlated at short lags."""
+
+
+def _excitation_text(spec: Any, rate: float) -> str:
+    unit = UNITS[spec.axis]
+    if spec.signal == "prbs":
+        return f"{spec.axis} PRBS ±{spec.amplitude:g} {unit}"
+    if spec.signal == "chirp":
+        return (
+            f"{spec.axis} {spec.sweep} chirp ±{spec.amplitude:g} {unit} "
+            f"{spec.f_start_hz:g}-{spec.f_end_hz:g} Hz"
+        )
+    width = f" width {spec.width / rate:g} s" if spec.signal == "doublet" else ""
+    return f"{spec.axis} {spec.signal} {spec.amplitude:g} {unit} at {spec.start / rate:g} s{width}"
+
+
+def summarize(plan: Plan, schedule: Schedule) -> dict[str, Any]:
+    """Everything ``plan check`` reports, JSON-ready (times in s, thrust in PWM)."""
+    rate = schedule.rate_hz
+    phases, prbs, warnings = [], [], []
+    for spec, ph in zip(plan.phases, schedule.phases, strict=True):
+        entry = ph.to_dict() | {"duration_s": ph.duration, "setpoints": ph.n_ticks}
+        if spec.kind in ("takeoff", "landing"):
+            entry["excitation"] = f"thrust {spec.thrust_start} -> {spec.thrust_end} PWM"
+        elif spec.kind == "hover":
+            entry["excitation"] = f"level, thrust {spec.thrust_start} PWM"
+        else:
+            entry["excitation"] = "; ".join(_excitation_text(e, rate) for e in spec.excitation)
+        phases.append(entry)
+        chains = [e for e in spec.excitation if e.signal == "prbs"]
+        for e in chains:
+            fig = e.prbs_figures(n_ticks=ph.n_ticks)
+            fig |= {
+                "phase": ph.name,
+                "axis": e.axis,
+                "amplitude": e.amplitude,
+                "unit": UNITS[e.axis],
+                "period_s": fig["period_ticks"] / rate,
+                "clock_period_s": e.clock_period / rate,
+            }
+            prbs.append(fig)
+            if fig["periods_covered"] < 1:
+                warnings.append(
+                    f"phase {ph.name} {e.axis}: the PRBS covers only "
+                    f"{fig['periods_covered']:.2f} of its period; its persistence "
+                    "of excitation holds over whole periods"
+                )
+        for i, a in enumerate(chains):
+            for b in chains[i + 1 :]:
+                if (a.register_length, a.clock_period) != (b.register_length, b.clock_period):
+                    continue
+                d = prbs_shift(register_length=a.register_length, seed_a=a.seed, seed_b=b.seed)
+                lag = min(d, (1 << a.register_length) - 1 - d) * a.clock_period
+                prbs[-len(chains) + i].setdefault("lag_ticks", {})[b.axis] = lag
+                if lag < SHIFT_WARN_TICKS:
+                    warnings.append(
+                        f"phase {ph.name}: {a.axis} and {b.axis} PRBS are the same "
+                        f"sequence only {lag} ticks apart; choose seeds further "
+                        "apart so the axes are uncorrelated"
+                    )
+    return {
+        "name": plan.name,
+        "source": plan.source,
+        "description": plan.description,
+        "rate_hz": rate,
+        "duration_s": schedule.duration,
+        "n_setpoints": len(schedule),
+        "hover_thrust": plan.hover_thrust,
+        "vehicle": vars(plan.vehicle),
+        "safety": vars(plan.safety),
+        "phases": phases,
+        "prbs": prbs,
+        "warnings": warnings,
+    }
+
+
+def _print_check(console: Console, s: dict[str, Any]) -> None:
+    console.print(f"[bold]plan {escape(s['name'])}[/] ({escape(s['source'])}): [green]valid[/]")
+    console.print(
+        f"{s['n_setpoints']} setpoints at {s['rate_hz']:g} Hz, duration {s['duration_s']:g} s"
+    )
+    table = Table(box=None, pad_edge=False, header_style="bold")
+    for col, just in (
+        ("#", "right"),
+        ("phase", "left"),
+        ("kind", "left"),
+        ("start s", "right"),
+        ("end s", "right"),
+        ("setpoints", "right"),
+        ("what", "left"),
+    ):
+        table.add_column(col, justify=just)  # type: ignore[arg-type]
+    for p in s["phases"]:
+        table.add_row(
+            str(p["id"]),
+            escape(p["name"]),
+            p["kind"],
+            f"{p['start_s']:g}",
+            f"{p['end_s']:g}",
+            str(p["setpoints"]),
+            escape(p["excitation"]),
+        )
+    console.print(table)
+    if s["prbs"]:
+        prbs = Table(box=None, pad_edge=False, header_style="bold")
+        for col in ("PRBS", "amplitude", "bits", "seed", "period", "clock", "PE order", "periods"):
+            prbs.add_column(col, justify="left" if col == "PRBS" else "right", no_wrap=True)
+        for f in s["prbs"]:
+            prbs.add_row(
+                f"{escape(f['phase'])}/{f['axis']}",
+                f"±{f['amplitude']:g} {f['unit']}",
+                str(f["register_length"]),
+                str(f["seed"]),
+                f"{f['period_ticks']} = {f['period_s']:g} s",
+                str(f["clock_period_ticks"]),
+                str(f["pe_order_ticks"]),
+                f"{f['periods_covered']:.2f}",
+            )
+        console.print(prbs)
+        lags = [
+            f"{f['axis']}-{k} {v}" for f in s["prbs"] for k, v in f.get("lag_ticks", {}).items()
+        ]
+        console.print(
+            "(period, clock and PE order in setpoint ticks)"
+            + (f"; lags between PRBS axes: {', '.join(lags)} ticks" if lags else "")
+        )
+    v, sf = s["vehicle"], s["safety"]
+    console.print(
+        f"limits: |roll| <= {v['max_roll_deg']:g} deg, |pitch| <= "
+        f"{v['max_pitch_deg']:g} deg, |yaw rate| <= {v['max_yaw_rate_deg_s']:g} deg/s,"
+        f" thrust {v['thrust_min']}-{v['thrust_max']} PWM, take-off at >= "
+        f"{v['min_vbat']:g} V"
+    )
+    abort = (
+        f"descend {sf['descent_duration']:g} s at <= {sf['descent_thrust']} PWM, then stop"
+        if sf["on_abort"] == "descend"
+        else "stop the motors"
+    )
+    console.print(f"on abort: {abort}")
+    for w in s["warnings"]:
+        console.print(f"[yellow]warning:[/] {escape(w)}")
+
+
+def plot_lines(values: np.ndarray, *, width: int, height: int) -> list[str]:
+    """A ``height`` x ``width`` character plot of ``values`` (n,): each column spans the min to
+    max of its samples (so a PRBS shows as a band, a ramp as a line); top row = max value."""
+    n = len(values)
+    edges = np.linspace(0, n, width + 1).astype(int)
+    lo, hi = float(values.min()), float(values.max())
+    scale = (height - 1) / (hi - lo) if hi > lo else 0.0
+    grid = [[" "] * width for _ in range(height)]
+    for c in range(width):
+        chunk = values[edges[c] : max(edges[c + 1], edges[c] + 1)]
+        top = round((float(chunk.max()) - lo) * scale) if scale else (height - 1) // 2
+        bottom = round((float(chunk.min()) - lo) * scale) if scale else top
+        for r in range(bottom, top + 1):
+            grid[height - 1 - r][c] = "█"
+    return ["".join(row) for row in grid]
+
+
+def _print_show(console: Console, schedule: Schedule, *, width: int, height: int) -> None:
+    n = len(schedule)
+    width = max(10, min(width, n))
+    console.print(
+        f"[bold]plan {escape(schedule.name)}[/]: {n} setpoints, "
+        f"{schedule.duration:g} s at {schedule.rate_hz:g} Hz"
+    )
+    for axis in SETPOINT_CHANNELS:
+        values = getattr(schedule, axis).astype(float)
+        console.print(f"[bold cyan]{axis}[/] " + escape(f"[{UNITS[axis]}]"))
+        for r, line in enumerate(plot_lines(values, width=width, height=height)):
+            label = (
+                f"{values.max():g}" if r == 0 else f"{values.min():g}" if r == height - 1 else ""
+            )
+            console.print(f"{label:>8} │{line}", highlight=False)
+    ruler = ["─"] * width
+    for ph in schedule.phases:
+        col = min(width - 1, ph.start_tick * width // n)
+        ruler[col] = str(ph.id % 10)
+    console.print(f"{'phases':>8} └{''.join(ruler)}", highlight=False)
+    console.print(f"{'':>8}  0 s{f'{schedule.duration:g} s':>{width - 3}}", highlight=False)
+    for ph in schedule.phases:
+        console.print(f"{'':>8}  {ph.id}: {ph.start:g}-{ph.end:g} s {escape(ph.name)} ({ph.kind})")
+
+
+@click.group("plan")
+def command() -> None:
+    """Validate and look at flight plans (flightplans/*.toml).
+
+    \b
+    Examples:
+      groundstation plan check prbs-3axis
+      groundstation plan show flightplans/hover-check.toml
+      groundstation plan show prbs-3axis --json > schedule.json
+    """
+
+
+@command.command("check")
+@click.argument("plan")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def check(plan: str, as_json: bool) -> None:
+    """Validate PLAN (a path or a shipped plan name) and print its timeline and PRBS figures.
+
+    \b
+    Example:
+      groundstation plan check prbs-3axis
+    """
+    loaded = load_plan(plan)
+    summary = summarize(loaded, loaded.compile())
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        _print_check(Console(highlight=False), summary)
+
+
+@command.command("show")
+@click.argument("plan")
+@click.option("--json", "as_json", is_flag=True, help="Dump the whole schedule as JSON.")
+@click.option(
+    "--width",
+    type=click.IntRange(10, 1000),
+    default=None,
+    help="Plot width in characters (default: the terminal's).",
+)
+@click.option(
+    "--height", type=click.IntRange(3, 50), default=5, show_default=True, help="Rows per axis."
+)
+def show(plan: str, as_json: bool, width: int | None, height: int) -> None:
+    """Draw PLAN's setpoints per axis in the terminal (or dump them with --json).
+
+    \b
+    Example:
+      groundstation plan show pitch-only --height 8
+    """
+    schedule = load_plan(plan).compile()
+    if as_json:
+        click.echo(json.dumps(schedule.to_dict()))
+        return
+    width = width or shutil.get_terminal_size((100, 24)).columns - 12
+    _print_show(Console(highlight=False), schedule, width=width, height=height)
