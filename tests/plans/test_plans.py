@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from groundstation.errors import PlanError
-from groundstation.plans import SHIPPED_PLANS_DIR, find_plan, load_plan, parse_plan
+from groundstation.plans import SHIPPED_PLANS_DIR, Schedule, find_plan, load_plan, parse_plan
 from sysid.excitation import mls_bits, prbs_shift
 from tests.plans.conftest import BASE, line_of
 
@@ -116,20 +116,44 @@ def _error(text: str) -> str:
 @pytest.mark.parametrize(
     ("old", "new", "key", "needles"),
     [
-        ("amplitude = 20.0", "amplitude = 35.0", "phase[1].roll.amplitude",
-         ["35", "vehicle.max_roll_deg (line 6) = 30"]),
-        ("amplitude = 40.0", "amplitude = 250.0", "phase[1].yaw_rate.amplitude",
-         ["250", "vehicle.max_yaw_rate_deg_s (line 8) = 200"]),
-        ("hover_thrust = 39000", "hover_thrust = 61000", "hover_thrust",
-         ["61000", "vehicle.thrust_max (line 10) = 60000"]),
-        ("descent_thrust = 34000", "descent_thrust = 5000", "safety.descent_thrust",
-         ["5000", "vehicle.thrust_min (line 9) = 10000"]),
-        ("thrust_end = 42000", "thrust_end = 62000", "phase[0].thrust_end",
-         ["62000", "thrust_max"]),
-        ("[phase.yaw_rate]", '[phase.thrust]\nsignal = "step"\namplitude = 25000\n'
-         "[phase.yaw_rate]", "phase[1].thrust.amplitude", ["64000", "thrust_max"]),
+        (
+            "amplitude = 20.0",
+            "amplitude = 35.0",
+            "phase[1].roll.amplitude",
+            ["35", "vehicle.max_roll_deg (line 6) = 30"],
+        ),
+        (
+            "amplitude = 40.0",
+            "amplitude = 250.0",
+            "phase[1].yaw_rate.amplitude",
+            ["250", "vehicle.max_yaw_rate_deg_s (line 8) = 200"],
+        ),
+        (
+            "hover_thrust = 39000",
+            "hover_thrust = 61000",
+            "hover_thrust",
+            ["61000", "vehicle.thrust_max (line 10) = 60000"],
+        ),
+        (
+            "descent_thrust = 34000",
+            "descent_thrust = 5000",
+            "safety.descent_thrust",
+            ["5000", "vehicle.thrust_min (line 9) = 10000"],
+        ),
+        (
+            "thrust_end = 42000",
+            "thrust_end = 62000",
+            "phase[0].thrust_end",
+            ["62000", "thrust_max"],
+        ),
+        (
+            "[phase.yaw_rate]",
+            '[phase.thrust]\nsignal = "step"\namplitude = 25000\n[phase.yaw_rate]',
+            "phase[1].thrust.amplitude",
+            ["64000", "thrust_max"],
+        ),
     ],
-)  # fmt: skip
+)
 def test_out_of_limit_values_are_refused_with_key_value_limit_and_line(old, new, key, needles):
     text = BASE.replace(old, new, 1)
     msg = _error(text)
@@ -210,3 +234,49 @@ def test_lines_survive_inline_tables_dotted_keys_and_multiline_strings():
 def test_missing_plan_names_the_shipped_ones(tmp_path):
     with pytest.raises(PlanError, match="hover-check"):
         load_plan(tmp_path / "nope.toml")
+
+
+def test_a_hand_made_schedule_beyond_the_limits_is_refused():
+    sched = parse_plan(text=BASE).compile()
+    roll = sched.roll.copy()
+    roll[12] = 31.0
+    with pytest.raises(PlanError, match=r"roll = 31 deg at t = 1\.2 s violates vehicle\.max_roll"):
+        Schedule(
+            name="x",
+            rate_hz=sched.rate_hz,
+            roll=roll,
+            pitch=sched.pitch,
+            yaw_rate=sched.yaw_rate,
+            thrust=sched.thrust,
+            phase_id=sched.phase_id,
+            phases=sched.phases,
+            vehicle=sched.vehicle,
+        )
+    with pytest.raises(PlanError, match="phases cover"):
+        Schedule(
+            name="x",
+            rate_hz=10.0,
+            roll=[0.0],
+            pitch=[0.0],
+            yaw_rate=[0.0],
+            thrust=[20000],
+            phase_id=[0],
+            phases=(),
+            vehicle=sched.vehicle,
+        )
+
+
+def test_the_documented_example_and_error_are_what_the_code_does():
+    doc = (SHIPPED_PLANS_DIR.parent / "docs" / "flightplans.md").read_text()
+    example = doc.split("```toml\n", 1)[1].split("```", 1)[0]
+    raw = tomllib.loads(example)
+    expected = round(sum(p["duration"] for p in raw["phase"]) * raw["setpoint_rate_hz"])
+    assert len(parse_plan(text=example).compile()) == expected
+    documented = next(ln.strip() for ln in doc.splitlines() if "prbs-3axis.toml:" in ln)
+    text = (SHIPPED_PLANS_DIR / "prbs-3axis.toml").read_text()
+    with pytest.raises(PlanError) as info:
+        parse_plan(
+            text=text.replace("amplitude = 25.0 ", "amplitude = 35.0 ", 1),
+            source="flightplans/prbs-3axis.toml",
+        )
+    assert str(info.value) == documented
