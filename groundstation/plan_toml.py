@@ -102,6 +102,13 @@ def dotted(path: tuple) -> str:
 
 
 REQUIRED = object()
+_KINDS = {
+    float: "a number",
+    int: "an integer",
+    str: "a string",
+    dict: "a table",
+    list: "an array of tables",
+}
 
 
 class TomlSource:
@@ -145,7 +152,7 @@ class TomlTable:
                 names = ", ".join(sorted(allowed))
                 hint = f"did you mean '{near[0]}'? " if near else ""
                 raise self.src.error(
-                    (*self.path, key), f"unknown key '{key}'; {hint}(allowed: {names})"
+                    (*self.path, key), f"unknown key '{key}'; {hint}allowed keys: {names}"
                 )
         return self
 
@@ -157,7 +164,7 @@ class TomlTable:
         path = (*self.path, key)
         if key not in self.data:
             if default is REQUIRED:
-                raise self.src.error(path, f"missing required key '{key}' ({kind.__name__})")
+                raise self.src.error(path, f"missing required key '{key}' ({_KINDS[kind]})")
             return default
         value = self.data[key]
         numeric = isinstance(value, int | float) and not isinstance(value, bool)
@@ -167,7 +174,7 @@ class TomlTable:
             return int(value)
         if kind in (str, dict, list) and isinstance(value, kind):
             return value
-        want = {float: "a number", int: "an integer", str: "a string"}.get(kind, kind.__name__)
+        want = _KINDS[kind]
         raise self.src.error(path, f"{value!r} is not {want}{f' in {unit}' if unit else ''}")
 
     def number(
