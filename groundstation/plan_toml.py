@@ -80,7 +80,8 @@ def key_lines(text: str) -> dict[tuple, int]:
                 arrays[path] = arrays.get(path, -1) + 1
                 path += (arrays[path],)
             current = path
-            where.setdefault(path, row + 1)
+            for k in range(1, len(path) + 1):
+                where.setdefault(path[:k], row + 1)
         elif stripped and not stripped.startswith("#"):
             match = _DOTTED.match(lines[row])
             if match and lines[row][match.end() : match.end() + 1] == "=":

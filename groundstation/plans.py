@@ -259,8 +259,8 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         TomlTable(src, ("safety",), top.get("safety", dict, default={})), vehicle, rate
     )
     raw_phases = top.get("phase", list)
-    if not raw_phases:
-        raise src.error(("phase",), "a plan needs at least one [[phase]]; add takeoff and landing")
+    if len(raw_phases) < 2:
+        raise src.error(("phase",), "a plan needs a takeoff and a landing [[phase]]; add them")
     phases: list[PhaseSpec] = []
     for i, raw in enumerate(raw_phases):
         where = "first" if i == 0 else "last" if i == len(raw_phases) - 1 else "middle"
@@ -311,7 +311,7 @@ def _check_thrust(
     if key:
         raise src.error(
             path,
-            f"{what} {value:g} PWM is beyond {src.ref(('vehicle', key))} = "
+            f"{what} = {value:g} PWM, beyond {src.ref(('vehicle', key))} = "
             f"{getattr(v, key)} PWM; change the value or the limit",
         )
 
@@ -390,9 +390,7 @@ def _read_signal(
     else:
         reach = (amplitude,) if signal == "step" else (abs(amplitude), -abs(amplitude))
         for value in reach:
-            _check_thrust(
-                t.src, at, hover + value, v, what=f"hover_thrust {hover} {value:+g} PWM reaches"
-            )
+            _check_thrust(t.src, at, hover + value, v, what=f"hover_thrust {hover} {value:+g}")
     spec: dict[str, Any] = {"axis": axis, "signal": signal, "amplitude": amplitude}
     if signal == "prbs":
         spec.update(_read_prbs(t, n_ticks))

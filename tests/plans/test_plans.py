@@ -212,6 +212,11 @@ def test_schema_violations_name_key_and_line(old, new, needle, fragment):
     assert fragment in msg, msg
 
 
+def test_a_plan_needs_takeoff_and_landing():
+    text = BASE.split("[[phase]]")[0] + '[[phase]]\nkind = "takeoff"\nduration = 1.0\n'
+    assert _error(text).startswith(f"p.toml:{line_of(text, '[[phase]]')}: phase: a plan needs")
+
+
 def test_lines_survive_inline_tables_dotted_keys_and_multiline_strings():
     text = BASE.replace(
         'name = "base"', 'name = "base"\ndescription = """\n[[phase]]\namplitude = 1\n"""'
