@@ -225,7 +225,9 @@ def command() -> None:
 @click.argument("plan")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def check(plan: str, as_json: bool) -> None:
-    """Validate PLAN (a path or a shipped plan name) and print its timeline and PRBS figures.
+    """Validate PLAN; print its timeline, duration, setpoint count and PRBS figures.
+
+    PLAN is a path or the name of a shipped plan (flightplans/NAME.toml).
 
     \b
     Example:
@@ -252,7 +254,7 @@ def check(plan: str, as_json: bool) -> None:
     "--height", type=click.IntRange(3, 50), default=5, show_default=True, help="Rows per axis."
 )
 def show(plan: str, as_json: bool, width: int | None, height: int) -> None:
-    """Draw PLAN's setpoints per axis in the terminal (or dump them with --json).
+    """Draw PLAN's setpoints per axis in the terminal, or dump them (--json).
 
     \b
     Example:
