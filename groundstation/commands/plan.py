@@ -221,7 +221,7 @@ def command() -> None:
     """
 
 
-@command.command("check")
+@command.command("check", short_help="Validate a plan; print its timeline and PRBS figures.")
 @click.argument("plan")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def check(plan: str, as_json: bool) -> None:
@@ -241,7 +241,7 @@ def check(plan: str, as_json: bool) -> None:
         _print_check(Console(highlight=False), summary)
 
 
-@command.command("show")
+@command.command("show", short_help="Plot a plan's setpoints per axis, or dump them as JSON.")
 @click.argument("plan")
 @click.option("--json", "as_json", is_flag=True, help="Dump the whole schedule as JSON.")
 @click.option(
