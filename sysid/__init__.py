@@ -13,9 +13,13 @@ from sysid.errors import (
     MissingDependencyError,
     ModelFileError,
     OrderError,
+    ParameterError,
     SysIdError,
 )
+from sysid.iem import iem
 from sysid.model import StateSpaceModel, load_model
+from sysid.moesp import po_moesp
+from sysid.order import singular_values
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
 from sysid.sweep import SweepResult, select_order, sweep
 from sysid.validate import CompareResult, compare, fit_percent, stable_predictor
@@ -29,6 +33,7 @@ __all__ = [
     "MissingDependencyError",
     "ModelFileError",
     "OrderError",
+    "ParameterError",
     "StateSpaceModel",
     "Stream",
     "SweepResult",
@@ -36,9 +41,12 @@ __all__ = [
     "compare",
     "detrend_data",
     "fit_percent",
+    "iem",
     "iodata_from_streams",
     "load_model",
+    "po_moesp",
     "select_order",
+    "singular_values",
     "stable_predictor",
     "sweep",
     "trim",

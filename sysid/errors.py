@@ -14,6 +14,7 @@ __all__ = [
     "MissingDependencyError",
     "ModelFileError",
     "OrderError",
+    "ParameterError",
     "SysIdError",
 ]
 
@@ -36,6 +37,10 @@ class HorizonError(SysIdError, ValueError):
 
 class OrderError(SysIdError, ValueError):
     """A model order larger than the rank the data and horizons make available."""
+
+
+class ParameterError(SysIdError, ValueError):
+    """An option outside its allowed values (e.g. an unknown method name)."""
 
 
 class ModelFileError(SysIdError, ValueError):

@@ -1,0 +1,200 @@
+"""The data products of subspace identification, built in one pass over the samples.
+
+Every method here works on the joint block Hankel matrix of the (scaled) signal
+``w(k) = [u(k); y(k)]`` (``c = m + l`` channels) with ``B = p + f`` block rows:
+
+.. math::
+
+    W = \\begin{bmatrix} Z_p \\\\ W_f \\end{bmatrix}, \\quad
+    W[t c + i, j] = w_i(j + t), \\quad t = 0..B-1, \\; j = 0..M-1, \\; M = N - B + 1
+
+so block rows ``0..p-1`` are the past ``Z_p`` (thesis eq. 3.23, in time order) and block rows
+``p..p+f-1`` the future ``U_f, Y_f`` (eq. 3.19). Several flights each contribute their own
+columns (never joined end to end).
+
+Only the Gram matrix :math:`G = W W^T` (``(Bc, Bc)``) is formed. Because W is block Hankel,
+block ``(a, b)``, ``d = b - a >= 0``, is a lag-``d`` correlation minus a few edge terms:
+
+.. math::
+
+    G_{ab} = \\sum_{t=0}^{N-1-d} w(t) w(t+d)^T - \\sum_{t<a} w(t) w(t+d)^T
+             - \\sum_{t \\ge a+M}^{N-1-d} w(t) w(t+d)^T
+
+which costs :math:`O(N B c^2)` instead of :math:`O(N B^2 c^2)` for ``W @ W.T``. Any ordering of
+the rows (e.g. ``[Z_p; y_0; u_0; y_1; ...]`` for IEM, ``[U_f; Z_p; Y_f]`` for PO-MOESP,
+eq. 3.16) is a symmetric permutation of G; its Cholesky factor ``L`` is the ``L`` of the LQ
+factorization ``W_perm = L Q^T`` (``Q`` orthonormal, never formed). If G is too ill conditioned
+for Cholesky (estimated ``cond(W) > 1e6``) the factor comes from a QR of ``W_perm^T`` instead.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from sysid.data import IOData, as_flights, block_hankel, check_excited, hankel_columns
+from sysid.errors import DataError, HorizonError
+
+__all__ = ["DataProducts", "build_products", "min_samples", "triangular_factor"]
+
+log = logging.getLogger(__name__)
+
+#: Largest estimated cond(W) accepted from the Cholesky route before falling back to QR.
+COND_LIMIT = 1e6
+
+
+def min_samples(*, past: int, future: int, n_channels: int, n_flights: int = 1) -> int:
+    """Fewest samples per flight for a full-rank ``W``: ``M >= B c`` columns overall."""
+    blocks = past + future
+    rows = blocks * n_channels
+    per_flight_cols = -(-rows // n_flights)
+    return per_flight_cols + blocks - 1
+
+
+@dataclass(frozen=True, eq=False)
+class DataProducts:
+    """Gram matrix of the scaled joint Hankel matrix and what is needed to interpret it.
+
+    Attributes:
+        gram: ``(B c, B c)`` with ``B = past + future``, ``c = m + l``; canonical row order.
+        past, future: horizons p and f (samples).
+        n_inputs, n_outputs: m and l.
+        n_columns: total Hankel columns M over all flights.
+        u_scale, y_scale: ``(m,)``, ``(l,)`` channel scales (the data were divided by them).
+        flights: the data (kept for the QR fallback).
+    """
+
+    gram: np.ndarray
+    past: int
+    future: int
+    n_inputs: int
+    n_outputs: int
+    n_columns: int
+    u_scale: np.ndarray
+    y_scale: np.ndarray
+    flights: tuple[IOData, ...]
+
+    @property
+    def n_channels(self) -> int:
+        """c = m + l."""
+        return self.n_inputs + self.n_outputs
+
+    def rows(self, *, block: int, kind: str) -> np.ndarray:
+        """Canonical row indices of ``u`` (kind "u") or ``y`` (kind "y") at block row ``block``."""
+        base = block * self.n_channels
+        if kind == "u":
+            return np.arange(base, base + self.n_inputs)
+        return np.arange(base + self.n_inputs, base + self.n_channels)
+
+    def scaled_w(self, flight: IOData) -> np.ndarray:
+        """``(N, c)`` joint signal of one flight divided by the channel scales."""
+        return np.hstack([flight.u / self.u_scale, flight.y / self.y_scale])
+
+
+def _gram_one(w: np.ndarray, blocks: int) -> np.ndarray:
+    """Gram matrix of ``block_hankel(w, block_rows=blocks)`` by lag correlations (see module)."""
+    n, c = w.shape
+    g = np.empty((blocks * c, blocks * c))
+    for d in range(blocks):
+        full = w[: n - d].T @ w[d:]
+        na = blocks - d  # block rows a = 0..na-1 with b = a + d
+        head = np.zeros((na, c, c))
+        tail = np.zeros((na, c, c))
+        if na > 1:
+            head[1:] = np.cumsum(np.einsum("ti,tj->tij", w[: na - 1], w[d:d + na - 1]), axis=0)
+            t0 = n - d - (na - 1)
+            tp = np.einsum("ti,tj->tij", w[t0:n - d], w[t0 + d:n])
+            tail[1:] = np.cumsum(tp[::-1], axis=0)
+        blk = full[None] - head - tail[::-1]
+        for a in range(na):
+            b = a + d
+            g[a * c:(a + 1) * c, b * c:(b + 1) * c] = blk[a]
+            g[b * c:(b + 1) * c, a * c:(a + 1) * c] = blk[a].T
+    return g
+
+
+def check_horizons(*, past: int, future: int) -> None:
+    """Raise :class:`HorizonError` unless ``past >= 1`` and ``future >= 2`` are integers."""
+    for name, value, low in (("past", past, 1), ("future", future, 2)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+            raise HorizonError(f"{name}={value!r}; pass an integer horizon >= {low} (samples)")
+
+
+def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,
+                   scale: bool = True) -> DataProducts:
+    """Validate the data and build the Gram matrix of the joint Hankel matrix, one pass.
+
+    With ``scale`` each channel is divided by its standard deviation over all flights, so the
+    factorization is well balanced whatever the units (PWM counts vs g vs deg/s).
+    """
+    check_horizons(past=past, future=future)
+    flights = as_flights(data)
+    m, ell = flights[0].n_inputs, flights[0].n_outputs
+    blocks = past + future
+    rows = blocks * (m + ell)
+    cols = sum(hankel_columns(d.n_samples, block_rows=blocks) for d in flights)
+    if cols < rows:
+        need = min_samples(past=past, future=future, n_channels=m + ell,
+                           n_flights=len(flights))
+        have = min(d.n_samples for d in flights)
+        raise DataError(
+            f"{have} samples{' per flight' if len(flights) > 1 else ''} are too few for "
+            f"past={past}, future={future} with {m + ell} channels; need at least {need} "
+            "samples per flight (or shorter horizons)"
+        )
+    u_std, y_std = check_excited(flights)
+    u_scale = u_std if scale else np.ones(m)
+    y_scale = y_std if scale else np.ones(ell)
+    gram = np.zeros((rows, rows))
+    products = DataProducts(gram=gram, past=past, future=future, n_inputs=m, n_outputs=ell,
+                            n_columns=cols, u_scale=u_scale, y_scale=y_scale, flights=flights)
+    for d in flights:
+        if hankel_columns(d.n_samples, block_rows=blocks) > 0:
+            gram += _gram_one(products.scaled_w(d), blocks)
+    log.debug("Gram %dx%d from %d columns of %d flight(s)", rows, rows, cols, len(flights))
+    return products
+
+
+def _qr_factor(products: DataProducts, order: np.ndarray) -> np.ndarray:
+    """Lower-triangular ``L`` with ``W_perm = L Q^T``, from a QR of ``W_perm^T`` (slow path)."""
+    blocks = products.past + products.future
+    w_t = np.hstack([block_hankel(products.scaled_w(d), block_rows=blocks)[order]
+                     for d in products.flights
+                     if hankel_columns(d.n_samples, block_rows=blocks) > 0]).T
+    r = scipy.linalg.qr(w_t, mode="r", overwrite_a=True, check_finite=False)[0]
+    r = r[: len(order)]
+    signs = np.where(np.diag(r) < 0, -1.0, 1.0)
+    return (signs[:, None] * r).T
+
+
+def triangular_factor(products: DataProducts, order: np.ndarray, *,
+                      method: str = "auto") -> np.ndarray:
+    """``L`` (lower triangular, ``(r, r)``) of the LQ factorization of the rows ``order`` of W.
+
+    ``method``: "cholesky" (Gram route), "qr" (explicit Hankel matrix, O(N r^2)), or "auto"
+    (Cholesky, falling back to QR when the estimated ``cond(W)`` exceeds :data:`COND_LIMIT`).
+    """
+    if method not in ("auto", "cholesky", "qr"):
+        raise ValueError(f"factorization={method!r}; use 'auto', 'cholesky' or 'qr'")
+    if method != "qr":
+        g = products.gram[np.ix_(order, order)]
+        try:
+            low = np.linalg.cholesky(g)
+            diag = np.abs(np.diag(low))
+            cond = diag.max() / diag.min() if diag.min() > 0 else np.inf
+        except np.linalg.LinAlgError:
+            low, cond = None, np.inf
+        if low is not None and (cond < COND_LIMIT or method == "cholesky"):
+            return low
+        log.info("Gram matrix ill conditioned (cond(W) ~ %.2g); using QR of the data", cond)
+    low = _qr_factor(products, order)
+    diag = np.abs(np.diag(low))
+    if diag.min() <= 1e-12 * diag.max():
+        raise DataError("the data matrix is rank deficient (linearly dependent or duplicated "
+                        "channels, or too little excitation); drop redundant channels or "
+                        "excite more")
+    return low

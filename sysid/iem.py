@@ -1,0 +1,230 @@
+"""Innovation Estimation Method (IEM, Qin & Ljung; thesis section 3.2 and Table 4.3).
+
+Row i = 0..f-1 of the future (eq. 3.25/3.26; ``feedthrough=True`` adds the current input, the
+``H_f1 U_1`` term of eq. 3.24):
+
+.. math::
+
+    Y_{f,i} = \\Gamma_{f,i} L_p Z_p + H^-_{f,i} U_{<i} + G^-_{f,i} \\hat E_{<i} + E_{f,i}
+
+is solved by least squares (eq. 3.31) and its residual is the innovation estimate
+:math:`\\hat E_{f,i}` (eqs. 3.28-3.30) used by the later rows. The stacked
+:math:`\\widehat{\\Gamma_f L_p}` ``(f l, p (m+l))`` is reduced by an SVD (eq. 3.32).
+
+**Fast path.** Each :math:`\\hat E_{f,j}` is :math:`Y_{f,j}` minus its projection on the
+previous regressors, so ``span[Z_p, U_<i, Ê_<i] = span[Z_p, U_<i, Y_<i]``. Ordering the rows of
+the joint Hankel matrix as ``[Z_p; y_0; u_0; y_1; u_1; ...]`` (``[Z_p; u_0; y_0; ...]`` with
+feedthrough) makes every row regression "this block on all rows before it". One LQ factor
+``W_perm = L Q^T`` (Cholesky of the Gram matrix, :mod:`sysid.factor`) then holds everything:
+:math:`\\hat E_{f,i} = L_{ii} Q_i^T`, and the regressors ``[Z_p; U_<i; Ê_<i]`` have
+coordinates ``M[:s_i, :s_i]``, where M is L with the off-diagonal part of each y-block row
+zeroed (still lower triangular). So
+:math:`[\\Gamma_{f,i} L_p, H^-, G^-] = L_{i,:s_i} M_{:s_i,:s_i}^{-1}` is one triangular solve,
+with no second pass over the N samples. :func:`iem_direct` is the plain per-row ``lstsq``
+version on the explicit arrays, kept as the reference.
+
+**Departures from the thesis.** (1) The SVD is taken of
+:math:`\\widehat{\\Gamma_f L_p} Z_p` (``weighting="data"``, the predicted future outputs,
+invariant to how the past is scaled) rather than of :math:`\\widehat{\\Gamma_f L_p}` alone
+(``weighting="none"``, eq. 3.32). (2) B, D, K come from a regression on the estimated states
+(``bk_method="state"``, see :mod:`sysid.realize`); the thesis' step 5 (``bk_method="thesis"``)
+is biased under feedback and K then comes from the state regression with B, D fixed.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.linalg
+
+from sysid.data import IOData, block_hankel
+from sysid.errors import ParameterError
+from sysid.factor import DataProducts, build_products, triangular_factor
+from sysid.model import StateSpaceModel
+from sysid.realize import (
+    Signals,
+    ac_from_gamma,
+    bd_thesis,
+    bdk_from_states,
+    build_model,
+    check_order,
+    gamma_from_svd,
+    lstsq_coords,
+    refine_predictor,
+)
+
+__all__ = ["iem", "iem_direct", "iem_order", "iem_signals", "realize_iem"]
+
+log = logging.getLogger(__name__)
+
+_BK = ("state", "thesis")
+_WEIGHTING = ("data", "none")
+
+
+def iem_order(products: DataProducts, *, feedthrough: bool) -> np.ndarray:
+    """Canonical row indices in IEM order: ``[Z_p; y_0; u_0; ...]`` or ``[Z_p; u_0; y_0; ...]``."""
+    pc = products.past * products.n_channels
+    parts = [np.arange(pc)]
+    for i in range(products.future):
+        u = products.rows(block=products.past + i, kind="u")
+        y = products.rows(block=products.past + i, kind="y")
+        parts += [u, y] if feedthrough else [y, u]
+    return np.concatenate(parts)
+
+
+def iem_signals(products: DataProducts, *, feedthrough: bool, factorization: str = "auto"
+                ) -> tuple[np.ndarray, Signals]:
+    """:math:`\\widehat{\\Gamma_f L_p}` ``(f l, p c)`` and the signals, from one LQ factor."""
+    order = iem_order(products, feedthrough=feedthrough)
+    low = triangular_factor(products, order, method=factorization)
+    pos = np.empty_like(order)
+    pos[order] = np.arange(order.size)
+    p, f, ell = products.past, products.future, products.n_outputs
+    pc = p * products.n_channels
+    y_pos = [pos[products.rows(block=p + i, kind="y")] for i in range(f)]
+    coords = low.copy()  # M: rows of Ê_j reduced to their diagonal block
+    for yp in y_pos:
+        diag = low[np.ix_(yp, yp)]
+        coords[yp] = 0.0
+        coords[np.ix_(yp, yp)] = diag
+    gamma_lp = np.empty((f * ell, pc))
+    for i, yp in enumerate(y_pos):
+        s = yp[0]
+        theta = scipy.linalg.solve_triangular(coords[:s, :s], low[yp, :s].T, lower=True,
+                                              trans="T", check_finite=False).T
+        gamma_lp[i * ell:(i + 1) * ell] = theta[:, :pc]
+
+    def rows(idx: np.ndarray) -> np.ndarray:
+        return low[pos[idx]]
+
+    all_u = np.concatenate([products.rows(block=p + i, kind="u") for i in range(f)])
+    all_y = np.concatenate([products.rows(block=p + i, kind="y") for i in range(f)])
+    sig = Signals(zp=low[:pc], zp_next=rows(np.arange(products.n_channels, pc +
+                                                      products.n_channels)),
+                  u0=rows(products.rows(block=p, kind="u")),
+                  y0=rows(products.rows(block=p, kind="y")), e0=coords[y_pos[0]],
+                  uf=rows(all_u), yf=rows(all_y), n_columns=products.n_columns)
+    return gamma_lp, sig
+
+
+def iem_direct(products: DataProducts, *, feedthrough: bool) -> tuple[np.ndarray, Signals]:
+    """Reference: the same as :func:`iem_signals` by per-row ``lstsq`` on the explicit arrays.
+
+    O(f N r^2): slow (the baseline of ``bench/bench_sysid.py``) but obviously right.
+    """
+    blocks = products.past + products.future
+    w = np.hstack([block_hankel(products.scaled_w(d), block_rows=blocks)
+                   for d in products.flights if d.n_samples >= blocks])
+    p, f, c, ell = products.past, products.future, products.n_channels, products.n_outputs
+    zp = w[: p * c]
+    gamma_lp = np.empty((f * ell, p * c))
+    us = [w[products.rows(block=p + i, kind="u")] for i in range(f)]
+    ys = [w[products.rows(block=p + i, kind="y")] for i in range(f)]
+    es: list[np.ndarray] = []
+    for i in range(f):
+        reg = [zp]
+        for j in range(i + 1 if feedthrough else i):
+            reg.append(us[j])
+        reg += es
+        reg_m = np.vstack(reg)
+        theta = lstsq_coords(ys[i], reg_m)
+        gamma_lp[i * ell:(i + 1) * ell] = theta[:, : p * c]
+        es.append(ys[i] - theta @ reg_m)
+    sig = Signals(zp=zp, zp_next=w[c:(p + 1) * c], u0=us[0], y0=ys[0], e0=es[0],
+                  uf=np.vstack(us), yf=np.vstack(ys), n_columns=products.n_columns)
+    return gamma_lp, sig
+
+
+def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int,
+                n_outputs: int, feedthrough: bool, bk_method: str, weighting: str,
+                refine_on: list[tuple[np.ndarray, np.ndarray]] | None = None
+                ) -> tuple[tuple[np.ndarray, ...], np.ndarray, str]:
+    """``(A, B, C, D, K, noise_cov)`` in scaled units, the singular values of step 3, and
+    what the predictor refinement did ("done", "off", or why it was skipped).
+
+    ``refine_on``: the scaled ``(u, y)`` of each flight, to refine ``(A, B, D, K)`` with
+    :func:`sysid.realize.refine_predictor` (A = A_K + K C, B = B_K + K D; C and A_K kept).
+    """
+    o = gamma_lp @ sig.zp / np.sqrt(sig.n_columns) if weighting == "data" else gamma_lp
+    gamma, sv = gamma_from_svd(o, order=order)
+    a, c = ac_from_gamma(gamma, n_outputs=n_outputs)
+    lp = np.linalg.pinv(gamma) @ gamma_lp  # L_p estimate, eq. 3.23
+    x, x_next = lp @ sig.zp, lp @ sig.zp_next
+    if bk_method == "thesis":
+        yf_uf = lstsq_coords(sig.yf, sig.uf)  # Y_f U_f^dagger
+        b, d = bd_thesis(gamma=gamma, yf_uf_pinv=yf_uf, n_inputs=n_inputs,
+                         n_outputs=n_outputs, feedthrough=feedthrough)
+        b, d, k = bdk_from_states(a=a, c=c, x=x, x_next=x_next, sig=sig,
+                                  feedthrough=feedthrough, b=b, d=d)
+    else:
+        b, d, k = bdk_from_states(a=a, c=c, x=x, x_next=x_next, sig=sig,
+                                  feedthrough=feedthrough)
+    noise_cov = sig.e0 @ sig.e0.T / sig.n_columns
+    status = "off"
+    if refine_on is not None:
+        a_k = a - k @ c
+        refined = None
+        if np.max(np.abs(np.linalg.eigvals(a_k))) < 0.999:
+            refined = refine_predictor(a_k=a_k, c=c, flights=refine_on,
+                                       feedthrough=feedthrough)
+            status = "skipped: A - K C not diagonalisable"
+        if refined is not None:
+            b_k, d, k = refined
+            a, b, status = a_k + k @ c, b_k + k @ d, "done"
+        elif status == "off":
+            status = "skipped: predictor A - K C unstable"
+            log.warning("IEM refinement skipped: the predictor A - K C is unstable")
+    return (a, b, c, d, k, noise_cov), sv, status
+
+
+def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
+        feedthrough: bool = False, bk_method: str = "state", weighting: str = "data",
+        scale: bool = True, factorization: str = "auto", direct: bool = False,
+        refine: bool = True) -> StateSpaceModel:
+    """Identify an innovation-form model with IEM from one flight or a list of flights.
+
+    Args:
+        data: ``IOData`` (u ``(N, m)``, y ``(N, l)``) or a list of them (each its own columns).
+        order: model order n. past, future: horizons p, f in samples.
+        feedthrough: estimate D (and use the current input in the row regressions); False
+            means D = 0, right for a loop without delay (u(k) already reacts to y(k)).
+        bk_method: "state" (closed-loop consistent, default) or "thesis" (eq. 3.15).
+        weighting: "data" (SVD of Γ_f L_p Z_p, default) or "none" (thesis eq. 3.32).
+        scale: divide channels by their std inside the identification (undone in the model).
+        factorization: "auto", "cholesky" or "qr" (see :func:`sysid.factor.triangular_factor`).
+        direct: use the per-row ``lstsq`` reference path instead of the fast one.
+        refine: one linear least-squares fit of the one-step predictor over all samples
+            after step 5 (:func:`sysid.realize.refine_predictor`); False gives Table 4.3 as is.
+
+    Returns:
+        ``StateSpaceModel`` in physical units with K and the innovation covariance.
+    """
+    if bk_method not in _BK:
+        raise ParameterError(f"bk_method={bk_method!r}; use one of {_BK}")
+    if weighting not in _WEIGHTING:
+        raise ParameterError(f"weighting={weighting!r}; use one of {_WEIGHTING}")
+    products = build_products(data, past=past, future=future, scale=scale)
+    m, ell = products.n_inputs, products.n_outputs
+    check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)
+    if direct:
+        gamma_lp, sig = iem_direct(products, feedthrough=feedthrough)
+    else:
+        gamma_lp, sig = iem_signals(products, feedthrough=feedthrough,
+                                    factorization=factorization)
+    refine_on = ([(fl.u / products.u_scale, fl.y / products.y_scale)
+                  for fl in products.flights] if refine else None)
+    (a, b, c, d, k, cov), sv, status = realize_iem(
+        gamma_lp, sig, order=order, n_inputs=m, n_outputs=ell, feedthrough=feedthrough,
+        bk_method=bk_method, weighting=weighting, refine_on=refine_on)
+    prov = {"method": "iem", "order": order, "past": past, "future": future,
+            "feedthrough": feedthrough, "bk_method": bk_method, "weighting": weighting,
+            "n_flights": len(products.flights), "n_columns": products.n_columns,
+            "n_samples": [fl.n_samples for fl in products.flights],
+            "sources": [fl.source for fl in products.flights],
+            "singular_values": sv.tolist(), "path": "direct" if direct else "fast",
+            "refine": status}
+    return build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
+                       y_scale=products.y_scale, template=products.flights[0],
+                       provenance=prov)

@@ -1,0 +1,258 @@
+"""From an estimate of the extended observability matrix to ``(A, B, C, D, K)``.
+
+Signals (rows of the Hankel matrix, residuals, state estimates) are passed as *coordinate*
+matrices ``S (rows, K)``: either the raw samples (``K = M`` columns) or their coordinates in the
+orthonormal basis ``Q`` of an LQ factorization (``K = r``). Least squares only needs inner
+products ``S_1 S_2^T``, which are the same in both, so one implementation serves the fast and
+the direct paths.
+
+* Order reduction, thesis eqs. 3.9/3.10/3.32: ``O = U S V^T``,
+  :math:`\\hat\\Gamma_f = U_1 S_1^{1/2}`.
+* A and C by shift invariance, eqs. 3.11-3.12: ``C`` is the first block row of
+  :math:`\\hat\\Gamma_f`, :math:`\\overline{\\Gamma}_f A = \\underline{\\Gamma}_f` by least squares.
+* B and D, thesis step 5 (eqs. 3.13-3.15, :func:`bd_thesis`):
+  :math:`\\Gamma_f^\\perp Y_f U_f^\\dagger = \\Gamma_f^\\perp H_f`. Consistent in open loop; in
+  closed loop :math:`E_f U_f^\\dagger \\ne 0` (the inputs react to the noise) and it is biased.
+* B, D and K from the state sequence (default, :func:`bdk_from_states`): with
+  :math:`\\hat L_p = \\hat\\Gamma_f^\\dagger \\widehat{\\Gamma_f L_p}` the states are
+  :math:`\\hat x(k) = \\hat L_p Z_p` and :math:`\\hat x(k+1) = \\hat L_p Z_p^+` (the past window
+  shifted by one sample, eq. 3.23), and with the innovation estimate :math:`\\hat e(k)`
+
+  .. math::
+
+      \\hat x(k+1) - A \\hat x(k) = B u(k) + K \\hat e(k), \\qquad
+      y(k) - C \\hat x(k) = D u(k) + \\hat e(k)
+
+  solved by least squares. Both regressors u(k) and ê(k) are included, so the correlation
+  between input and noise under feedback causes no bias; the only approximation is
+  :math:`A_K^p \\approx 0`, the one IEM already makes.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from sysid.data import IOData
+from sysid.errors import OrderError
+from sysid.model import StateSpaceModel
+
+__all__ = [
+    "Signals",
+    "ac_from_gamma",
+    "bd_thesis",
+    "bdk_from_states",
+    "build_model",
+    "check_order",
+    "gamma_from_svd",
+    "lstsq_coords",
+    "refine_predictor",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class Signals:
+    """Row signals in a common column basis (raw samples or LQ coordinates), all ``(rows, K)``.
+
+    ``zp`` past window ``(p c, K)``; ``zp_next`` the past window one sample later; ``u0``, ``y0``
+    the first future input/output ``(m, K)``/``(l, K)``; ``e0`` the innovation estimate at that
+    time; ``uf``/``yf`` the future blocks ``(f m, K)``/``(f l, K)``; ``n_columns`` Hankel columns M.
+    """
+
+    zp: np.ndarray
+    zp_next: np.ndarray
+    u0: np.ndarray
+    y0: np.ndarray
+    e0: np.ndarray
+    uf: np.ndarray
+    yf: np.ndarray
+    n_columns: int
+
+
+def check_order(*, order: int, past: int, future: int, n_inputs: int, n_outputs: int) -> None:
+    """Raise :class:`OrderError` unless ``1 <= order <= min((f-1) l, p (m+l))``."""
+    limit = min((future - 1) * n_outputs, past * (n_inputs + n_outputs))
+    if isinstance(order, bool) or not isinstance(order, int | np.integer) or order < 1:
+        raise OrderError(f"order={order!r}; pass a positive integer model order")
+    if order > limit:
+        raise OrderError(
+            f"order={order} exceeds the rank available ({limit} with past={past}, "
+            f"future={future}, {n_outputs} outputs); lower the order or raise future"
+        )
+
+
+def lstsq_coords(target: np.ndarray, regressors: np.ndarray) -> np.ndarray:
+    """``Theta`` minimising ``||target - Theta regressors||_F`` (rows are signals)."""
+    return np.linalg.lstsq(regressors.T, target.T, rcond=None)[0].T
+
+
+def gamma_from_svd(o: np.ndarray, *, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """:math:`\\hat\\Gamma_f = U_1 S_1^{1/2}` ``(f l, n)`` and all singular values of ``o``."""
+    u, s, _ = np.linalg.svd(o, full_matrices=False)
+    if s[order - 1] <= 1e-12 * s[0]:
+        raise OrderError(f"order={order} exceeds the numerical rank of the data "
+                         f"({int(np.sum(s > 1e-12 * s[0]))}); lower the order")
+    return u[:, :order] * np.sqrt(s[:order]), s
+
+
+def ac_from_gamma(gamma: np.ndarray, *, n_outputs: int) -> tuple[np.ndarray, np.ndarray]:
+    """``A (n, n)``, ``C (l, n)`` from :math:`\\hat\\Gamma_f` (thesis eqs. 3.11-3.12)."""
+    c = gamma[:n_outputs]
+    a = np.linalg.lstsq(gamma[:-n_outputs], gamma[n_outputs:], rcond=None)[0]
+    return a, c
+
+
+def bd_thesis(*, gamma: np.ndarray, yf_uf_pinv: np.ndarray, n_inputs: int, n_outputs: int,
+              feedthrough: bool) -> tuple[np.ndarray, np.ndarray]:
+    """B, D from :math:`\\Gamma^\\perp Y_f U_f^\\dagger = \\Gamma^\\perp H_f` (eqs. 3.13-3.15).
+
+    ``yf_uf_pinv`` is :math:`Y_f U_f^\\dagger` ``(f l, f m)``. Column block i of the left side,
+    :math:`\\mathcal M_i`, equals :math:`\\mathcal L_i D + \\sum_{j>i} \\mathcal L_j C A^{j-i-1} B`
+    with :math:`\\mathcal L_j` the column blocks of :math:`\\Gamma^\\perp` and :math:`CA^k` the
+    block rows of :math:`\\hat\\Gamma_f`. With ``feedthrough=False`` D = 0 is imposed.
+    """
+    m, ell = n_inputs, n_outputs
+    f = gamma.shape[0] // ell
+    n = gamma.shape[1]
+    perp = scipy.linalg.null_space(gamma.T).T  # (f l - n, f l)
+    lhs = perp @ yf_uf_pinv
+    lj = [perp[:, j * ell:(j + 1) * ell] for j in range(f)]
+    gb = [gamma[k * ell:(k + 1) * ell] for k in range(f)]
+    rows_d, rows_b, rhs = [], [], []
+    for i in range(f):
+        acc = np.zeros((perp.shape[0], n))
+        for j in range(i + 1, f):
+            acc += lj[j] @ gb[j - i - 1]
+        rows_d.append(lj[i])
+        rows_b.append(acc)
+        rhs.append(lhs[:, i * m:(i + 1) * m])
+    design = np.hstack([np.vstack(rows_d), np.vstack(rows_b)]) if feedthrough else \
+        np.vstack(rows_b)
+    sol = np.linalg.lstsq(design, np.vstack(rhs), rcond=None)[0]
+    if feedthrough:
+        return sol[ell:], sol[:ell]
+    return sol, np.zeros((ell, m))
+
+
+def bdk_from_states(*, a: np.ndarray, c: np.ndarray, x: np.ndarray, x_next: np.ndarray,
+                    sig: Signals, feedthrough: bool, b: np.ndarray | None = None,
+                    d: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """B, D, K by regression on the estimated states (see module docstring).
+
+    ``x``, ``x_next`` are ``(n, K)`` state coordinates at k and k+1. Given ``b`` (and ``d``)
+    only K is estimated (used with the thesis' B, D).
+    """
+    m, ell = sig.u0.shape[0], sig.y0.shape[0]
+    lhs = x_next - a @ x
+    if b is None:
+        bk = lstsq_coords(lhs, np.vstack([sig.u0, sig.e0]))
+        b, k = bk[:, :m], bk[:, m:]
+    else:
+        k = lstsq_coords(lhs - b @ sig.u0, sig.e0)
+    if d is None:
+        d = (lstsq_coords(sig.y0 - c @ x, np.vstack([sig.u0, sig.e0]))[:, :m] if feedthrough
+             else np.zeros((ell, m)))
+    return b, d, k
+
+
+def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
+                     flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool,
+                     chunk: int = 4096
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples.
+
+    With ``A_K = A - K C`` and C fixed, the predictor (thesis eq. 3.23's ``A_K, B_K``)
+
+    .. math::
+
+        \\hat y(k) = C A_K^k x_0 + \\sum_{t<k} C A_K^{k-1-t} (B_K u(t) + K y(t)) + D u(k)
+
+    is linear in ``(B_K, K, D, x_0)`` (one ``x_0`` per flight). With ``A_K = V \\Lambda V^{-1}``
+    the regressors are ``C V diag(z_c(k)) V^{-1}`` where ``z_{c,i}(k) = \\lambda_i z_{c,i}(k-1)
+    + w_c(k-1)`` are first-order filters of each channel of ``w = [u; y]`` (``lfilter``, so no
+    Python loop over samples). Normal equations are accumulated in chunks. ``flights`` holds
+    ``(u (N, m), y (N, l))`` in scaled units. Returns None when ``A_K`` is not safely
+    diagonalisable (cond(V) > 1e8); the caller then keeps its estimates.
+    """
+    n, ell = a_k.shape[0], c.shape[0]
+    m = flights[0][0].shape[1]
+    cc = m + ell
+    lam, vec = np.linalg.eig(a_k)
+    if np.linalg.cond(vec) > 1e8:
+        return None
+    vinv = np.linalg.inv(vec)
+    cv = c @ vec
+    # R[k, l, c, j] = sum_i z[k, c, i] T[i, l, j] with T[i, l, j] = (C V)[l, i] V^{-1}[i, j]
+    t = (cv.T[:, :, None] * vinv[:, None, :]).reshape(n, ell * n)
+    n_fl = len(flights)
+    n_bk = n * cc
+    n_par = n_bk + (ell * m if feedthrough else 0) + n * n_fl
+    gram = np.zeros((n_par, n_par))
+    rhs = np.zeros(n_par)
+    for f_idx, (u, y) in enumerate(flights):
+        w = np.hstack([u, y])
+        z = np.empty((w.shape[0], cc, n), dtype=complex)
+        for i in range(n):
+            z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)
+        x0_col = n_par - n * (n_fl - f_idx)
+        for k0 in range(0, w.shape[0], chunk):
+            k1 = min(k0 + chunk, w.shape[0])
+            nk = k1 - k0
+            reg = np.zeros((nk, ell, n_par))
+            zk = z[k0:k1].reshape(nk * cc, n)
+            r_kc = zk.real @ t.real - zk.imag @ t.imag  # (k c, l j)
+            reg[:, :, :n_bk] = r_kc.reshape(nk, cc, ell, n).transpose(0, 2, 1, 3).reshape(
+                nk, ell, n_bk)
+            if feedthrough:
+                d_reg = np.einsum("li,kj->klij", np.eye(ell), u[k0:k1])
+                reg[:, :, n_bk:n_bk + ell * m] = d_reg.reshape(nk, ell, ell * m)
+            powers = lam[None, :] ** np.arange(k0, k1)[:, None]  # (k, i)
+            reg[:, :, x0_col:x0_col + n] = ((cv[None] * powers[:, None, :]) @ vinv).real
+            reg2 = reg.reshape(-1, n_par)
+            gram += reg2.T @ reg2
+            rhs += reg2.T @ y[k0:k1].reshape(-1)
+    theta = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+    # parameter index c * n + j is entry j of column c of [B_K, K]
+    bk_all = theta[:n_bk].reshape(cc, n).T
+    d = theta[n_bk:n_bk + ell * m].reshape(ell, m) if feedthrough else np.zeros((ell, m))
+    return bk_all[:, :m], d, bk_all[:, m:]
+
+
+def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                k: np.ndarray | None, noise_cov: np.ndarray | None, u_scale: np.ndarray,
+                y_scale: np.ndarray, template: IOData, provenance: dict[str, Any]
+                ) -> StateSpaceModel:
+    """Undo the channel scaling and wrap the matrices with names, units and provenance.
+
+    Scaled model: ``u_s = S_u^{-1} u``, ``y_s = S_y^{-1} y``; physical model
+    ``B = B_s S_u^{-1}``, ``C = S_y C_s``, ``D = S_y D_s S_u^{-1}``, ``K = K_s S_y^{-1}``,
+    noise covariance ``S_y Sigma_s S_y``.
+    """
+    su_inv = 1.0 / u_scale
+    prov = dict(provenance)
+    prov.setdefault("software", _software())
+    prov["scaling"] = {"u_scale": u_scale.tolist(), "y_scale": y_scale.tolist(),
+                       "note": "identification ran on channels divided by these; undone"}
+    return StateSpaceModel(
+        A=a, B=b * su_inv, C=y_scale[:, None] * c, D=y_scale[:, None] * d * su_inv,
+        K=None if k is None else k / y_scale, dt=template.dt,
+        noise_cov=None if noise_cov is None else noise_cov * np.outer(y_scale, y_scale),
+        input_names=template.input_names, output_names=template.output_names,
+        input_units=template.input_units, output_units=template.output_units,
+        provenance=prov)
+
+
+def _software() -> dict[str, str]:
+    try:
+        version = importlib.metadata.version("cf-sysid")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - source checkout
+        version = "unknown"
+    return {"cf-sysid": version, "numpy": np.__version__, "scipy": scipy.__version__}
