@@ -1,0 +1,119 @@
+"""The UDP server with cflib's own UdpDriver: connect, log, fuzz, a client that vanishes."""
+
+from __future__ import annotations
+
+import contextlib
+import random
+import socket
+import struct
+import threading
+import time
+
+import cflib.crtp
+import numpy as np
+import pytest
+
+from groundstation.errors import LinkError
+from groundstation.sim import UdpServer
+from groundstation.sim.crtp import crtp_header
+
+from .helpers import Recorder, connect
+from .test_flight import hover_thrust
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def server():
+    cflib.crtp.init_drivers()
+    srv = UdpServer(port=_free_port(), seed=2)
+    yield srv
+    srv.close()
+    time.sleep(0.05)
+    assert not [t for t in threading.enumerate() if t.name.startswith("sim-")]
+
+
+def test_cflib_udp_driver_connects_and_logs(server):
+    uri = server.uris[0]
+    assert uri.startswith("udp://127.0.0.1:")
+    with connect(uri) as scf:
+        assert type(scf.cf.link).__name__ == "UdpDriver"
+        assert float(scf.cf.param.get_value("pid_rate.roll_kp")) == pytest.approx(250.0)
+        rec = Recorder(scf.cf, blocks={"gyro": ["gyro.x", "gyro.y", "gyro.z"]})
+        time.sleep(1.0)  # real time
+        rec.configs[0].stop()
+    t, _ = rec.rows("gyro")
+    assert len(t) >= 40 and set(np.diff(t)) == {20}
+
+
+def test_scan_probe_and_port_in_use(server):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.settimeout(0.5)
+        s.sendto(b"\xff", ("127.0.0.1", server.endpoints[0].port))
+        assert s.recv(64) == b"\xff"
+    with pytest.raises(LinkError, match="--port"):
+        UdpServer(port=server.endpoints[0].port)
+
+
+def _fuzz_datagrams(rng: random.Random, n: int) -> list[bytes]:
+    out = []
+    for _ in range(n):
+        kind = rng.random()
+        if kind < 0.3:  # random bytes, any length, some oversized or empty
+            out.append(rng.randbytes(rng.choice([0, 1, 2, 5, 31, 32, 200, 1500])))
+        elif kind < 0.8:  # well-formed header, bad ids and truncated requests on every service
+            port = rng.choice([0, 2, 4, 5, 6, 7, 9, 13, 15])
+            payload = bytes([rng.randrange(10)]) + struct.pack("<H", rng.choice(
+                [0, 1, 300, 0xFFFF])) + rng.randbytes(rng.randrange(0, 28))
+            out.append(bytes([crtp_header(port, rng.randrange(4))]) + payload[:30])
+        else:  # commander packets with garbage floats (NaN, inf, huge)
+            vals = [rng.choice([float("nan"), float("inf"), 1e30, -5.0, 3.0]) for _ in range(3)]
+            out.append(bytes([crtp_header(3, 0)]) + struct.pack("<fffH", *vals,
+                                                               rng.randrange(65536)))
+    return out
+
+
+def test_fuzz_then_a_normal_connect_still_works(server):
+    port = server.endpoints[0].port
+    sim = server.simulators[0]
+    rng = random.Random(7)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.setblocking(False)
+        for i, datagram in enumerate(_fuzz_datagrams(rng, 5000)):
+            s.sendto(datagram, ("127.0.0.1", port))
+            if i % 200 == 0:
+                time.sleep(0.005)
+                with contextlib.suppress(BlockingIOError):
+                    while s.recv(64):
+                        pass
+    time.sleep(0.2)
+    assert server.endpoints[0].datagrams > 4000 and server.endpoints[0].ignored > 100
+    t0 = sim.clock.now()
+    time.sleep(0.2)
+    assert sim.running and sim.clock.now() > t0 + 0.1  # still simulating
+    with connect(server.uris[0]) as scf:
+        assert scf.cf.log.toc.get_element_by_complete_name("motor.m1").ctype == "uint16_t"
+
+
+def test_client_that_vanishes_mid_flight_triggers_the_watchdog(server):
+    sim = server.simulators[0]
+    with connect(server.uris[0]) as scf:
+        cf = scf.cf
+        Recorder(cf, blocks={"gyro": ["gyro.x", "gyro.y", "gyro.z"]})
+        cf.commander.send_setpoint(0, 0, 0, 0)
+        thrust = int(1.4 * hover_thrust(4.0))
+        for _ in range(8):  # 0.8 s of real-time flight at 10 Hz
+            cf.commander.send_setpoint(0, 0, 0, thrust)
+            time.sleep(0.1)
+        assert sim.vehicle.is_flying and any(sim.vehicle.motors_pwm)
+        assert sim.peer.next_due_ms() is not None  # logging
+        cf.link.close()  # the client vanishes: no stop setpoint, no more packets
+        time.sleep(1.0)
+        assert any(sim.vehicle.motors_pwm) and not sim.vehicle.is_locked  # levelled, still on
+        time.sleep(1.3)
+        assert sim.vehicle.is_locked and sim.vehicle.motors_pwm == (0, 0, 0, 0)
+        assert sim.peer.next_due_ms() is None  # link down after 1 s: logging reset
