@@ -26,7 +26,8 @@ def main(argv: list[str]) -> int:
         print(f"=== bench {name}", flush=True)
         t0 = time.perf_counter()
         rc = importlib.import_module(f"bench.bench_{name}").main()
-        print(f"=== bench {name}: {'ok' if rc == 0 else 'FAILED'} in {time.perf_counter() - t0:.1f} s")
+        verdict = "ok" if rc == 0 else "FAILED"
+        print(f"=== bench {name}: {verdict} in {time.perf_counter() - t0:.1f} s")
         status |= rc
     return status
 

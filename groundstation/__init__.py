@@ -1,4 +1,4 @@
-"""Crazyflie flight-test ground station: fly declarative plans, record HDF5 sessions, view in Rerun."""
+"""Crazyflie flight-test ground station: fly plans, record HDF5 sessions, view them in Rerun."""
 
 from importlib.metadata import PackageNotFoundError, version
 
