@@ -51,6 +51,7 @@ from sysid.realize import (
     build_model,
     check_order,
     gamma_from_svd,
+    kalman_gain_from_residuals,
     lstsq_coords,
     refine_predictor,
 )
@@ -142,7 +143,9 @@ def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int
                 refine_on: list[tuple[np.ndarray, np.ndarray]] | None = None
                 ) -> tuple[tuple[np.ndarray, ...], np.ndarray, str]:
     """``(A, B, C, D, K, noise_cov)`` in scaled units, the singular values of step 3, and
-    what the predictor refinement did ("done", "off", or why it was skipped).
+    what the predictor refinement did ("done", "off", or why it was skipped) and where K
+    came from. If the regression K leaves ``A - K C`` unstable, K is replaced by the Kalman
+    gain of the state residuals (:func:`sysid.realize.kalman_gain_from_residuals`).
 
     ``refine_on``: the scaled ``(u, y)`` of each flight, to refine ``(A, B, D, K)`` with
     :func:`sysid.realize.refine_predictor` (A = A_K + K C, B = B_K + K D; C and A_K kept).
@@ -162,6 +165,13 @@ def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int
         b, d, k = bdk_from_states(a=a, c=c, x=x, x_next=x_next, sig=sig,
                                   feedthrough=feedthrough)
     noise_cov = sig.e0 @ sig.e0.T / sig.n_columns
+    k_source = "state regression"
+    if np.max(np.abs(np.linalg.eigvals(a - k @ c))) >= 1.0:
+        kalman = kalman_gain_from_residuals(a=a, b=b, c=c, d=d, x=x, x_next=x_next, sig=sig)
+        if kalman is not None:
+            k, noise_cov = kalman
+            k_source = "Kalman gain (DARE) of the state residuals"
+            log.info("IEM: A - K C of the regression K is unstable; using the Kalman gain")
     status = "off"
     if refine_on is not None:
         a_k = a - k @ c
@@ -176,7 +186,7 @@ def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int
         elif status == "off":
             status = "skipped: predictor A - K C unstable"
             log.warning("IEM refinement skipped: the predictor A - K C is unstable")
-    return (a, b, c, d, k, noise_cov), sv, status
+    return (a, b, c, d, k, noise_cov), sv, f"{status}; K from {k_source}"
 
 
 def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,

@@ -51,6 +51,7 @@ __all__ = [
     "build_model",
     "check_order",
     "gamma_from_svd",
+    "kalman_gain_from_residuals",
     "lstsq_coords",
     "refine_predictor",
 ]
@@ -161,6 +162,28 @@ def bdk_from_states(*, a: np.ndarray, c: np.ndarray, x: np.ndarray, x_next: np.n
         d = (lstsq_coords(sig.y0 - c @ x, np.vstack([sig.u0, sig.e0]))[:, :m] if feedthrough
              else np.zeros((ell, m)))
     return b, d, k
+
+
+def kalman_gain_from_residuals(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
+                               x: np.ndarray, x_next: np.ndarray, sig: Signals
+                               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Steady-state Kalman gain from the residuals of the state equations (N4SID style).
+
+    ``w = x(k+1) - A x(k) - B u(k)``, ``v = y(k) - C x(k) - D u(k)`` give
+    ``[Q S; S^T R] = [w; v][w; v]^T / M``; the stabilising DARE solution P gives
+    ``K = (A P C^T + S)(C P C^T + R)^{-1}`` with ``A - K C`` stable whenever (A, C) is
+    detectable (Q, R from data are positive semidefinite by construction), and the innovation
+    covariance ``C P C^T + R``. Returns None when the DARE has no stabilising solution.
+    """
+    w = x_next - a @ x - b @ sig.u0
+    v = sig.y0 - c @ x - d @ sig.u0
+    q, s_, r = (w @ w.T / sig.n_columns, w @ v.T / sig.n_columns, v @ v.T / sig.n_columns)
+    try:
+        p = scipy.linalg.solve_discrete_are(a.T, c.T, q, r, s=s_)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    r_e = c @ p @ c.T + r
+    return (a @ p @ c.T + s_) @ np.linalg.inv(r_e), r_e
 
 
 def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,

@@ -164,3 +164,24 @@ def test_iem_returns_k_and_noise_covariance() -> None:
     ck_true = np.hstack([system.C @ np.linalg.matrix_power(system.A, i) @ system.K
                          for i in range(3)])
     assert np.max(np.abs(ck - ck_true)) < 0.1 * np.max(np.abs(ck_true))
+
+
+def test_kalman_gain_from_residuals_recovers_the_innovation_gain() -> None:
+    """With the true states, w = K e and v = e, so the DARE gives back K and cov(e)."""
+    from sysid.realize import Signals, kalman_gain_from_residuals
+
+    system = pbsid_example1()
+    rng = np.random.default_rng(6)
+    n_samples = 20000
+    u = rng.standard_normal((n_samples, 2))
+    e = 0.5 * rng.standard_normal((n_samples, 2))
+    x = np.zeros((n_samples + 1, 4))
+    for k in range(n_samples):
+        x[k + 1] = system.A @ x[k] + system.B @ u[k] + system.K @ e[k]
+    y = x[:-1] @ system.C.T + e
+    sig = Signals(zp=np.zeros((1, n_samples)), zp_next=np.zeros((1, n_samples)), u0=u.T,
+                  y0=y.T, e0=e.T, uf=u.T, yf=y.T, n_columns=n_samples)
+    gain, cov = kalman_gain_from_residuals(a=system.A, b=system.B, c=system.C, d=system.D,
+                                           x=x[:-1].T, x_next=x[1:].T, sig=sig)
+    assert np.allclose(gain, system.K, atol=0.03)
+    assert np.allclose(cov, 0.25 * np.eye(2), atol=0.01)
