@@ -56,7 +56,8 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-_WAKE_S = 0.002  # longest the simulation thread sleeps (wall s) between steps
+_WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
+_CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
@@ -288,6 +289,16 @@ class Simulator:
                 _, header, data = out.popleft()
             sink(header, data)
 
+    def _sleep_s(self, base_wall: float, base_ms: int) -> float:
+        """Wall seconds until the next log packet is due, within [0.5 ms, the clock's
+        resolution]: 10 ms of wall time, or 40 ms of simulation time at high speed."""
+        longest = min(_WAKE_S, _CLOCK_RESOLUTION_MS / 1000.0 / self.speed)
+        due = self.peer.next_due_ms()
+        if due is None:
+            return longest
+        until = base_wall + (due - base_ms) / (1000.0 * self.speed) - time.perf_counter()
+        return min(longest, max(until, 0.0005))
+
     def _should_power_off(self, rest_since: float | None) -> bool:
         if not self._linger or self._token:
             return False
@@ -330,7 +341,7 @@ class Simulator:
                 self._stop.set()
                 break
             if not math.isinf(self.speed):
-                self._wake.wait(_WAKE_S)
+                self._wake.wait(self._sleep_s(base_wall, base_ms))
                 self._wake.clear()
         with self.cond:
             self.cond.notify_all()
