@@ -1,0 +1,72 @@
+"""Read an .rrd file back into plain Python for the viz tests (rerun 0.41 ``RrdReader``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+from rerun.chunk import RrdReader
+
+__all__ = ["Entity", "blueprint_entities", "load"]
+
+
+@dataclass
+class Entity:
+    """Temporal rows of one entity (sorted by ``sort_by``) and its static components."""
+
+    rows: dict[str, list] = field(default_factory=dict)
+    times: dict[str, np.ndarray] = field(default_factory=dict)
+    static: dict[str, object] = field(default_factory=dict)
+
+    def scalars(self) -> np.ndarray:
+        """Scalar values, (n_rows,) for one instance per row, else (n_rows, k)."""
+        vals = np.array(self.rows["Scalars:scalars"], dtype=float)
+        return vals[:, 0] if vals.ndim == 2 and vals.shape[1] == 1 else vals
+
+
+def _kind(f: pa.Field) -> str:
+    return (f.metadata or {}).get(b"rerun:kind", b"").decode()
+
+
+def load(path: Path, *, sort_by: str | None = "host_time") -> dict[str, Entity]:
+    """Every entity of the file's recording: components per row, timelines in seconds."""
+    out: dict[str, Entity] = {}
+    raw: dict[str, dict[str, list]] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        rb = chunk.to_record_batch()
+        ent = out.setdefault(chunk.entity_path, Entity())
+        acc = raw.setdefault(chunk.entity_path, {})
+        for f in rb.schema:
+            col = rb.column(f.name)
+            if _kind(f) == "index":
+                acc.setdefault("@" + f.name, []).extend(
+                    (col.cast(pa.int64()).to_numpy(zero_copy_only=False) / 1e9).tolist())
+            elif _kind(f) == "data":
+                values = col.to_pylist()
+                if chunk.is_static:
+                    ent.static[f.name] = values[-1]
+                else:
+                    acc.setdefault(f.name, []).extend(values)
+    for path_, acc in raw.items():
+        ent = out[path_]
+        n = max((len(v) for v in acc.values()), default=0)
+        order = np.arange(n)
+        key = "@" + sort_by if sort_by else None
+        if key in acc and len(acc[key]) == n:
+            order = np.argsort(np.asarray(acc[key]), kind="stable")
+        for k, v in acc.items():
+            if len(v) != n:
+                continue  # a timeline not on every row of this entity
+            if k.startswith("@"):
+                ent.times[k[1:]] = np.asarray(v)[order]
+            else:
+                ent.rows[k] = [v[i] for i in order]
+    return out
+
+
+def blueprint_entities(path: Path) -> list[str]:
+    """Entity paths of the file's blueprint store (views, containers, time panel)."""
+    reader = RrdReader(path)
+    return [c.entity_path for b in reader.blueprints() for c in reader.stream(store=b).to_chunks()]
