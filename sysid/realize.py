@@ -186,9 +186,35 @@ def kalman_gain_from_residuals(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d
     return (a @ p @ c.T + s_) @ np.linalg.inv(r_e), r_e
 
 
+def _modal_features(lam: np.ndarray, vec: np.ndarray, c: np.ndarray
+                    ) -> tuple[list[int], np.ndarray]:
+    """Real modal bookkeeping: the eigenvalues kept (real ones, and one of each conjugate
+    pair) and ``tau (n, l, n)`` with ``C A_K^j = sum_a feat_a(lambda^j) tau[a]``."""
+    vinv = np.linalg.inv(vec)
+    keep, rows = [], []
+    for i, li in enumerate(lam):
+        t = np.outer(c @ vec[:, i], vinv[i])  # (l, n) complex
+        if abs(li.imag) <= 1e-12 * max(1.0, abs(li)):
+            keep.append(i)
+            rows.append(t.real)
+        elif li.imag > 0:
+            keep.append(i)
+            rows += [2.0 * t.real, -2.0 * t.imag]
+    return keep, np.array(rows)
+
+
+def _feature_columns(z: np.ndarray, lam: np.ndarray, keep: list[int]) -> np.ndarray:
+    """Real features ``(N, cc, n)`` from complex modal filters ``z (N, cc, n_modes)``."""
+    cols = []
+    for i in keep:
+        cols.append(z[:, :, i].real)
+        if lam[i].imag > 0:
+            cols.append(z[:, :, i].imag)
+    return np.stack(cols, axis=2)
+
+
 def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
-                     flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool,
-                     chunk: int = 4096
+                     flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples.
 
@@ -198,10 +224,13 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
 
         \\hat y(k) = C A_K^k x_0 + \\sum_{t<k} C A_K^{k-1-t} (B_K u(t) + K y(t)) + D u(k)
 
-    is linear in ``(B_K, K, D, x_0)`` (one ``x_0`` per flight). With ``A_K = V \\Lambda V^{-1}``
-    the regressors are ``C V diag(z_c(k)) V^{-1}`` where ``z_{c,i}(k) = \\lambda_i z_{c,i}(k-1)
-    + w_c(k-1)`` are first-order filters of each channel of ``w = [u; y]`` (``lfilter``, so no
-    Python loop over samples). Normal equations are accumulated in chunks. ``flights`` holds
+    is linear in ``(B_K, K, D, x_0)`` (one ``x_0`` per flight). With
+    ``A_K = V Lambda V^{-1}``, ``C A_K^j = sum_a f_a(lambda^j) tau_a`` with real modal
+    features f (real part, and real/imaginary parts of one of each conjugate pair), so the
+    regressors factor as (n features per channel of ``w = [u; y]``, from first-order
+    ``lfilter`` runs) times ``tau``. The normal equations are then
+    ``sum_l J_l^T (F^T F) J_l`` with ``F`` the ``(N, (m+l) n + m + n n_flights)`` feature
+    matrix: one pass, ``O(N ((m+l) n)^2)``, no Python loop over samples. ``flights`` holds
     ``(u (N, m), y (N, l))`` in scaled units. Returns None when ``A_K`` is not safely
     diagonalisable (cond(V) > 1e8); the caller then keeps its estimates.
     """
@@ -211,41 +240,45 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
     lam, vec = np.linalg.eig(a_k)
     if np.linalg.cond(vec) > 1e8:
         return None
-    vinv = np.linalg.inv(vec)
-    cv = c @ vec
-    # R[k, l, c, j] = sum_i z[k, c, i] T[i, l, j] with T[i, l, j] = (C V)[l, i] V^{-1}[i, j]
-    t = (cv.T[:, :, None] * vinv[:, None, :]).reshape(n, ell * n)
+    keep, tau = _modal_features(lam, vec, c)  # tau (n, l, n)
     n_fl = len(flights)
-    n_bk = n * cc
-    n_par = n_bk + (ell * m if feedthrough else 0) + n * n_fl
-    gram = np.zeros((n_par, n_par))
-    rhs = np.zeros(n_par)
+    n_bk, n_d = n * cc, (ell * m if feedthrough else 0)
+    n_par = n_bk + n_d + n * n_fl
+    n_feat = n_bk + n_d + n * n_fl
+    gram = np.zeros((n_feat, n_feat))
+    fty = np.zeros((n_feat, ell))
     for f_idx, (u, y) in enumerate(flights):
         w = np.hstack([u, y])
         z = np.empty((w.shape[0], cc, n), dtype=complex)
-        for i in range(n):
+        for i in keep:
             z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)
-        x0_col = n_par - n * (n_fl - f_idx)
-        for k0 in range(0, w.shape[0], chunk):
-            k1 = min(k0 + chunk, w.shape[0])
-            nk = k1 - k0
-            reg = np.zeros((nk, ell, n_par))
-            zk = z[k0:k1].reshape(nk * cc, n)
-            r_kc = zk.real @ t.real - zk.imag @ t.imag  # (k c, l j)
-            reg[:, :, :n_bk] = r_kc.reshape(nk, cc, ell, n).transpose(0, 2, 1, 3).reshape(
-                nk, ell, n_bk)
-            if feedthrough:
-                d_reg = np.einsum("li,kj->klij", np.eye(ell), u[k0:k1])
-                reg[:, :, n_bk:n_bk + ell * m] = d_reg.reshape(nk, ell, ell * m)
-            powers = lam[None, :] ** np.arange(k0, k1)[:, None]  # (k, i)
-            reg[:, :, x0_col:x0_col + n] = ((cv[None] * powers[:, None, :]) @ vinv).real
-            reg2 = reg.reshape(-1, n_par)
-            gram += reg2.T @ reg2
-            rhs += reg2.T @ y[k0:k1].reshape(-1)
-    theta = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+        powers = (lam[None, :] ** np.arange(w.shape[0])[:, None])[:, None, :]
+        feat = np.zeros((w.shape[0], n_feat))
+        feat[:, :n_bk] = _feature_columns(z, lam, keep).reshape(w.shape[0], n_bk)
+        if feedthrough:
+            feat[:, n_bk:n_bk + m] = u
+        x0 = n_bk + n_d + n * f_idx
+        feat[:, x0:x0 + n] = _feature_columns(powers, lam, keep)[:, 0, :]
+        gram += feat.T @ feat
+        fty += feat.T @ y
+    # J_l maps parameters to feature coefficients for output l
+    lhs = np.zeros((n_par, n_par))
+    rhs = np.zeros(n_par)
+    for out in range(ell):
+        jac = np.zeros((n_feat, n_par))
+        for ch in range(cc):
+            jac[ch * n:(ch + 1) * n, ch * n:(ch + 1) * n] = tau[:, out, :]
+        if feedthrough:
+            jac[n_bk + np.arange(m), n_bk + out * m + np.arange(m)] = 1.0
+        for f_idx in range(n_fl):
+            x0 = n_bk + n_d + n * f_idx
+            jac[x0:x0 + n, x0:x0 + n] = tau[:, out, :]
+        lhs += jac.T @ gram @ jac
+        rhs += jac.T @ fty[:, out]
+    theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
     # parameter index c * n + j is entry j of column c of [B_K, K]
     bk_all = theta[:n_bk].reshape(cc, n).T
-    d = theta[n_bk:n_bk + ell * m].reshape(ell, m) if feedthrough else np.zeros((ell, m))
+    d = theta[n_bk:n_bk + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
     return bk_all[:, :m], d, bk_all[:, m:]
 
 

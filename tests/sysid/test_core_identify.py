@@ -185,3 +185,49 @@ def test_kalman_gain_from_residuals_recovers_the_innovation_gain() -> None:
                                            x=x[:-1].T, x_next=x[1:].T, sig=sig)
     assert np.allclose(gain, system.K, atol=0.03)
     assert np.allclose(cov, 0.25 * np.eye(2), atol=0.01)
+
+
+@pytest.mark.parametrize("feedthrough", [False, True])
+def test_refine_predictor_equals_brute_force_regression(feedthrough: bool) -> None:
+    """The modal-feature normal equations give the same (B_K, D, K) as regressing y on the
+    predictor responses to each unit parameter, simulated sample by sample (two flights)."""
+    from sysid.realize import refine_predictor
+
+    rng = np.random.default_rng(7)
+    system = random_stable_system(n_states=3, n_inputs=2, n_outputs=2, rng=rng,
+                                  feedthrough=feedthrough)
+    flights = [open_loop(system, n_samples=n, rng=rng).data for n in (250, 180)]
+    a_k = system.A - system.K @ system.C
+    c = system.C
+    n, m, ell = 3, 2, 2
+    n_par = n * (m + ell) + (ell * m if feedthrough else 0) + n * 2
+
+    def predictor(theta: np.ndarray, f_idx: int, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        bk = theta[: n * (m + ell)].reshape(m + ell, n).T
+        d = (theta[n * (m + ell):n * (m + ell) + ell * m].reshape(ell, m) if feedthrough
+             else np.zeros((ell, m)))
+        x = theta[n_par - n * (2 - f_idx):n_par - n * (1 - f_idx)].copy()
+        out = np.empty_like(y)
+        for k in range(len(u)):
+            out[k] = c @ x + d @ u[k]
+            x = a_k @ x + bk @ np.concatenate([u[k], y[k]])
+        return out
+
+    cols = []
+    for j in range(n_par):
+        unit = np.zeros(n_par)
+        unit[j] = 1.0
+        cols.append(np.concatenate([predictor(unit, i, fl.u, fl.y).ravel()
+                                    for i, fl in enumerate(flights)]))
+    target = np.concatenate([fl.y.ravel() for fl in flights])
+    theta = np.linalg.lstsq(np.column_stack(cols), target, rcond=None)[0]
+    bk_ref = theta[: n * (m + ell)].reshape(m + ell, n).T
+    b_k, d, k = refine_predictor(a_k=a_k, c=c, flights=[(fl.u, fl.y) for fl in flights],
+                                 feedthrough=feedthrough)
+    assert np.allclose(b_k, bk_ref[:, :m], atol=1e-8)
+    assert np.allclose(k, bk_ref[:, m:], atol=1e-8)
+    if feedthrough:
+        assert np.allclose(d, theta[n * (m + ell):n * (m + ell) + ell * m].reshape(ell, m),
+                           atol=1e-8)
+    # and with the true A_K, C the estimates are near the truth
+    assert np.allclose(k, system.K, atol=0.15)
