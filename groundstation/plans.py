@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from groundstation.altitude import AltitudeHoldConfig
 from groundstation.errors import PlanError
 from groundstation.plan_toml import TomlSource, TomlTable
 from groundstation.schedule import (
@@ -75,6 +76,7 @@ _TOP_KEYS = (
     "hover_thrust",
     "vehicle",
     "safety",
+    "altitude_hold",
     "phase",
 )
 _PHASE_KEYS = {
@@ -169,6 +171,7 @@ class Plan:
     vehicle: VehicleLimits
     safety: Safety
     phases: tuple[PhaseSpec, ...]
+    altitude_hold: AltitudeHoldConfig | None = None
 
     @property
     def n_setpoints(self) -> int:
@@ -215,6 +218,7 @@ class Plan:
             phases=tuple(phases),
             vehicle=self.vehicle,
             safety=self.safety,
+            altitude_hold=self.altitude_hold,
         )
 
 
@@ -258,6 +262,11 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     safety = _read_safety(
         TomlTable(src, ("safety",), top.get("safety", dict, default={})), vehicle, rate
     )
+    hold = top.get("altitude_hold", dict, default=None)
+    altitude_hold = (
+        None if hold is None
+        else _read_altitude_hold(TomlTable(src, ("altitude_hold",), hold), vehicle, hover)
+    )
     raw_phases = top.get("phase", list)
     if len(raw_phases) < 2:
         raise src.error(("phase",), "a plan needs a takeoff and a landing [[phase]]; add them")
@@ -282,6 +291,7 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         vehicle=vehicle,
         safety=safety,
         phases=tuple(phases),
+        altitude_hold=altitude_hold,
     )
     log.debug("plan %s: %d phases, %d setpoints", plan.name, len(phases), plan.n_setpoints)
     return plan
@@ -324,6 +334,34 @@ def _read_safety(t: TomlTable, v: VehicleLimits, rate: float) -> Safety:
     thrust = t.pwm("descent_thrust")
     _check_thrust(t.src, ("safety", "descent_thrust"), thrust, v)
     return Safety(on_abort="descend", descent_duration=ticks / rate, descent_thrust=thrust)
+
+
+def _read_altitude_hold(t: TomlTable, v: VehicleLimits, hover: int) -> AltitudeHoldConfig:
+    """``[altitude_hold]``: every key optional (defaults in :class:`AltitudeHoldConfig`)."""
+    d = AltitudeHoldConfig()
+    t.allow(set(AltitudeHoldConfig.__dataclass_fields__))
+    kinds = tuple(t.get("kinds", list, default=list(d.kinds)))
+    bad = [k for k in kinds if k not in ("hover", "excitation")]
+    if bad or not kinds:
+        raise t.src.error((*t.path, "kinds"), f"{bad or kinds} must be a non-empty list of "
+                          "'hover' and 'excitation'; take-off and landing follow the plan")
+    variable = t.get("variable", str, default=d.variable)
+    if "." not in variable:
+        raise t.src.error((*t.path, "variable"), f"'{variable}' is not a log variable "
+                          "'group.name', e.g. 'stateEstimate.z'")
+    cfg = AltitudeHoldConfig(
+        variable=variable,
+        target_m=t.number("target_m", lo=0.2, hi=5.0, unit="m", default=d.target_m),
+        kp=t.number("kp", lo=0, hi=1e5, unit="PWM/m", default=d.kp),
+        ki=t.number("ki", lo=0, hi=1e5, unit="PWM/(m s)", default=d.ki),
+        kd=t.number("kd", lo=0, hi=1e5, unit="PWM/(m/s)", default=d.kd),
+        max_trim=t.number("max_trim", lo=0, hi=30000, unit="PWM", kind=int, default=d.max_trim),
+        kinds=kinds,
+    )
+    for value in (hover + cfg.max_trim, hover - cfg.max_trim):
+        _check_thrust(t.src, (*t.path, "max_trim"), value, v,
+                      what=f"hover_thrust {hover} ± max_trim {cfg.max_trim}")
+    return cfg
 
 
 def _read_phase(t: TomlTable, where: str, v: VehicleLimits, hover: int, rate: float) -> PhaseSpec:

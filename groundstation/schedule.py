@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from groundstation.altitude import AltitudeHoldConfig
 from groundstation.errors import PlanError
 
 __all__ = ["SETPOINT_CHANNELS", "UNITS", "Phase", "Safety", "Schedule", "VehicleLimits"]
@@ -111,6 +112,7 @@ class Schedule:
     phases: tuple[Phase, ...]
     vehicle: VehicleLimits
     safety: Safety = Safety()
+    altitude_hold: AltitudeHoldConfig | None = None
     t: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
