@@ -39,7 +39,7 @@ from groundstation.session_schema import (
     setpoints_spec,
 )
 
-__all__ = ["Session", "SessionWriter", "open_session", "standard_streams"]
+__all__ = ["Session", "SessionWriter", "event_rows", "open_session", "standard_streams"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +58,14 @@ def _attr_value(value: Any) -> Any:
     if isinstance(value, Mapping | list | tuple):
         return json.dumps(value, sort_keys=True, default=str)
     return value
+
+
+def event_rows(*, t: float, text: str, level: str = "info", source: str = "runner") -> list[tuple]:
+    """Rows of the ``events`` stream for one event: text longer than one row continues."""
+    data = text.encode("utf-8", errors="replace")
+    lvl, src = _LEVELS.get(level, 2), source.encode()[:16]
+    pieces = [data[i : i + TEXT_BYTES] for i in range(0, len(data), TEXT_BYTES)] or [b""]
+    return [(t, lvl, src, piece, int(i > 0)) for i, piece in enumerate(pieces)]
 
 
 class SessionWriter:
@@ -171,12 +179,7 @@ class SessionWriter:
 
     def event(self, *, t: float, text: str, level: str = "info", source: str = "runner") -> None:
         """Record an event; text longer than one row continues on following rows."""
-        data = text.encode("utf-8", errors="replace")
-        lvl = _LEVELS.get(level, 2)
-        src = source.encode()[:16]
-        pieces = [data[i : i + TEXT_BYTES] for i in range(0, len(data), TEXT_BYTES)] or [b""]
-        for i, piece in enumerate(pieces):
-            self.append("events", (t, lvl, src, piece, int(i > 0)))
+        self.extend("events", event_rows(t=t, text=text, level=level, source=source))
 
     def phase(self, *, t: float, phase_id: int, name: str, kind: str) -> None:
         """Mark the start of a phase (it lasts until the next phase row)."""

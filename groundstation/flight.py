@@ -1,0 +1,446 @@
+"""The flight runner: stream a plan's setpoints on a drift-free schedule, record, stay safe.
+
+:func:`fly_plan` connects (:mod:`groundstation.link`), checks the TOC and the battery, records
+the flight through :class:`~groundstation.recorder.Recorder` and any other
+:class:`FlightListener`, and returns a :class:`FlightResult` (session path, summary, abort cause).
+
+**Schedule.** Setpoint :math:`k` is due at :math:`t_k = t_0 + k / f_s` on the flight clock
+(:func:`groundstation.clock.clock_for_uri`: the simulation's clock for ``sim://``), never
+:math:`t_{k-1} + 1/f_s`, so lateness never accumulates. One setpoint of thrust 0 at
+:math:`t_0 - 1/f_s` releases the firmware's thrust lock; the stop setpoint follows one period
+after the last one.
+
+**Threads.** cflib's callbacks only put tuples on a :class:`queue.SimpleQueue` (the one hand-off,
+see :mod:`groundstation.link`); this runner's thread sends, drains the queue, checks limits and
+feeds the listeners, in that order, so listener work never delays a setpoint.
+
+**Safety.** SIGINT/SIGTERM (handlers installed while flying, restored after), link loss, an
+exception in the runner, a measured rate beyond :class:`RateLimits` or a battery below
+``vehicle.min_vbat`` at take-off each record an event (source ``safety``) and end with the stop
+setpoint; if the plan's ``on_abort`` is ``descend`` and the link is up, the
+:meth:`~groundstation.schedule.Schedule.abort_schedule` descent streams first at the same rate,
+so there is never more than one period without a setpoint. A listener that raises is dropped
+(with an event); the flight goes on. Without its recorder the flight aborts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import queue
+import signal
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from groundstation.clock import clock_for_uri
+from groundstation.errors import FlightAborted
+from groundstation.link import BATTERY_BLOCK, BLOCK_PERIOD_S, DEFAULT_URI, FLIGHT_BLOCKS, open_link
+from groundstation.plans import Plan, Schedule, load_plan
+from groundstation.recorder import Recorder, session_path
+from groundstation.session import event_rows, standard_streams
+from groundstation.session_schema import StreamSpec
+
+__all__ = ["FlightListener", "FlightResult", "RateLimits", "block_summary", "fly_plan"]
+
+log = logging.getLogger(__name__)
+
+_FW_WRAP = 1 << 24  # log packets carry 24-bit firmware milliseconds
+
+
+class FlightListener(Protocol):
+    """Receives a flight as it happens (the recorder, the live view, progress display)."""
+
+    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None: ...
+
+    def rows(self, stream: str, rows: Sequence[tuple]) -> None:
+        """Rows of ``stream``: tuples in the stream's field order, ``host_time`` first."""
+        ...
+
+    def end(self, *, summary: Mapping[str, Any]) -> None: ...
+
+
+@dataclass(frozen=True)
+class RateLimits:
+    """Abort when ``|gyro|`` on any axis exceeds ``max_rate_deg_s`` (deg/s) for ``samples``
+    consecutive log packets (20 ms each) while flying. 1000 deg/s is about three times the
+    largest rate a ±25° PRBS step produces: a tumbling or crashed vehicle."""
+
+    max_rate_deg_s: float = 1000.0
+    samples: int = 3
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    """What :func:`fly_plan` returns: ``cause`` is ``""`` for a flight that ran to the end."""
+
+    path: Path
+    summary: dict[str, Any] = field(default_factory=dict)
+    cause: str = ""
+
+    @property
+    def aborted(self) -> bool:
+        return bool(self.cause)
+
+    def raise_if_aborted(self) -> None:
+        """One-line :class:`FlightAborted` naming the cause and the file."""
+        if self.cause:
+            raise FlightAborted(f"flight aborted: {self.cause}; session saved to {self.path}")
+
+
+def block_summary(*, fw_ms: Sequence[int], period_s: float) -> dict[str, Any]:
+    """Packets of one log block: received, expected from the firmware-time span
+    :math:`\\lfloor (t_{last} - t_{first}) / T \\rceil + 1`, dropped from timestamp gaps
+    (steps beyond 1.5 periods count :math:`\\mathrm{round}(\\Delta t / T) - 1`)."""
+    ms = np.asarray(fw_ms, dtype=np.int64)
+    if len(ms) < 2:
+        return {"received": len(ms), "expected": len(ms), "dropped": 0}
+    dt = np.diff(ms) % _FW_WRAP / 1000.0  # unwraps the 24-bit counter
+    gaps = dt[dt > 1.5 * period_s]
+    return {
+        "received": len(ms),
+        "expected": round(dt.sum() / period_s) + 1,
+        "dropped": int(np.sum(np.round(gaps / period_s) - 1)),
+    }
+
+
+class _Runner:
+    """One flight; see the module docstring. Use :func:`fly_plan`."""
+
+    def __init__(self, *, plan: Plan, schedule: Schedule, uri: str, recorder: Recorder,
+                 listeners: Sequence[FlightListener], limits: RateLimits,
+                 connect_timeout_s: float, tick_hook: Callable[[int], None] | None) -> None:
+        self.plan, self.schedule, self.uri = plan, schedule, uri
+        self.recorder, self.limits, self.tick_hook = recorder, limits, tick_hook
+        self.listeners: list[FlightListener] = [recorder, *listeners]
+        self.connect_timeout_s = connect_timeout_s
+        self.q: queue.SimpleQueue[tuple] = queue.SimpleQueue()
+        self.clock = clock_for_uri(uri)
+        self.origin = self.clock.now()
+        self.start_ns = time.time_ns()
+        self.pending: dict[str, list[tuple]] = defaultdict(list)
+        self.fw: dict[str, list[int]] = defaultdict(list)
+        self.delivered: dict[str, int] = defaultdict(int)
+        self.sent_t: list[float] = []
+        self.n_scheduled = 0
+        self.causes: list[str] = []
+        self.flying = False
+        self.vbat: float | None = None
+        self.over = [0, 0, 0]
+        self.console = ""
+        self.link: Any = None
+        self.t_first = math.nan
+        self.block_periods: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ helpers
+    def now(self) -> float:
+        return self.clock.now() - self.origin
+
+    def event(self, text: str, *, level: str = "info", source: str = "runner") -> None:
+        log.log(logging.ERROR if level == "error" else logging.INFO, "%s: %s", source, text)
+        self.pending["events"].extend(event_rows(t=self.now(), text=text, level=level,
+                                                 source=source))
+
+    def request_abort(self, cause: str) -> None:
+        """Thread- and signal-safe: the runner aborts at its next deadline."""
+        self.q.put(("abort", self.clock.now(), cause))
+
+    def _cause(self, text: str, *, level: str = "error") -> None:
+        self.causes.append(text)
+        self.event(text if len(self.causes) == 1 else f"during the abort: {text}",
+                   level=level, source="safety")
+
+    def _deadline(self, k: int) -> float:
+        return self.t_first + k * self.schedule.period
+
+    # ------------------------------------------------------------------ queue and listeners
+    def collect(self) -> None:
+        """Drain the queue into pending rows; check link, signals and limits (no I/O)."""
+        while True:
+            try:
+                item = self.q.get_nowait()
+            except queue.Empty:
+                return
+            kind, t = item[0], item[2] if item[0] == "log" else item[1]
+            t -= self.origin
+            if kind == "log":
+                _, block, _, fw_ms, values = item
+                self.pending[block].append((t, fw_ms, *values))
+                self.fw[block].append(fw_ms)
+                self.delivered[block] += 1
+                if block == BATTERY_BLOCK[0]:
+                    self.vbat = float(values[0])
+                elif block == "gyro" and self.flying:
+                    self._check_rates(values)
+            elif kind == "console":
+                self.console += item[2]
+                *lines, self.console = self.console.split("\n")
+                for line in lines:
+                    self.event(line.rstrip(), source="console")
+            elif kind == "link":
+                self.pending["link"].append((t, item[2], item[3]))
+            elif kind == "lost":
+                self._cause(f"link lost: {item[2]}")
+            elif kind == "abort":
+                self._cause(item[2], level="warning")
+            else:
+                self.event(str(item[2]), level="warning", source="link")
+
+    def _check_rates(self, values: Sequence[float]) -> None:
+        lim = self.limits
+        for i, v in enumerate(values):
+            self.over[i] = self.over[i] + 1 if abs(v) > lim.max_rate_deg_s else 0
+            if self.over[i] == lim.samples and not self.causes:
+                self._cause(f"limit: gyro.{'xyz'[i]} = {v:.0f} deg/s beyond "
+                            f"{lim.max_rate_deg_s:g} deg/s for {lim.samples} samples")
+
+    def _call(self, listener: FlightListener, method: str, **kw: Any) -> None:
+        try:
+            getattr(listener, method)(**kw)
+        except Exception as exc:
+            self.listeners.remove(listener)
+            what = f"{type(listener).__name__}.{method} failed ({type(exc).__name__}: {exc})"
+            log.exception("listener %s", what)
+            if listener is self.recorder:
+                self._cause(f"recording failed: {what}")
+            else:
+                self.event(f"{what}; listener dropped, flight continues", level="error")
+
+    def dispatch(self) -> None:
+        pending, self.pending = self.pending, defaultdict(list)
+        for stream, rows in pending.items():
+            for listener in list(self.listeners):
+                self._call(listener, "rows", stream=stream, rows=rows)
+
+    # ------------------------------------------------------------------ commander
+    def send(self, sp: tuple[float, float, float, int], *, phase_id: int, tick: int) -> None:
+        roll, pitch, yaw_rate, thrust = sp
+        self.link.send_setpoint(roll=roll, pitch=pitch, yaw_rate=yaw_rate, thrust=thrust)
+        t = self.now()
+        self.sent_t.append(t)
+        self.pending["setpoints"].append((t, roll, pitch, yaw_rate, thrust, phase_id, tick))
+
+    def stop(self, why: str) -> None:
+        """The stop setpoint (recorded as a thrust-0 row with tick -1)."""
+        self.link.send_stop()
+        self.flying = False
+        self.pending["setpoints"].append((self.now(), 0.0, 0.0, 0.0, 0, -1, -1))
+        self.event(f"stop setpoint sent ({why})", source="safety" if self.causes else "runner")
+
+    def phase(self, *, phase_id: int, name: str, kind: str, planned_s: float) -> None:
+        self.pending["phases"].append((self.now(), phase_id, name.encode()[:32],
+                                       kind.encode()[:16]))
+        self.event(f"phase {name} ({kind}) starts, {planned_s:g} s planned")
+
+    def wait(self, t: float) -> None:
+        self.clock.sleep_until(t)
+        self.collect()
+
+    # ------------------------------------------------------------------ the flight
+    def preflight(self) -> bool:
+        """Wait for every log block and a battery reading; refuse a low battery."""
+        names = [*FLIGHT_BLOCKS, BATTERY_BLOCK[0]]
+        give_up = time.monotonic() + max(3.0, self.connect_timeout_s / 2)
+        t = self.clock.now()
+        while not self.causes:
+            missing = [n for n in names if not self.delivered[n]]
+            if not missing and self.vbat is not None:
+                break
+            if time.monotonic() > give_up:
+                self._cause(f"log blocks {missing} delivered nothing; check the link")
+                return False
+            t += self.schedule.period
+            self.wait(t)
+            self.dispatch()
+        if self.causes:
+            return False
+        v = self.schedule.vehicle
+        if self.vbat is not None and self.vbat < v.min_vbat:
+            self._cause(f"battery {self.vbat:.2f} V below vehicle.min_vbat = {v.min_vbat:g} V: "
+                        "refusing to take off; charge or swap the battery")
+            return False
+        self.event(f"preflight ok: battery {self.vbat:.2f} V, log blocks {names} running")
+        return True
+
+    def fly(self) -> int:
+        """Unlock, then every scheduled setpoint; returns the next unsent tick."""
+        s, k = self.schedule, 0
+        self.t_first = self.clock.now() + s.period
+        self.send((0.0, 0.0, 0.0, 0), phase_id=-1, tick=-1)  # releases the thrust lock
+        self.flying = True
+        current = -1
+        while k < len(s) and not self.causes:
+            self.wait(self._deadline(k))
+            if self.causes:
+                break
+            if self.tick_hook is not None:
+                self.tick_hook(k)
+            ph = s.phase_at(k)
+            if ph.id != current:
+                current = ph.id
+                self.phase(phase_id=ph.id, name=ph.name, kind=ph.kind, planned_s=ph.duration)
+            self.send(s.setpoint(k), phase_id=ph.id, tick=k)
+            self.n_scheduled += 1
+            k += 1
+            self.dispatch()
+        return k
+
+    def abort(self, k: int) -> None:
+        """After a cause: the plan's descent if the link is up, then the stop setpoint."""
+        lost = self.link is None or self.link.lost
+        n_causes = len(self.causes)
+        descent = self.schedule.abort_schedule(k) if self.flying and not lost else None
+        if descent is not None and len(descent):
+            self.phase(phase_id=-1, name="abort", kind="abort", planned_s=descent.duration)
+            for j in range(len(descent)):
+                self.wait(self._deadline(k + j))
+                if len(self.causes) > n_causes or self.link.lost:
+                    break
+                self.send(descent.setpoint(j), phase_id=-1, tick=-1)
+                self.dispatch()
+            else:
+                self.wait(self._deadline(k + len(descent)))
+        if self.link is not None:
+            if self.link.lost:
+                self.event("no link: the Crazyflie's watchdog levels out after 0.5 s and stops "
+                           "the motors after 2 s", level="warning", source="safety")
+            self.stop(f"abort: {self.causes[0]}")
+
+    def run(self) -> FlightResult:
+        link = self.link = open_link(uri=self.uri, clock=self.clock, post=self.q.put,
+                                     timeout_s=self.connect_timeout_s)
+        k, begun = 0, False
+        try:
+            blocks = [*link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S),
+                      *link.plan_blocks(blocks={BATTERY_BLOCK[0]: BATTERY_BLOCK[1]},
+                                        period_s=BATTERY_BLOCK[2])]
+            self.block_periods = {b.name: b.period_s for b in blocks}
+            meta = {**link.metadata(), **self._plan_metadata()}
+            streams = [*(b.spec() for b in blocks), *standard_streams()]
+            for listener in list(self.listeners):
+                self._call(listener, "begin", streams=streams, metadata=meta)
+            begun = True
+            if self.recorder not in self.listeners:
+                raise FlightAborted(f"cannot record to {self.recorder.path}; nothing flown")
+            link.start_blocks(blocks)
+            try:
+                if self.preflight():
+                    k = self.fly()
+            except Exception as exc:
+                log.exception("flight runner error")
+                self._cause(f"runner error: {type(exc).__name__}: {exc}")
+            try:
+                if self.causes:
+                    self.abort(k)
+                else:
+                    self.wait(self._deadline(k))
+                    self.stop("landed")
+                    self.event("flight complete")
+                self._tail()
+            except Exception as exc:  # last resort: the motors must stop
+                log.exception("abort path failed")
+                self._cause(f"runner error while stopping: {type(exc).__name__}: {exc}")
+                link.send_stop()
+        finally:
+            link.close()
+            self.collect()
+            summary = self.summary()
+            if begun:
+                self.dispatch()
+                for listener in list(self.listeners):
+                    self._call(listener, "end", summary=summary)
+        return FlightResult(path=self.recorder.path, summary=summary,
+                            cause=self.causes[0] if self.causes else "")
+
+    def _tail(self, seconds: float = 0.5) -> None:
+        """Keep recording a moment after the stop so the file shows the motors at rest."""
+        if self.link.lost:
+            return
+        t = self.clock.now()
+        for _ in range(round(seconds / self.schedule.period)):
+            t += self.schedule.period
+            self.wait(t)
+            self.dispatch()
+
+    def _plan_metadata(self) -> dict[str, Any]:
+        s = self.schedule
+        return {
+            "start_time_ns": self.start_ns,
+            "plan_name": self.plan.name,
+            "plan_text": self.plan.text,
+            "phase_table": [p.to_dict() for p in s.phases],
+            "setpoint_rate_hz": s.rate_hz,
+            "rate_limits": {"max_rate_deg_s": self.limits.max_rate_deg_s,
+                            "samples": self.limits.samples},
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """Duration, packets per block, setpoint count and period jitter, cause, file."""
+        period = self.schedule.period
+        dt = np.diff(np.asarray(self.sent_t))
+        jitter = np.abs(dt - period) * 1000.0 if len(dt) else np.zeros(1)
+        blocks = {name: block_summary(fw_ms=self.fw[name], period_s=p)
+                  for name, p in self.block_periods.items()}
+        return {
+            "file": str(self.recorder.path),
+            "plan": self.plan.name,
+            "uri": self.uri,
+            "duration_s": round(self.now(), 3),
+            "aborted": bool(self.causes),
+            "cause": self.causes[0] if self.causes else "",
+            "blocks": blocks,
+            "setpoints": {
+                "sent": len(self.sent_t),
+                "scheduled": self.n_scheduled,
+                "planned": len(self.schedule),
+                "period_s": period,
+                "jitter_ms": {"p50": round(float(np.percentile(jitter, 50)), 3),
+                              "p99": round(float(np.percentile(jitter, 99)), 3),
+                              "max": round(float(jitter.max()), 3)},
+            },
+        }
+
+
+@contextlib.contextmanager
+def _signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
+    """SIGINT and SIGTERM request an abort while flying (main thread only); restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, lambda n, _f: abort(f"{signal.Signals(n).name} "
+                                                               "received"))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI,
+             listeners: Sequence[FlightListener] = (), limits: RateLimits | None = None,
+             connect_timeout_s: float = 10.0,
+             tick_hook: Callable[[int], None] | None = None) -> FlightResult:
+    """Fly ``plan`` (a :class:`Plan`, a path or a shipped plan's name) over ``uri``, record the
+    session into folder ``out`` and return the :class:`FlightResult`.
+
+    ``tick_hook(k)`` runs before setpoint ``k`` is sent (an exception in it is a runner error:
+    the flight aborts safely). Raises :class:`~groundstation.errors.LinkError` when the Crazyflie
+    cannot be reached or lacks a logged variable (nothing is flown then).
+    """
+    plan = plan if isinstance(plan, Plan) else load_plan(plan)
+    schedule = plan.compile()
+    recorder = Recorder(session_path(out=out, plan_name=plan.name))
+    runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
+                     listeners=listeners, limits=limits or RateLimits(),
+                     connect_timeout_s=connect_timeout_s, tick_hook=tick_hook)
+    with _signal_handlers(runner.request_abort):
+        return runner.run()

@@ -1,0 +1,280 @@
+"""The cflib connection of a flight: drivers, connect, TOC checks, log blocks, metadata.
+
+:func:`open_link` connects to a Crazyflie (``radio://``, ``usb://``, ``udp://`` or the simulator's
+``sim://``) with a timeout and returns a :class:`Link`. Everything cflib calls back from its own
+threads (log packets, console text, link quality and latency, link loss) is turned into a tuple and
+handed to ``post`` (the flight runner's queue), stamped with the flight clock:
+
+=====================================================  =========================================
+``("log", block, t, fw_ms, values)``                   one log packet; ``values`` in block order
+``("console", t, text)``                               console text as it arrives (not by line)
+``("link", t, quality_pct, latency_ms)``               one of the two is NaN
+``("lost", t, message)``                               the link was lost (cflib connection_lost)
+``("log_error", t, message)``                          cflib refused or failed a log block
+=====================================================  =========================================
+
+``t`` is ``clock.now()`` in seconds. :func:`plan_blocks` checks the logged variables against the
+TOC before anything flies: each must exist, its type is taken from the TOC (``motor.m1`` is
+``uint16_t`` or ``uint32_t`` depending on the firmware) and each block must fit the firmware's
+26 data bytes per packet: :math:`\\sum_i \\text{size}(\\text{type}_i) \\le 26`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from groundstation.clock import Clock
+from groundstation.errors import LinkError
+from groundstation.session_schema import CFLIB_TYPES, StreamSpec, log_block_spec
+
+__all__ = [
+    "BATTERY_BLOCK",
+    "BLOCK_PERIOD_S",
+    "DEFAULT_URI",
+    "FLIGHT_BLOCKS",
+    "LOG_MAX_BYTES",
+    "BlockPlan",
+    "Link",
+    "install_drivers",
+    "open_link",
+    "plan_blocks",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
+LOG_MAX_BYTES = 26
+"""Data bytes in one log packet (firmware ``LOG_MAX_LEN``, cflib ``LogConfig.MAX_LEN``)."""
+BLOCK_PERIOD_S = 0.020
+FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
+    "motors": ("motor.m1", "motor.m2", "motor.m3", "motor.m4"),
+    "acc": ("acc.x", "acc.y", "acc.z"),
+    "gyro": ("gyro.x", "gyro.y", "gyro.z"),
+}
+"""The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
+BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
+"""A slow block (name, variables, period s) for the take-off check and the battery's sag."""
+
+_WIRE_BYTES = {"uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "FP16": 2,
+               "uint32_t": 4, "int32_t": 4, "float": 4}
+_PLATFORM_PORT, _VERSION_CHANNEL, _VERSION_GET_FIRMWARE = 13, 1, 1
+
+Post = Callable[[tuple], None]
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """A log block as it will be created: ``variables`` are ``(group.name, TOC type)``."""
+
+    name: str
+    variables: tuple[tuple[str, str], ...]
+    period_s: float
+
+    @property
+    def n_bytes(self) -> int:
+        """Data bytes per packet: the sum of the variables' wire sizes."""
+        return sum(_WIRE_BYTES[t] for _, t in self.variables)
+
+    def spec(self) -> StreamSpec:
+        """The session stream this block is recorded to."""
+        return log_block_spec(name=self.name, variables=self.variables, period_s=self.period_s)
+
+
+def plan_blocks(
+    *, toc_type: Callable[[str], str | None], blocks: Mapping[str, Sequence[str]],
+    period_s: float,
+) -> list[BlockPlan]:
+    """Blocks with types from the TOC (``toc_type(name)``, ``None`` if absent), each checked.
+
+    Raises :class:`LinkError` naming the variable missing from the TOC, a type cflib cannot log,
+    or the block beyond :data:`LOG_MAX_BYTES`.
+    """
+    out = []
+    for name, variables in blocks.items():
+        typed = []
+        for var in variables:
+            ctype = toc_type(var)
+            if ctype is None:
+                raise LinkError(f"log variable {var} (block {name}) is not in the Crazyflie's "
+                                "log TOC; update the firmware or log another variable")
+            if ctype not in _WIRE_BYTES or ctype not in CFLIB_TYPES:
+                raise LinkError(f"log variable {var} has TOC type {ctype!r}, which cannot be "
+                                "logged; choose another variable")
+            typed.append((var, ctype))
+        block = BlockPlan(name=name, variables=tuple(typed), period_s=period_s)
+        if block.n_bytes > LOG_MAX_BYTES:
+            raise LinkError(f"log block {name} needs {block.n_bytes} bytes per packet, more than "
+                            f"the {LOG_MAX_BYTES} a log packet holds; split it into two blocks")
+        out.append(block)
+    return out
+
+
+_drivers_lock = threading.Lock()
+_drivers_ready = False
+
+
+def install_drivers() -> None:
+    """cflib's link drivers plus the simulator's ``sim://`` (idempotent)."""
+    global _drivers_ready
+    with _drivers_lock:
+        if _drivers_ready:
+            return
+        import cflib.crtp
+
+        import groundstation.sim  # the simulated Crazyflie is one more link driver
+
+        if not cflib.crtp.CLASSES:
+            cflib.crtp.init_drivers()
+        groundstation.sim.install()
+        _drivers_ready = True
+
+
+class Link:
+    """An open connection to one Crazyflie (made by :func:`open_link`)."""
+
+    def __init__(self, *, cf: Any, uri: str, clock: Clock, post: Post) -> None:
+        self.cf, self.uri, self.clock, self._post = cf, uri, clock, post
+        self.lost = False
+        self._configs: list[Any] = []
+        cf.connection_lost.add_callback(self._on_lost)
+        cf.console.receivedChar.add_callback(
+            lambda text: post(("console", clock.now(), text)))
+        stats = cf.link_statistics
+        stats.link_quality_updated.add_callback(
+            lambda q: post(("link", clock.now(), float(q), math.nan)))
+        stats.latency_updated.add_callback(
+            lambda ms: post(("link", clock.now(), math.nan, float(ms))))
+
+    def _on_lost(self, uri: str, message: str) -> None:
+        self.lost = True
+        self._post(("lost", self.clock.now(), str(message).strip().splitlines()[0]))
+
+    # ------------------------------------------------------------------ TOC and metadata
+    def toc_type(self, name: str) -> str | None:
+        """The log TOC type of ``group.name`` (``None`` if the firmware has no such variable)."""
+        element = self.cf.log.toc.get_element_by_complete_name(name)
+        return None if element is None else element.ctype
+
+    def plan_blocks(self, *, blocks: Mapping[str, Sequence[str]],
+                    period_s: float) -> list[BlockPlan]:
+        """:func:`plan_blocks` against this Crazyflie's TOC."""
+        return plan_blocks(toc_type=self.toc_type, blocks=blocks, period_s=period_s)
+
+    def firmware_version(self, *, timeout_s: float = 1.0) -> str:
+        """The firmware's version text (platform service), or its revision parameters."""
+        from cflib.crtp.crtpstack import CRTPPacket
+
+        got: list[str] = []
+        done = threading.Event()
+
+        def on_platform(pk: Any) -> None:
+            if pk.channel == _VERSION_CHANNEL and pk.data[:1] == bytes([_VERSION_GET_FIRMWARE]):
+                got.append(bytes(pk.data[1:]).split(b"\0")[0].decode("utf-8", "replace"))
+                done.set()
+
+        self.cf.add_port_callback(_PLATFORM_PORT, on_platform)
+        try:
+            pk = CRTPPacket()
+            pk.set_header(_PLATFORM_PORT, _VERSION_CHANNEL)
+            pk.data = (_VERSION_GET_FIRMWARE,)
+            self.cf.send_packet(pk)
+            done.wait(timeout_s)
+        finally:
+            self.cf.remove_port_callback(_PLATFORM_PORT, on_platform)
+        if got:
+            return got[0]
+        fw = self.cf.param.values.get("firmware", {})
+        return " ".join(f"{k}={v}" for k, v in sorted(fw.items())) or "unknown"
+
+    def metadata(self) -> dict[str, Any]:
+        """Root attributes for the session: uri, firmware, protocol_version, params."""
+        return {
+            "uri": self.uri,
+            "firmware": self.firmware_version(),
+            "protocol_version": int(self.cf.platform.get_protocol_version()),
+            "params": {g: dict(v) for g, v in self.cf.param.values.items()},
+        }
+
+    # ------------------------------------------------------------------ logging
+    def start_blocks(self, blocks: Sequence[BlockPlan]) -> None:
+        """Create and start ``blocks``; their packets are posted as ``("log", ...)``."""
+        from cflib.crazyflie.log import LogConfig
+
+        for block in blocks:
+            conf = LogConfig(name=block.name, period_in_ms=round(block.period_s * 1000))
+            for var, ctype in block.variables:
+                conf.add_variable(var, ctype)
+            names = [v for v, _ in block.variables]
+            conf.data_received_cb.add_callback(
+                lambda ts, data, c, names=names: self._post(
+                    ("log", c.name, self.clock.now(), int(ts), tuple(data[n] for n in names))))
+            conf.error_cb.add_callback(
+                lambda c, msg: self._post(("log_error", self.clock.now(), f"{c.name}: {msg}")))
+            try:
+                self.cf.log.add_config(conf)
+            except (KeyError, AttributeError) as exc:
+                raise LinkError(f"log block {block.name}: cflib refused it ({exc}); "
+                                "check the variables and the period") from None
+            conf.start()
+            self._configs.append(conf)
+
+    # ------------------------------------------------------------------ commander
+    def send_setpoint(self, *, roll: float, pitch: float, yaw_rate: float, thrust: int) -> None:
+        """``Commander.send_setpoint`` (deg, deg, deg/s, PWM); cflib negates pitch on the wire."""
+        self.cf.commander.send_setpoint(roll, pitch, yaw_rate, int(thrust))
+
+    def send_stop(self) -> None:
+        """The stop setpoint: motors off at once."""
+        self.cf.commander.send_stop_setpoint()
+
+    def close(self) -> None:
+        """Stop the log blocks and close the link (never raises)."""
+        try:
+            if not self.lost:
+                for conf in self._configs:
+                    conf.stop()
+            self.cf.close_link()
+        except Exception:  # closing must not hide the flight's own outcome
+            log.exception("closing the link to %s failed", self.uri)
+
+
+def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) -> Link:
+    """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
+
+    ``timeout_s`` is wall-clock seconds. Failure raises a one-line :class:`LinkError`.
+    """
+    install_drivers()
+    from cflib.crazyflie import Crazyflie
+
+    cf = Crazyflie(rw_cache=None)
+    ready, failure = threading.Event(), []
+    cf.fully_connected.add_callback(lambda _uri: ready.set())
+
+    def failed(_uri: str, message: str) -> None:
+        failure.append(str(message).strip().splitlines()[0] if str(message).strip() else "")
+        ready.set()
+
+    cf.connection_failed.add_callback(failed)
+    cf.connection_lost.add_callback(failed)
+    link = Link(cf=cf, uri=uri, clock=clock, post=post)
+    t0 = time.monotonic()
+    cf.open_link(uri)
+    ok = ready.wait(timeout_s) and not failure
+    if not ok:
+        try:
+            cf.close_link()
+        except Exception:
+            log.debug("close after failed connect", exc_info=True)
+        why = failure[0] if failure else f"no answer within {timeout_s:g} s"
+        raise LinkError(f"cannot connect to {uri}: {why}; check that the Crazyflie is on and "
+                        "the URI is right (groundstation scan lists them)")
+    cf.connection_failed.remove_callback(failed)
+    cf.connection_lost.remove_callback(failed)
+    log.info("connected to %s in %.2f s", uri, time.monotonic() - t0)
+    return link
