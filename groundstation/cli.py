@@ -51,9 +51,9 @@ def main(verbose: int) -> None:
 
 
 def _register() -> None:
-    from groundstation.commands import demo, info, plan, sim
+    from groundstation.commands import demo, importer, info, plan, sim
 
-    for module in (info, demo, sim, plan):
+    for module in (info, demo, sim, plan, importer):
         main.add_command(module.command)
 
 

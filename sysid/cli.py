@@ -1,18 +1,430 @@
-"""The ``sysid`` command line (identification from session files)."""
+"""The ``sysid`` command line: identify, compare, order, sweep and export from session files.
+
+Sessions are read through :mod:`sysid.session_io` (channels, window, ZOH grid). User mistakes
+(:class:`~sysid.errors.SysIdError`, session-file errors, missing files) print one line and exit
+with code 2, never a traceback. ``--json`` prints a machine-readable result on stdout; tables
+and progress are for people (progress goes to stderr).
+"""
 
 from __future__ import annotations
 
+import json
 import logging
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
 import click
+import numpy as np
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+from rich.table import Table
 
-__all__ = ["main"]
+from sysid.data import IOData
+from sysid.errors import MissingDependencyError, ParameterError, SysIdError
+from sysid.iem import iem
+from sysid.model import StateSpaceModel, load_model
+from sysid.moesp import po_moesp
+from sysid.order import singular_values
+from sysid.session_io import SessionFileError, Window, load_sessions
+from sysid.sweep import sweep as run_sweep
+from sysid.validate import CompareResult, compare
+
+__all__ = ["main", "parse_range", "parse_window", "pole_table"]
+
+log = logging.getLogger(__name__)
+
+_METHODS: dict[str, Callable[..., StateSpaceModel]] = {"iem": iem, "po-moesp": po_moesp}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """A click group whose user errors print one line and exit 2, never a traceback."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except (SysIdError, SessionFileError) as exc:
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+            msg = f"{exc.strerror}: {exc.filename}"
+        except np.linalg.LinAlgError as exc:
+            msg = f"numerical failure ({exc}); try another order or horizons"
+        click.echo(f"error: {msg}", err=True)
+        sys.exit(2)
+
+
+# ------------------------------------------------------------------------------- parsing
+def parse_window(text: str) -> Window:
+    """``all`` -> None, ``T0:T1`` -> host-time seconds, anything else a phase name or kind."""
+    if text.lower() in ("all", "none", ""):
+        return None
+    if ":" in text:
+        try:
+            t0, t1 = (float(x) for x in text.split(":"))
+        except ValueError:
+            raise ParameterError(f"--window {text!r}: use a phase name, T0:T1 seconds or all")\
+                from None
+        return (t0, t1)
+    return text
+
+
+def parse_range(*, text: str, option: str) -> list[int]:
+    """``20:80:10`` -> 20, 30, ..., 80 (stop included); ``6,8`` -> 6, 8; ``8`` -> 8."""
+    try:
+        if ":" in text:
+            parts = [int(x) for x in text.split(":")]
+            start, stop, step = [*parts, 1][:3] if len(parts) == 2 else parts
+            if step < 1 or stop < start or len(parts) > 3:
+                raise ValueError
+            return list(range(start, stop + 1, step))
+        values = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ParameterError(f"{option} {text!r}: use START:STOP:STEP, a,b,c or one integer")\
+            from None
+    if not values or min(values) < 1:
+        raise ParameterError(f"{option} {text!r}: give positive integers")
+    return values
+
+
+def _names(text: str) -> list[str]:
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def _session_options(func: Callable) -> Callable:
+    """Options shared by every command that reads sessions."""
+    opts = [
+        click.option("--inputs", default="motors", show_default=True, help=(
+                     "Input channels: STREAM, STREAM.FIELD or group.variable, comma-separated.")),
+        click.option("--outputs", default="acc,gyro", show_default=True,
+                     help="Output channels, as --inputs."),
+        click.option("--window", default="excitation", show_default=True,
+                     help="Phase name or kind, T0:T1 (session seconds), or 'all'."),
+        click.option("--dt", default=0.02, show_default=True, type=click.FloatRange(min=1e-4),
+                     help="Grid period in seconds (zero-order hold)."),
+        click.option("--detrend", default="mean", show_default=True,
+                     type=click.Choice(["mean", "linear", "none"])),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def _load(paths: Sequence[Path], *, opts: dict[str, Any], inputs: Sequence[str] | None = None,
+          outputs: Sequence[str] | None = None) -> list[IOData]:
+    return load_sessions(
+        list(paths), inputs=inputs or _names(opts["inputs"]),
+        outputs=outputs or _names(opts["outputs"]), window=parse_window(opts["window"]),
+        dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+
+
+# ------------------------------------------------------------------------------- output
+def pole_table(model: StateSpaceModel) -> list[dict[str, float]]:
+    """Poles with modulus, frequency (Hz) and damping ratio of the equivalent s-plane pole.
+
+    :math:`s = \\ln z / \\Delta t`, :math:`f = |\\operatorname{Im} s| / 2\\pi`,
+    :math:`\\zeta = -\\operatorname{Re} s / |s|`.
+    """
+    rows = []
+    for z in sorted(model.poles(), key=lambda p: (-abs(p), p.imag)):
+        s = np.log(complex(z)) / model.dt if z != 0 else complex(-np.inf)
+        rows.append({"re": float(z.real), "im": float(z.imag), "abs": float(abs(z)),
+                     "freq_hz": float(abs(s.imag) / (2 * np.pi)) if np.isfinite(s.real) else 0.0,
+                     "damping": float(-s.real / abs(s)) if np.isfinite(s.real) and s else 1.0})
+    return rows
+
+
+def _console() -> Console:
+    return Console(highlight=False, width=max(Console().width, 100))
+
+
+def _fit_table(*, title: str, names: Sequence[str], rows: list[tuple[str, np.ndarray]]) -> Table:
+    table = Table("", *names, title=title)
+    for label, fit in rows:
+        table.add_row(label, *[f"{f:.1f}" if abs(f) < 1e5 else f"{f:.3g}" for f in fit])
+    return table
+
+
+def _fits_json(res: CompareResult) -> dict[str, float | None]:
+    return {n: (float(f) if np.isfinite(f) else None)
+            for n, f in zip(res.output_names, res.fit, strict=True)}
+
+
+def _viz(func: str, **kwargs: Any) -> None:
+    """Call ``sysid.viz.<func>(**kwargs)``; one-line error when the module is not there."""
+    try:
+        from sysid import viz
+    except ImportError as exc:
+        raise MissingDependencyError(f"--rrd needs sysid.viz, which cannot be imported ({exc});"
+                                     " drop --rrd") from None
+    fn = getattr(viz, func, None)
+    if fn is None:
+        raise MissingDependencyError(f"--rrd: sysid.viz has no {func}(); update sysid or "
+                                     "drop --rrd")
+    fn(**kwargs)
+
+
+_RRD = click.option("--rrd", type=click.Path(dir_okay=False, path_type=Path),
+                    help="Also write the results to this Rerun recording (.rrd).")
+_JSON = click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+
+
+# ------------------------------------------------------------------------------- commands
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="cf-sysid", prog_name="sysid")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
-    """Closed-loop subspace identification (IEM, PO-MOESP) of flight sessions."""
+    """Closed-loop subspace identification (IEM, PO-MOESP) of flight sessions.
+
+    \b
+    Examples:
+      sysid identify flight1.h5 flight2.h5 --order 8 --out model.h5
+      sysid compare model.h5 validation.h5 --window-s 5 --horizon 10
+    """
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+
+
+@main.command()
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
+@click.option("--order", default=8, show_default=True, type=click.IntRange(min=1))
+@click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
+@click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
+@click.option("--feedthrough/--no-feedthrough", default=None,
+              help="Estimate D (default: no for iem, yes for po-moesp).")
+@_session_options
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Save the model (.h5, .json or .mat).")
+@_JSON
+@_RRD
+def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, future: int,
+             feedthrough: bool | None, out: Path | None, as_json: bool, rrd: Path | None,
+             **opts: Any) -> None:
+    """Identify one model from one or more sessions (each its own experiment).
+
+    Prints the poles, whether the model and its predictor A - KC are stable, and the fit on
+    the identification data (simulation from a least-squares initial state, and one-step
+    prediction).
+
+    \b
+    Examples:
+      sysid identify flight.h5 --order 8 --past 60 --future 17 --out model.h5
+      sysid identify imported.h5 --window all --dt 0.01 \\
+        --inputs controller.cmd_roll,controller.cmd_pitch,controller.cmd_yaw \\
+        --outputs controller.r_roll,controller.r_pitch,controller.r_yaw
+    """
+    flights = _load(sessions, opts=opts)
+    kwargs = {} if feedthrough is None else {"feedthrough": feedthrough}
+    with Console(stderr=True).status(f"identifying ({method}, n={order})"):
+        model = _METHODS[method](flights, order=order, past=past, future=future, **kwargs)
+    sim = compare(model, flights, warn=False)
+    pred = compare(model, flights, horizon=1, warn=False)
+    if out is not None:
+        model.save(out)
+    if rrd is not None:
+        _viz("log_identification", model=model, data=flights, path=rrd)
+    poles = pole_table(model)
+    if as_json:
+        click.echo(json.dumps({
+            "sessions": [str(p) for p in sessions], "method": method, "order": order,
+            "past": past, "future": future, "n_samples": [d.n_samples for d in flights],
+            "dt_s": model.dt, "poles": poles, "stable": model.is_stable,
+            "predictor_stable": model.predictor_is_stable,
+            "fit_percent": {"simulation": _fits_json(sim), "1-step": _fits_json(pred)},
+            "model": str(out) if out else None}, indent=1))
+        return
+    con = _console()
+    table = Table("pole", "re", "im", "|z|", "f [Hz]", "damping", title=f"{method} order {order}")
+    for i, p in enumerate(poles):
+        table.add_row(str(i), f"{p['re']:.4f}", f"{p['im']:.4f}", f"{p['abs']:.4f}",
+                      f"{p['freq_hz']:.2f}", f"{p['damping']:.3f}")
+    con.print(table)
+    con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
+              f"predictor A - KC stable: {model.predictor_is_stable}")
+    con.print(_fit_table(title="fit on the identification data [%]", names=model.output_names,
+                         rows=[("simulation", sim.fit), ("1-step", pred.fit)]))
+    if out is not None:
+        con.print(f"model saved to {out}")
+
+
+@main.command("compare")
+@click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--horizon", type=click.IntRange(min=1), help="k-step-ahead prediction.")
+@click.option("--window-s", type=click.FloatRange(min=0, min_open=True),
+              help="Simulate over windows of this many seconds, each from its own x0.")
+@click.option("--window", default="excitation", show_default=True,
+              help="Phase name or kind, T0:T1 (session seconds), or 'all'.")
+@click.option("--detrend", default="mean", show_default=True,
+              type=click.Choice(["mean", "linear", "none"]))
+@_JSON
+@_RRD
+def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | None,
+                window_s: float | None, as_json: bool, rrd: Path | None, **opts: Any) -> None:
+    """Fit of a model on sessions: per channel and per session, in percent (NRMSE).
+
+    The model's channel names select the session channels and its dt sets the grid. Without
+    --horizon/--window-s the whole window is simulated from a least-squares initial state.
+
+    \b
+    Example:
+      sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
+    """
+    model = load_model(model_path)
+    flights = _load(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
+                    outputs=model.output_names)
+    modes: list[tuple[str, dict[str, Any]]] = []
+    if window_s is not None:
+        modes.append((f"simulation, {window_s:g} s windows", {"window": window_s}))
+    if horizon is not None:
+        modes.append((f"{horizon}-step prediction", {"horizon": horizon}))
+    modes = modes or [("simulation", {})]
+    results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
+    if rrd is not None:
+        _viz("log_comparison", model=model, data=flights, results=[r for _, r in results],
+             path=rrd)
+    if as_json:
+        click.echo(json.dumps({"model": str(model_path), "modes": [{
+            "mode": label, "overall": _fits_json(res), "sessions": [
+                {"path": str(p), "fit_percent": dict(zip(res.output_names,
+                                                         [float(f) for f in fits], strict=True))}
+                for p, fits in zip(sessions, res.fits, strict=True)]}
+            for label, res in results],
+            "stable": model.is_stable, "predictor_stable": model.predictor_is_stable},
+            indent=1))
+        return
+    con = _console()
+    for label, res in results:
+        rows = [(p.name, f) for p, f in zip(sessions, res.fits, strict=True)]
+        con.print(_fit_table(title=f"{label}: fit [%]", names=res.output_names,
+                             rows=[*rows, ("all", res.fit)] if len(rows) > 1 else rows))
+    if not model.predictor_is_stable:
+        con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
+
+
+@main.command()
+@click.argument("session", type=click.Path(path_type=Path))
+@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
+@click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
+@click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
+@click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
+              help="How many singular values to list.")
+@_session_options
+@_JSON
+def order(session: Path, method: str, past: int, future: int, show: int, as_json: bool,
+          **opts: Any) -> None:
+    """Singular values of the order-selection SVD and a suggested order (largest gap).
+
+    The suggestion is the n maximising log10(s_n / s_n+1) among the first --show values.
+
+    \b
+    Example:
+      sysid order flight.h5 --past 60 --future 17
+    """
+    flights = _load([session], opts=opts)
+    sv = singular_values(flights, past=past, future=future, method=method)
+    head = sv[: min(show, sv.size)]
+    with np.errstate(divide="ignore"):
+        gaps = np.log10(head[:-1] / np.maximum(head[1:], 1e-300))
+    suggested = int(np.argmax(gaps)) + 1
+    if as_json:
+        click.echo(json.dumps({"session": str(session), "singular_values": sv.tolist(),
+                               "suggested_order": suggested}, indent=1))
+        return
+    con = _console()
+    table = Table("n", "singular value", "log10 gap to next", title=f"{method} p={past} f={future}")
+    for i, s in enumerate(head):
+        gap = f"{gaps[i]:.2f}" if i < gaps.size else ""
+        table.add_row(str(i + 1), f"{s:.4g}", gap, style="bold" if i + 1 == suggested else None)
+    con.print(table)
+    con.print(f"suggested order: {suggested}")
+
+
+@main.command("sweep")
+@click.argument("session", type=click.Path(path_type=Path))
+@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
+@click.option("--pasts", default="20:80:10", show_default=True, help="START:STOP:STEP or a,b,c.")
+@click.option("--futures", default="5:25:4", show_default=True, help="START:STOP:STEP or a,b,c.")
+@click.option("--orders", default="8", show_default=True, help="START:STOP:STEP or a,b,c.")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1))
+@click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
+              help="Score on this session (repeatable; default: the identification data).")
+@click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
+@click.option("--window-s", type=click.FloatRange(min=0, min_open=True),
+              help="Score by simulation over windows of this many seconds.")
+@click.option("--top", default=10, show_default=True, type=click.IntRange(min=1))
+@_session_options
+@_JSON
+@_RRD
+def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str, workers: int,
+              validate: tuple[Path, ...], horizon: int | None, window_s: float | None, top: int,
+              as_json: bool, rrd: Path | None, **opts: Any) -> None:
+    """Identify a model for every (past, future, order) and rank them by fit.
+
+    \b
+    Example:
+      sysid sweep flight.h5 --pasts 20:80:10 --futures 5:25:4 --orders 6,8,10 \\
+        --validate other_flight.h5 --window-s 5 --workers 2
+    """
+    grid = {"pasts": parse_range(text=pasts, option="--pasts"),
+            "futures": parse_range(text=futures, option="--futures"),
+            "orders": parse_range(text=orders, option="--orders")}
+    flights = _load([session], opts=opts)
+    val = _load(list(validate), opts=opts) if validate else None
+    total = len(grid["pasts"]) * len(grid["futures"]) * len(grid["orders"])
+    with Progress("sweep", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True), disable=as_json) as bar:
+        task = bar.add_task("sweep", total=total)
+        result = run_sweep(flights, **grid, method=method.replace("-", "_"), validation=val,
+                           horizon=horizon, window=window_s, workers=workers,
+                           progress=lambda done, _total: bar.update(task, completed=done))
+    ok = sorted((r for r in result.rows if r.error is None and np.isfinite(r.mean_fit)),
+                key=lambda r: -r.mean_fit)
+    try:
+        best = result.best()
+    except SysIdError:
+        best = None
+    if rrd is not None:
+        _viz("log_sweep", result=result, path=rrd)
+    if as_json:
+        click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
+                               "n_failed": sum(r.error is not None for r in result.rows),
+                               "best": best.to_record() if best else None,
+                               "top": [r.to_record() for r in ok[:top]]}, indent=1))
+        return
+    con = _console()
+    table = Table("past", "future", "order", "mean fit [%]", "max |pole|", "stable", "pred. stable",
+                  title=f"best {min(top, len(ok))} of {len(result.rows)} models")
+    for r in ok[:top]:
+        table.add_row(str(r.past), str(r.future), str(r.order), f"{r.mean_fit:.2f}",
+                      f"{np.abs(r.poles).max():.4f}", str(r.stable), str(r.predictor_stable))
+    con.print(table)
+    if best is not None:
+        con.print(f"selected (smallest order within 0.5 points of the best stable fit): "
+                  f"past {best.past}, future {best.future}, order {best.order}, "
+                  f"fit {best.mean_fit:.2f} %")
+    else:
+        con.print("[yellow]no stable model in the grid[/]")
+
+
+@main.command()
+@click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", required=True, type=click.Choice(["json", "mat"]))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Output file (default: MODEL with the format's suffix).")
+def export(model_path: Path, fmt: str, out: Path | None) -> None:
+    """Write a model file as JSON or MATLAB .mat (A, B, C, D, K, Ts, names, units).
+
+    \b
+    Example:
+      sysid export model.h5 --format mat --out model.mat
+    """
+    model = load_model(model_path)
+    target = out or model_path.with_suffix(f".{fmt}")
+    if target.suffix.lower() != f".{fmt}":
+        raise ParameterError(f"--out {target} does not end in .{fmt}; name it *.{fmt}")
+    if target.exists():
+        raise ParameterError(f"{target} already exists; pass another --out")
+    model.save(target)
+    click.echo(f"wrote {target}")

@@ -1,8 +1,22 @@
 """Importers: turn logs written by other tools into arrays (and later into session files).
 
 * :mod:`groundstation.importers.usd` reads the uSD-card deck's binary log format.
+* :mod:`groundstation.importers.cfclient_csv` reads the cfclient "log to file" CSVs.
+* :mod:`groundstation.importers.to_session` writes either as a session file.
 """
 
+from groundstation.importers.cfclient_csv import CsvFormatError, CsvLog, read_cfclient_csv
+from groundstation.importers.to_session import csv_to_session, usd_to_session
 from groundstation.importers.usd import UsdEvent, UsdFormatError, UsdLog, read_usd
 
-__all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "read_usd"]
+__all__ = [
+    "CsvFormatError",
+    "CsvLog",
+    "UsdEvent",
+    "UsdFormatError",
+    "UsdLog",
+    "csv_to_session",
+    "read_cfclient_csv",
+    "read_usd",
+    "usd_to_session",
+]
