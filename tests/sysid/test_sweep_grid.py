@@ -42,7 +42,7 @@ def test_po_moesp_order_selection_open_loop_mimo() -> None:
     system = random_stable_system(n_states=3, n_inputs=2, n_outputs=2, rng=rng,
                                   radius=(0.6, 0.9))
     ident = open_loop(system, n_samples=3000, rng=rng, noise_std=0.05).data
-    val = open_loop(system, n_samples=1500, rng=rng, noise_std=0.05).data
+    val = open_loop(system, n_samples=1500, rng=rng, noise_std=0.0).data  # the true response
     best, _ = select_order(ident, past=8, future=8, orders=[1, 2, 3, 4, 5], method="po_moesp",
                            validation=val, feedthrough=False)
     assert best.order == 3 and best.mean_fit > 95.0
@@ -50,11 +50,13 @@ def test_po_moesp_order_selection_open_loop_mimo() -> None:
 
 def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData]) -> None:
     # IEM assumes (A - KC)^p ~ 0; here |eig(A - KC)| = 0.51, so p = 1 leaves 51 % of the
-    # state unexplained while p = 3 leaves 13 %.
+    # state unexplained while p = 3 leaves 13 %. The default one-step refit largely repairs a
+    # short past (80.9 % vs 81.6 %), so the sweep is tested on the subspace estimate itself.
     ident, val = pbsid_data
     calls: list[tuple[int, int]] = []
     result = sweep(ident, pasts=[1, 3, 10], futures=[3, 10], orders=[4], validation=val,
-                   horizon=1, progress=lambda done, total: calls.append((done, total)))
+                   horizon=1, progress=lambda done, total: calls.append((done, total)),
+                   refine=False)
     assert calls == [(k, 6) for k in range(1, 7)]
     assert [(r.past, r.future) for r in result.rows] == [
         (1, 3), (1, 10), (3, 3), (3, 10), (10, 3), (10, 10)]
