@@ -70,3 +70,20 @@ def blueprint_entities(path: Path) -> list[str]:
     """Entity paths of the file's blueprint store (views, containers, time panel)."""
     reader = RrdReader(path)
     return [c.entity_path for b in reader.blueprints() for c in reader.stream(store=b).to_chunks()]
+
+
+def blueprint_views(path: Path) -> dict[str, list[str]]:
+    """Display name of every named view of the file's blueprint -> its content queries."""
+    reader = RrdReader(path)
+    names: dict[str, str] = {}
+    queries: dict[str, list[str]] = {}
+    for b in reader.blueprints():
+        for c in reader.stream(store=b).to_chunks():
+            rb = c.to_record_batch()
+            cols = set(rb.schema.names)
+            if "ViewBlueprint:display_name" in cols:
+                names[c.entity_path] = rb.column("ViewBlueprint:display_name").to_pylist()[-1][0]
+            if "ViewContents:query" in cols:
+                queries[c.entity_path.rsplit("/", 1)[0]] = rb.column(
+                    "ViewContents:query").to_pylist()[-1]
+    return {name: queries.get(path_, []) for path_, name in names.items()}

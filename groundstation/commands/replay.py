@@ -1,0 +1,81 @@
+"""``groundstation replay SESSION``: a recorded flight in the same Rerun view as a live one.
+
+The session's streams are declared to :class:`groundstation.live.RerunView` with the specs
+they were recorded with, then each stream is sent as one block (``send_columns`` per channel),
+so a 5-minute flight replays in well under a second.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import click
+
+from groundstation.live import RerunView, open_view
+from groundstation.session import Session, open_session
+from groundstation.session_schema import Field, StreamSpec
+
+__all__ = ["command", "replay_session", "specs_of"]
+
+log = logging.getLogger(__name__)
+
+
+def specs_of(session: Session) -> list[StreamSpec]:
+    """The stream specs a session was written with (fields, dtypes, units, sources)."""
+    specs = []
+    for name, s in session.streams.items():
+        dtype = s.data.dtype
+        fields = tuple(
+            Field(f, dtype.fields[f][0].str, s.units.get(f, ""), s.sources.get(f, ""))
+            for f in dtype.names
+        )
+        specs.append(StreamSpec(name=name, kind=s.kind, fields=fields, period_s=s.period_s))
+    return specs
+
+
+def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
+    """Send every stream of ``session`` through ``view`` and end it; rows sent per stream."""
+    meta = dict(session.meta) | {"problems": list(session.problems)}
+    view.begin(streams=specs_of(session), metadata=meta)
+    for name, stream in session.streams.items():
+        view.send_block(name, stream.data)
+    summary = session.json_meta("summary", {}) | {"duration_s": session.duration}
+    view.end(summary=summary)
+    return dict(view.sent_rows)
+
+
+@click.command("replay", short_help="Show a recorded session in Rerun, or write it to .rrd.")
+@click.argument("session", type=click.Path(path_type=Path))
+@click.option("--rrd", "rrd", type=click.Path(path_type=Path, dir_okay=False), default=None,
+              help="Write the view to this .rrd file (open it later with `rerun FILE`).")
+@click.option("--view", "mode", type=click.Choice(["rerun", "serve"]), default=None,
+              help="rerun: native viewer (web viewer without a display); serve: web viewer "
+                   "on localhost. Default: rerun.")
+def command(session: Path, rrd: Path | None, mode: str | None) -> None:
+    """Show SESSION (an .h5 flight session) in Rerun as the live view showed it.
+
+    \b
+    Examples:
+      groundstation replay sessions/prbs-3axis-2026-11-22T10-00-00.h5
+      groundstation replay flight.h5 --rrd flight.rrd
+      groundstation replay flight.h5 --view serve
+    """
+    if rrd is not None and mode is not None:
+        raise click.UsageError("--rrd writes a file and --view shows a viewer; pass only one")
+    s = open_session(session)
+    t0 = time.perf_counter()
+    view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd)
+    counts = replay_session(session=s, view=view)
+    log.info("replayed %d rows in %.2f s", sum(counts.values()), time.perf_counter() - t0)
+    if rrd is not None:
+        click.echo(f"wrote {rrd} ({sum(counts.values())} rows from {len(counts)} streams)")
+        return
+    if view.url:
+        click.echo(f"Rerun web viewer: {view.url}  (Ctrl-C to stop serving)")
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass

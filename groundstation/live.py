@@ -1,0 +1,388 @@
+"""The flight view in Rerun: live flights, replayed sessions and plans look the same.
+
+The only module of :mod:`groundstation` that talks to Rerun. :func:`open_view` returns a
+:class:`RerunView`, a listener on the flight runner (:class:`FlightListener`): ``begin`` with the
+session's stream specs, ``rows`` as they arrive, ``end`` with the summary. ``groundstation
+replay`` feeds a recorded session through the same view with :meth:`RerunView.send_block`.
+
+Entities (one scalar series per entity; labels carry the unit, e.g. ``x [deg/s]``):
+
+==============================  ============================================================
+``/<log stream>/<field>``       every logged variable: ``/motors/m1`` (PWM), ``/acc/x`` (g),
+                                ``/gyro/z`` (deg/s), ``/stabilizer/roll`` (deg), ...
+``/setpoints/<axis>``           ``roll``, ``pitch`` (deg), ``yaw_rate`` (deg/s), ``thrust`` (PWM)
+``/link/quality``, ``latency``  link quality (%) and round-trip latency (ms); NaN samples skipped
+``/phase``                      state (``name (kind)``) and a text line at each phase start
+``/events``                     text log ``[source] text`` with the event's level
+``/session``                    metadata (plan, URI, firmware, start) and, at the end, summary
+==============================  ============================================================
+
+Timelines: ``host_time`` (the flight clock, s, every stream) and, for log streams, ``fw_time``
+(the Crazyflie tick, s, 24-bit wraps undone). The default layout (blueprint) plots each log
+stream in its own panel; roll/pitch setpoints (deg) share a panel with ``stabilizer.roll/pitch``
+when those are logged, and the yaw-rate setpoint shares one with ``gyro.z`` (both deg/s).
+
+Cost: ``rows`` only appends to a queue (about a microsecond, never blocks); a worker thread
+converts queued rows to arrays every ``flush_interval`` seconds and sends one
+``send_columns`` per channel.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from groundstation.errors import GroundStationError
+from groundstation.schedule import Schedule
+from groundstation.session_schema import StreamSpec, phases_spec, setpoints_spec
+from sysid.errors import ParameterError
+from sysid.viz import MODES, open_recording
+
+__all__ = [
+    "MODES",
+    "FlightListener",
+    "RerunView",
+    "ViewError",
+    "flight_blueprint",
+    "open_view",
+    "plot_plan",
+]
+
+log = logging.getLogger(__name__)
+
+_WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
+_LEVELS = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
+_SKIP = {"host_time", "fw_time_ms", "phase_id", "tick"}
+_META_KEYS = ("plan_name", "uri", "firmware", "protocol_version", "start_time_iso",
+              "software_version", "closed_cleanly", "duration_s")
+
+
+class ViewError(GroundStationError, ValueError):
+    """The view cannot be opened as asked (unknown mode, no .rrd path for mode 'save')."""
+
+
+class FlightListener(Protocol):
+    """What the flight runner calls; rows are tuples in the stream's field order."""
+
+    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None: ...
+
+    def rows(self, stream: str, rows: Sequence[tuple]) -> None: ...
+
+    def end(self, *, summary: Mapping[str, Any]) -> None: ...
+
+
+@dataclass(frozen=True)
+class _Channels:
+    """How one stream is shown: numeric ``(field, entity)`` pairs, or its text kind."""
+
+    spec: StreamSpec
+    channels: tuple[tuple[str, str], ...]
+    firmware_time: bool
+
+
+def _channels(spec: StreamSpec) -> _Channels:
+    numeric = tuple(
+        (f.name, f"{spec.name}/{f.name}") for f in spec.fields
+        if f.name not in _SKIP and np.dtype(f.dtype).kind in "fiub"
+    ) if spec.kind not in ("events", "phases") else ()
+    return _Channels(spec, numeric, any(f.name == "fw_time_ms" for f in spec.fields))
+
+
+def _label(field: str, unit: str) -> str:
+    return f"{field} [{unit}]" if unit else field
+
+
+def _entity_of(specs: Sequence[StreamSpec], source: str) -> str | None:
+    """The entity of the logged variable ``source`` (e.g. ``gyro.z``), if it is logged."""
+    for spec in specs:
+        for f in spec.fields:
+            if spec.kind == "log" and f.source == source:
+                return f"/{spec.name}/{f.name}"
+    return None
+
+
+def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
+    """The default layout for these streams (module docstring)."""
+    by_kind: dict[str, list[StreamSpec]] = {}
+    for s in streams:
+        by_kind.setdefault(s.kind, []).append(s)
+    plots: list[rrb.View] = []
+    for s in by_kind.get("log", []):
+        units = {f.unit for f in s.fields if f.name not in _SKIP}
+        unit = f" [{units.pop()}]" if len(units) == 1 else ""
+        plots.append(rrb.TimeSeriesView(origin=f"/{s.name}", name=f"{s.name}{unit}"))
+    if "setpoints" in by_kind:
+        measured = [e for e in (_entity_of(streams, "stabilizer.roll"),
+                                _entity_of(streams, "stabilizer.pitch")) if e]
+        plots.append(rrb.TimeSeriesView(
+            origin="/", contents=["/setpoints/roll", "/setpoints/pitch", *measured],
+            name="roll, pitch: setpoint" + (" vs stabilizer" if measured else "") + " [deg]"))
+        gyro_z = _entity_of(streams, "gyro.z")
+        plots.append(rrb.TimeSeriesView(
+            origin="/", contents=["/setpoints/yaw_rate", *([gyro_z] if gyro_z else [])],
+            name="yaw rate: setpoint" + (" vs gyro.z" if gyro_z else "") + " [deg/s]"))
+        plots.append(rrb.TimeSeriesView(origin="/", contents="/setpoints/thrust",
+                                        name="thrust setpoint [PWM]"))
+    if "link" in by_kind:
+        plots.append(rrb.TimeSeriesView(origin="/", contents="/link/quality",
+                                        name="link quality [%]"))
+        plots.append(rrb.TimeSeriesView(origin="/", contents="/link/latency_ms",
+                                        name="link latency [ms]"))
+    side = [rrb.StateTimelineView(origin="/phase", name="phase"),
+            rrb.TextLogView(origin="/events", name="events"),
+            rrb.TextLogView(origin="/phase", name="phases"),
+            rrb.TextDocumentView(origin="/session", name="session")]
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Grid(*plots), rrb.Vertical(*side), column_shares=[3, 1]),
+        rrb.TimePanel(timeline="host_time"),
+        collapse_panels=True,
+    )
+
+
+class RerunView:
+    """A :class:`FlightListener` drawing into a Rerun recording (module docstring).
+
+    ``rows`` queues; a daemon thread sends every ``flush_interval`` seconds (``background``;
+    without it, rows are sent when :meth:`flush` or :meth:`end` is called). More than
+    ``max_pending_rows`` queued rows (viewer far behind) are dropped and counted in
+    ``dropped_rows``, never blocking the caller. ``url`` is the web viewer's address (serve).
+    """
+
+    def __init__(self, *, rec: rr.RecordingStream, url: str | None = None,
+                 close_on_end: bool = False, flush_interval: float = 0.1,
+                 max_pending_rows: int = 200_000, background: bool = True) -> None:
+        self.rec = rec
+        self.url = url
+        self.close_on_end = close_on_end
+        self.flush_interval = flush_interval
+        self.max_pending_rows = max_pending_rows
+        self.background = background
+        self.dropped_rows = 0
+        self.sent_rows: dict[str, int] = {}
+        self._pending: deque[tuple[str, list[tuple]]] = deque()
+        self._n_pending = 0
+        self._lock = threading.Lock()  # the pending count and the recording's send calls
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._streams: dict[str, _Channels] = {}
+        self._metadata: dict[str, Any] = {}
+        self._fw_state: dict[str, tuple[int, int]] = {}  # stream -> (last raw ms, wraps)
+        self._last_event: tuple[float, str, str, bytes] | None = None
+        self._warned: set[str] = set()
+
+    # ------------------------------------------------------------------ listener
+    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
+        """Declare the streams, log the metadata, send the layout, start the worker."""
+        self._streams = {s.name: _channels(s) for s in streams}
+        self._metadata = dict(metadata)
+        for ch in self._streams.values():
+            units = {f.name: f.unit for f in ch.spec.fields}
+            for field, entity in ch.channels:
+                self.rec.log(entity, rr.SeriesLines(names=_label(field, units[field])),
+                             static=True)
+        self._log_session_text(summary=None)
+        self.rec.send_blueprint(flight_blueprint(streams))
+        if self.background:
+            self._thread = threading.Thread(target=self._run, name="rerun-view", daemon=True)
+            self._thread.start()
+
+    def rows(self, stream: str, rows: Sequence[tuple]) -> None:
+        """Queue rows of ``stream`` (never blocks, never raises)."""
+        n = len(rows)
+        with self._lock:
+            if self._n_pending + n > self.max_pending_rows:
+                self.dropped_rows += n
+                full = True
+            else:
+                self._n_pending += n
+                full = False
+        if full:
+            self._warn_once("full", "view is behind: dropping rows (the session file keeps them)")
+            return
+        self._pending.append((stream, list(rows)))
+
+    def end(self, *, summary: Mapping[str, Any]) -> None:
+        """Send what is queued, log the summary, flush; close the sink in mode 'save'."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        self.flush()
+        self._flush_event()
+        self._log_session_text(summary=summary)
+        self.rec.flush()
+        if self.dropped_rows:
+            log.warning("view dropped %d rows", self.dropped_rows)
+        if self.close_on_end:
+            self.rec.disconnect()
+
+    # ------------------------------------------------------------------ sending
+    def flush(self) -> None:
+        """Send every queued row now (the worker does this every ``flush_interval``)."""
+        batches: dict[str, list[tuple]] = {}
+        while self._pending:
+            stream, rows = self._pending.popleft()
+            batches.setdefault(stream, []).extend(rows)
+        with self._lock:
+            self._n_pending -= sum(len(b) for b in batches.values())
+        for stream, rows in batches.items():
+            ch = self._streams.get(stream)
+            if ch is None:
+                self._warn_once(stream, f"rows for undeclared stream {stream!r} ignored")
+                continue
+            try:
+                self.send_block(stream, np.array(rows, dtype=ch.spec.dtype))
+            except Exception:  # a bad row must not stop the view, nor the flight
+                log.exception("view could not show %d rows of %s", len(rows), stream)
+
+    def send_block(self, stream: str, data: np.ndarray) -> None:
+        """Send a structured array ``(n_rows,)`` of ``stream`` (dtype of its spec) at once."""
+        ch = self._streams[stream]
+        if len(data) == 0:
+            return
+        t = data["host_time"].astype(np.float64)
+        with self._lock:
+            if ch.spec.kind == "events":
+                self._send_events(t, data)
+            elif ch.spec.kind == "phases":
+                self._send_phases(t, data)
+            else:
+                times = [("host_time", t)]
+                if ch.firmware_time:
+                    times.append(("fw_time", self._unwrap(stream, data["fw_time_ms"])))
+                self._send_numeric(ch, times, data)
+            self.sent_rows[stream] = self.sent_rows.get(stream, 0) + len(data)
+
+    def _send_numeric(self, ch: _Channels, times: list[tuple[str, np.ndarray]],
+                      data: np.ndarray) -> None:
+        full = [rr.TimeColumn(name, duration=v) for name, v in times]
+        for field, entity in ch.channels:
+            v = data[field].astype(np.float64)
+            ok = np.isfinite(v)
+            if ok.all():
+                indexes = full
+            elif ok.any():
+                indexes = [rr.TimeColumn(name, duration=a[ok]) for name, a in times]
+                v = v[ok]
+            else:
+                continue
+            self.rec.send_columns(entity, indexes=indexes,
+                                  columns=rr.Scalars.columns(scalars=v))
+
+    def _unwrap(self, stream: str, raw: np.ndarray) -> np.ndarray:
+        """Firmware seconds with 24-bit wraps undone, continuing across blocks."""
+        ms = raw.astype(np.int64)
+        last, wraps = self._fw_state.get(stream, (int(ms[0]), 0))
+        steps = np.diff(np.concatenate([[last], ms])) < -(_WRAP // 2)
+        count = wraps + np.cumsum(steps)
+        self._fw_state[stream] = (int(ms[-1]), int(count[-1]))
+        return (ms + count * _WRAP) / 1000.0
+
+    def _send_events(self, t: np.ndarray, data: np.ndarray) -> None:
+        """Events as a text log; a text continued on following rows (``cont``) is joined."""
+        out: list[tuple[float, str, str, bytes]] = []
+        pending = self._last_event
+        for i in range(len(data)):
+            piece = bytes(data["text"][i])
+            if data["cont"][i] and pending is not None:
+                pending = (*pending[:3], pending[3] + piece)
+                continue
+            if pending is not None:
+                out.append(pending)
+            src = bytes(data["source"][i]).decode("utf-8", errors="replace")
+            pending = (float(t[i]), _LEVELS.get(int(data["level"][i]), "INFO"), src, piece)
+        self._last_event = pending  # may still be continued by the next block
+        self._log_events(out)
+
+    def _flush_event(self) -> None:
+        with self._lock:
+            if self._last_event is not None:
+                self._log_events([self._last_event])
+                self._last_event = None
+
+    def _log_events(self, events: list[tuple[float, str, str, bytes]]) -> None:
+        if not events:
+            return
+        texts = [f"[{e[2]}] {e[3].decode('utf-8', errors='replace')}" for e in events]
+        self.rec.send_columns(
+            "events", indexes=[rr.TimeColumn("host_time", duration=[e[0] for e in events])],
+            columns=rr.TextLog.columns(text=texts, level=[e[1] for e in events]))
+
+    def _send_phases(self, t: np.ndarray, data: np.ndarray) -> None:
+        names = [bytes(v).decode("utf-8", errors="replace") for v in data["name"]]
+        kinds = [bytes(v).decode("utf-8", errors="replace") for v in data["kind"]]
+        ids = data["phase_id"].astype(int)
+        self.rec.send_columns(
+            "phase", indexes=[rr.TimeColumn("host_time", duration=t)],
+            columns=[*rr.StateChange.columns(state=[f"{n} ({k})" for n, k in
+                                                    zip(names, kinds, strict=True)]),
+                     *rr.TextLog.columns(text=[f"phase {i}: {n} ({k})" for i, n, k in
+                                               zip(ids, names, kinds, strict=True)],
+                                         level=["INFO"] * len(ids))])
+
+    def _log_session_text(self, *, summary: Mapping[str, Any] | None) -> None:
+        meta = self._metadata
+        lines = [f"**{k}**: {meta[k]}" for k in _META_KEYS
+                 if meta.get(k) not in (None, "") and meta[k] == meta[k]]  # not NaN
+        lines += [f"**problem**: {p}" for p in meta.get("problems", [])]
+        if summary is not None:
+            lines.append("\n**summary**\n\n```\n" +
+                         json.dumps(dict(summary), indent=1, sort_keys=True, default=str) +
+                         "\n```")
+        with self._lock:
+            self.rec.log("session", rr.TextDocument("\n\n".join(lines) or "(no metadata)",
+                                                    media_type=rr.MediaType.MARKDOWN),
+                         static=True)
+
+    # ------------------------------------------------------------------ worker
+    def _run(self) -> None:
+        while not self._stop.wait(self.flush_interval):
+            try:
+                self.flush()
+            except Exception:
+                log.exception("view worker")
+
+    def _warn_once(self, key: str, message: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            log.warning(message)
+
+
+def open_view(*, mode: str, name: str, rrd_path: Path | None = None) -> RerunView:
+    """A flight view: ``mode`` ``rerun`` (native viewer, or web viewer without a display),
+    ``serve`` (web viewer on localhost; the URL is logged and in ``view.url``) or ``save``
+    (``rrd_path``, written completely at ``end``)."""
+    try:
+        rec, url = open_recording(name=name, mode=mode, rrd_path=rrd_path,
+                                  application_id="crazyflie-groundstation")
+    except ParameterError as exc:
+        raise ViewError(str(exc)) from None
+    return RerunView(rec=rec, url=url, close_on_end=mode == "save")
+
+
+def plot_plan(*, schedule: Schedule, view: RerunView) -> None:
+    """Show a compiled plan's setpoints and phases in ``view`` exactly as a flight's
+    setpoints would be shown (time axis ``host_time`` = plan time, s); ends the view."""
+    sp, ph = setpoints_spec(), phases_spec()
+    n = len(schedule.t)
+    setpoints = np.zeros(n, dtype=sp.dtype)
+    setpoints["host_time"] = schedule.t
+    for axis in ("roll", "pitch", "yaw_rate", "thrust", "phase_id"):
+        setpoints[axis] = getattr(schedule, axis)
+    setpoints["tick"] = np.arange(n)
+    phases = np.array([(p.start, p.id, p.name.encode()[:32], p.kind.encode()[:16])
+                       for p in schedule.phases], dtype=ph.dtype)
+    view.begin(streams=[sp, ph], metadata={"plan_name": schedule.name})
+    view.send_block("setpoints", setpoints)
+    view.send_block("phases", phases)
+    view.end(summary={"setpoints": n, "rate_hz": schedule.rate_hz,
+                      "duration_s": float(n / schedule.rate_hz)})
