@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 from typing import Any
 
 import click
@@ -253,7 +254,9 @@ def check(plan: str, as_json: bool) -> None:
 @click.option(
     "--height", type=click.IntRange(3, 50), default=5, show_default=True, help="Rows per axis."
 )
-def show(plan: str, as_json: bool, width: int | None, height: int) -> None:
+@click.option("--rrd", type=click.Path(path_type=Path, dir_okay=False), default=None,
+              help="Write the setpoints and phases to this Rerun .rrd file instead.")
+def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | None) -> None:
     """Draw PLAN's setpoints per axis in the terminal, or dump them (--json).
 
     \b
@@ -263,6 +266,12 @@ def show(plan: str, as_json: bool, width: int | None, height: int) -> None:
     schedule = load_plan(plan).compile()
     if as_json:
         click.echo(json.dumps(schedule.to_dict()))
+        return
+    if rrd is not None:
+        from groundstation.live import open_view, plot_plan  # Rerun only when asked for
+
+        plot_plan(schedule=schedule, view=open_view(mode="save", name=schedule.name, rrd_path=rrd))
+        click.echo(f"wrote {rrd}")
         return
     width = width or shutil.get_terminal_size((100, 24)).columns - 12
     _print_show(Console(highlight=False), schedule, width=width, height=height)
