@@ -1,0 +1,59 @@
+"""Variants of a flight plan that keep its text honest (the session stores the text flown).
+
+:func:`advance_prbs` gives a second realisation of a PRBS plan for validation flights: every PRBS
+starts ``chips`` chips later in its own m-sequence. The lags between the axes (which make them
+uncorrelated) are unchanged, and so are the period and the persistence of excitation; the input is
+a different stretch of the sequence. The new seeds are written into the plan's TOML text, which is
+parsed again, so ``plan.text`` is exactly what was flown.
+"""
+
+from __future__ import annotations
+
+import re
+
+from groundstation.errors import PlanError
+from groundstation.plan_toml import key_lines
+from groundstation.plans import Plan, parse_plan
+from sysid.excitation import mls_bits
+
+__all__ = ["advance_prbs", "advanced_seed"]
+
+_SEED_LINE = re.compile(r"^(\s*seed\s*=\s*)(\d+)")
+
+
+def advanced_seed(*, register_length: int, seed: int, chips: int) -> int:
+    """Register state ``chips`` chips after ``seed``: the seed's bits are the first n chips,
+    least significant bit first, so the new seed is :math:`\\sum_i a_{d+i} 2^i`."""
+    n = register_length
+    period = (1 << n) - 1
+    d = chips % period
+    bits = mls_bits(register_length=n, seed=seed, n_chips=d + n)[d:]
+    return int(sum(int(b) << i for i, b in enumerate(bits)))
+
+
+def advance_prbs(plan: Plan, *, chips: int) -> Plan:
+    """The same plan with every PRBS advanced by ``chips`` chips (see the module docstring)."""
+    if chips < 0:
+        raise PlanError(f"{plan.source}: PRBS advance {chips} must be >= 0 chips")
+    lines = plan.text.splitlines(keepends=True)
+    where = key_lines(plan.text)
+    inserts: list[tuple[int, str]] = []
+    found = False
+    for i, phase in enumerate(plan.phases):
+        for exc in phase.excitation:
+            if exc.signal != "prbs":
+                continue
+            found = True
+            new = advanced_seed(register_length=exc.register_length, seed=exc.seed, chips=chips)
+            line = where.get(("phase", i, exc.axis, "seed"))
+            if line is not None:
+                text = lines[line - 1]
+                lines[line - 1] = _SEED_LINE.sub(lambda m, v=new: f"{m.group(1)}{v}", text, 1)
+            else:  # seed defaulted to 1: add it under the table header
+                inserts.append((where[("phase", i, exc.axis)], f"seed = {new}\n"))
+    if not found:
+        raise PlanError(f"{plan.source}: plan '{plan.name}' has no PRBS to advance")
+    for line, text in sorted(inserts, reverse=True):
+        lines.insert(line, text)
+    header = f"# PRBS advanced by {chips} chips from the shipped plan (groundstation)\n"
+    return parse_plan(text=header + "".join(lines), source=plan.source, name=plan.name)
