@@ -51,9 +51,9 @@ def main(verbose: int) -> None:
 
 
 def _register() -> None:
-    from groundstation.commands import demo, importer, info, plan, sim
+    from groundstation.commands import demo, fly, importer, info, plan, replay, scan, sim
 
-    for module in (info, demo, sim, plan, importer):
+    for module in (info, demo, sim, plan, importer, fly, scan, replay):
         main.add_command(module.command)
 
 

@@ -252,6 +252,8 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) ->
     install_drivers()
     from cflib.crazyflie import Crazyflie
 
+    # Without a cache folder cflib warns on every connect that it cannot save the TOC.
+    logging.getLogger("cflib.crazyflie.toccache").setLevel(logging.ERROR)
     cf = Crazyflie(rw_cache=None)
     ready, failure = threading.Event(), []
     cf.fully_connected.add_callback(lambda _uri: ready.set())

@@ -1,0 +1,115 @@
+"""``groundstation scan``: Crazyradios and Crazyflies on USB (pyusb), Crazyflies in reach (cflib).
+
+Without a Crazyradio, or without permission to open it, the command names the problem and the fix
+in one line (the udev rule is in ``docs/flying.md``) and exits 2, unless some other link (the
+simulator, a UDP peer) found a Crazyflie, in which case it lists those and warns.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+from typing import Any
+
+import click
+
+from groundstation.errors import LinkError
+
+__all__ = ["USB_IDS", "command", "find_usb_devices", "scan_crazyflies"]
+
+log = logging.getLogger(__name__)
+
+USB_IDS = {
+    (0x1915, 0x7777): "Crazyradio PA / 2.0",
+    (0x0483, 0x5740): "Crazyflie 2.x (USB cable)",
+}
+UDEV_HINT = ("add the udev rule from docs/flying.md (SUBSYSTEM==\"usb\", "
+             "ATTRS{idVendor}==\"1915\", ATTRS{idProduct}==\"7777\", MODE=\"0664\", "
+             "GROUP=\"plugdev\"), then replug")
+
+
+def find_usb_devices() -> list[dict[str, Any]]:
+    """Crazyradios and USB-connected Crazyflies: ``name``, ``vid``, ``pid``, ``bus``,
+    ``address``, ``serial``. A missing libusb or a permission problem raises a one-line
+    :class:`LinkError` with the fix."""
+    import usb.core
+    import usb.util
+
+    found = []
+    try:
+        for (vid, pid), name in USB_IDS.items():
+            for dev in usb.core.find(find_all=True, idVendor=vid, idProduct=pid) or ():
+                try:
+                    index = dev.iSerialNumber
+                    serial = usb.util.get_string(dev, index) if index else ""
+                except (usb.core.USBError, ValueError) as exc:
+                    if getattr(exc, "errno", None) == 13:
+                        raise
+                    serial = ""
+                found.append({"name": name, "vid": vid, "pid": pid, "bus": dev.bus,
+                              "address": dev.address, "serial": serial or ""})
+    except usb.core.NoBackendError:
+        raise LinkError("no USB backend (libusb) found; install it (Debian/Ubuntu: "
+                        "sudo apt install libusb-1.0-0) and retry") from None
+    except usb.core.USBError as exc:
+        if exc.errno == 13:
+            raise LinkError(f"no permission to open the Crazyradio; {UDEV_HINT}") from None
+        raise LinkError(f"USB error while scanning ({exc}); replug the Crazyradio") from None
+    return found
+
+
+def scan_crazyflies(address: int | None = None) -> list[str]:
+    """URIs of the Crazyflies cflib finds on every link driver (radio, USB, UDP, ``sim://``)."""
+    import cflib.crtp
+
+    from groundstation.link import install_drivers
+
+    install_drivers()
+    uris = []
+    for driver in cflib.crtp.CLASSES:
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # cflib prints "Cannot find ..."
+                found = driver().scan_interface(address) or []
+            uris += [str(entry[0]) for entry in found]
+        except Exception as exc:  # one driver failing (no dongle) must not hide the others
+            log.info("scanning with %s failed: %s", driver.__name__, exc)
+    return uris
+
+
+@click.command("scan")
+@click.option("--address", default=None, help="Radio address to scan, hex (default E7E7E7E7E7).")
+def command(address: str | None) -> None:
+    """List Crazyradios and Crazyflies.
+
+    \b
+    Examples:
+      groundstation scan
+      groundstation scan --address E7E7E7E7E8
+    """
+    try:
+        addr = None if address is None else int(address, 16)
+    except ValueError:
+        raise click.BadParameter(f"{address!r} is not hex; e.g. E7E7E7E7E7",
+                                 param_hint="--address") from None
+    try:
+        devices, problem = find_usb_devices(), ""
+    except LinkError as exc:  # still list what other links (sim://, udp://) can reach
+        devices, problem = [], str(exc)
+    for d in devices:
+        serial = f" serial {d['serial']}" if d["serial"] else ""
+        click.echo(f"usb {d['vid']:04x}:{d['pid']:04x} {d['name']} (bus {d['bus']} "
+                   f"address {d['address']}){serial}")
+    if not problem and not any(d["pid"] == 0x7777 for d in devices):
+        problem = ("no Crazyradio found on USB; plug in a Crazyradio PA (1915:7777), "
+                   "or if it is plugged in, " + UDEV_HINT)
+    uris = scan_crazyflies(addr)
+    for uri in uris:
+        click.echo(f"crazyflie {uri}")
+    if problem and not uris:
+        raise LinkError(problem)
+    if problem:
+        click.echo(f"warning: {problem}", err=True)
+    elif not uris:
+        click.echo("no Crazyflie answered; switch it on and check its channel and address",
+                   err=True)

@@ -1,0 +1,62 @@
+"""What every recorded flight must satisfy (shared by the sim tests and hw_tests)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from groundstation.flight import FlightResult
+from groundstation.plans import Plan
+from groundstation.session import Session, open_session
+
+BLOCKS = ("motors", "acc", "gyro")
+
+
+def check_log_blocks(s: Session, result: FlightResult) -> None:
+    """>= 99 % of the expected packets, 20 ms firmware spacing, file rows = delivered rows."""
+    for name in BLOCKS:
+        stream, stats = s[name], result.summary["blocks"][name]
+        fw = np.asarray(stream.fw_time_s)
+        expected = round((fw[-1] - fw[0]) / 0.02) + 1
+        assert len(stream) >= 0.99 * expected, (name, len(stream), expected)
+        assert stats["received"] == len(stream)  # every packet cflib delivered is in the file
+        assert stats["expected"] == expected
+        spacing = np.round(np.diff(fw) * 1000).astype(int)
+        assert np.median(spacing) == 20 and (spacing % 20 == 0).all(), name
+        assert stats["dropped"] == s.dropped()[name]
+
+
+def check_setpoints(s: Session, plan: Plan, *, complete: bool) -> np.ndarray:
+    """Scheduled setpoints as planned and on a 10 Hz grid; returns their rows."""
+    sp = s["setpoints"].data
+    sched = plan.compile()
+    rows = sp[sp["tick"] >= 0]
+    k = rows["tick"]
+    assert (np.diff(k) == 1).all() and k[0] == 0
+    if complete:
+        assert len(rows) == len(sched)
+    np.testing.assert_allclose(rows["roll"], sched.roll[k], atol=1e-4)
+    np.testing.assert_allclose(rows["pitch"], sched.pitch[k], atol=1e-4)
+    np.testing.assert_allclose(rows["yaw_rate"], sched.yaw_rate[k], atol=1e-4)
+    np.testing.assert_array_equal(rows["thrust"], sched.thrust[k])
+    np.testing.assert_array_equal(rows["phase_id"], sched.phase_id[k])
+    # Drift-free deadlines t0 + k / f: lateness stays bounded whatever the flight's length.
+    # The simulation clock advances in steps and slips when the host is busy, so single sends
+    # can be late; the median over the flight and over its end must not be (no drift).
+    t = rows["host_time"]
+    late = t - k / sched.rate_hz
+    late -= late.min()
+    assert np.median(late) < 0.05 and np.median(late[-20:]) < 0.05, np.median(late)
+    assert late.max() < 2.0  # the firmware's watchdog would stop the motors beyond 2 s
+    span = (t[-1] - t[0]) / (len(t) - 1)
+    assert abs(span - 1 / sched.rate_hz) < 2.0 / (len(t) - 1)
+    return rows
+
+
+def check_closed_with_stop(result: FlightResult) -> Session:
+    """A readable, cleanly closed file whose last setpoint row is the stop (thrust 0)."""
+    s = open_session(result.path)
+    assert s.closed_cleanly and not s.problems
+    last = s["setpoints"].data[-1]
+    assert last["thrust"] == 0 and last["tick"] == -1
+    assert any("stop setpoint sent" in e.text for e in s.events())
+    return s

@@ -1,0 +1,52 @@
+"""Fixtures for flights against the simulated Crazyflie: a fresh ``sim://`` URI per test at 20x
+real time, every simulation powered off afterwards, and helpers that read the simulator's side."""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import pytest
+
+import groundstation.sim as gsim
+from groundstation.link import install_drivers
+from groundstation.plans import load_plan, parse_plan
+
+SPEED = 20
+_counter = itertools.count(500)
+
+
+@pytest.fixture
+def sim_uri():
+    """A ``sim://`` URI no other test uses (``sim_uri(**faults)`` adds options)."""
+    install_drivers()
+
+    def make(**options: float) -> str:
+        query = "&".join(f"{k}={v}" for k, v in {"speed": SPEED, **options}.items())
+        return f"sim://{next(_counter)}?{query}"
+
+    yield make
+    gsim.close_all()
+
+
+def wait_for_stop(uri: str, timeout_s: float = 5.0) -> gsim.Simulator:
+    """The simulation behind ``uri`` once its motors are off and it counted a stop."""
+    sim = gsim.instance(uri)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        v = sim.vehicle
+        if v.stop_count >= 1 and not any(v.motors_pwm):
+            return sim
+        time.sleep(0.01)
+    raise AssertionError(f"vehicle not stopped: motors {sim.vehicle.motors_pwm}, "
+                         f"stop_count {sim.vehicle.stop_count}")
+
+
+def plan_variant(name: str, **replace: str):
+    """A shipped plan with text replaced (``old=new`` pairs given as ``{old: new}``)."""
+    base = load_plan(name)
+    text = base.text
+    for old, new in replace.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    return parse_plan(text=text, source=f"{name}-variant", name=base.name)
