@@ -170,8 +170,9 @@ class RerunView:
         self.dropped_rows = 0
         self.sent_rows: dict[str, int] = {}
         self._pending: deque[tuple[str, list[tuple]]] = deque()
-        self._n_pending = 0
-        self._lock = threading.Lock()  # the pending count and the recording's send calls
+        self._n_queued = 0  # rows queued (written by the caller of rows() only)
+        self._n_taken = 0  # rows taken off the queue (written by flush() only): no lock needed
+        self._lock = threading.Lock()  # send calls and the continued-event state
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._streams: dict[str, _Channels] = {}
@@ -199,17 +200,12 @@ class RerunView:
     def rows(self, stream: str, rows: Sequence[tuple]) -> None:
         """Queue rows of ``stream`` (never blocks, never raises)."""
         n = len(rows)
-        with self._lock:
-            if self._n_pending + n > self.max_pending_rows:
-                self.dropped_rows += n
-                full = True
-            else:
-                self._n_pending += n
-                full = False
-        if full:
+        if self._n_queued + n - self._n_taken > self.max_pending_rows:
+            self.dropped_rows += n
             self._warn_once("full", "view is behind: dropping rows (the session file keeps them)")
             return
         self._pending.append((stream, list(rows)))
+        self._n_queued += n
 
     def end(self, *, summary: Mapping[str, Any]) -> None:
         """Send what is queued, log the summary, flush; close the sink in mode 'save'."""
@@ -227,13 +223,13 @@ class RerunView:
 
     # ------------------------------------------------------------------ sending
     def flush(self) -> None:
-        """Send every queued row now (the worker does this every ``flush_interval``)."""
+        """Send every queued row now: the worker does this every ``flush_interval``; call it
+        yourself only with ``background=False`` (one thread takes rows off the queue)."""
         batches: dict[str, list[tuple]] = {}
         while self._pending:
             stream, rows = self._pending.popleft()
             batches.setdefault(stream, []).extend(rows)
-        with self._lock:
-            self._n_pending -= sum(len(b) for b in batches.values())
+        self._n_taken += sum(len(b) for b in batches.values())
         for stream, rows in batches.items():
             ch = self._streams.get(stream)
             if ch is None:
