@@ -4,8 +4,9 @@ No other ``sysid`` module imports :mod:`groundstation`. :func:`load_session` tur
 into one uniformly sampled experiment (thesis section 4.3.1):
 
 1. **Channels.** Each name in ``inputs``/``outputs`` selects log variables: a log stream
-   (``"motors"``: all its fields), ``"stream.field"`` (``"gyro.x"``), or the firmware variable it
-   was logged from (``"controller.cmd_roll"``, matched against the stream's ``sources``).
+   (``"motors"``: all its fields), ``"stream.field"`` (``"gyro.x"``), the firmware variable it
+   was logged from (``"controller.cmd_roll"``, matched against the stream's ``sources``), or a
+   firmware group (``"gyro"``: every logged ``gyro.*`` variable) when no stream has that name.
 2. **Times.** Every sample is placed at its firmware time :math:`\\tau` (the log packet's tick,
    unwrapped, in seconds): when the Crazyflie sampled it, free of radio latency.
 3. **Clock alignment.** Phases are on the host clock. The offset
@@ -93,6 +94,9 @@ def resolve_channels(session: Session, names: Sequence[str], *, role: str) -> li
             out.append(channel(sname, fname))
         elif len(by_source.get(name, [])) == 1:
             out.append(channel(*by_source[name][0]))
+        elif "." not in name and (group := [sf for src, sfs in by_source.items()
+                                            if src.startswith(name + ".") for sf in sfs]):
+            out += [channel(*sf) for sf in group]
         elif by_source.get(name):
             where = [f"{s}.{f}" for s, f in by_source[name]]
             raise DataError(f"{session.path}: {role} {name!r} is logged in several streams "

@@ -62,8 +62,8 @@ def block_name_of(path: Path) -> str:
 
 def _parse(line: str, *, path: Path, lineno: int, width: int) -> list[float] | None:
     cells = line.strip().split(",")
-    if len(cells) != width:
-        return None
+    if len(cells) != width or not all(c.strip() for c in cells):
+        return None  # a line cut short
     try:
         return [float(c) for c in cells]
     except ValueError:
@@ -108,8 +108,8 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
                 log.warning("%s: last line %d is incomplete (client killed?); dropped", path, i)
                 break
             raise CsvFormatError(
-                f"{path}: line {i} has {len(line.split(','))} columns, the header "
-                f"{len(header)}; fix or delete that line"
+                f"{path}: line {i} has {len(line.split(','))} columns (or empty ones), the "
+                f"header {len(header)}; fix or delete that line"
             )
         rows.append(row)
     if not rows:
