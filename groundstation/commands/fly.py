@@ -6,6 +6,7 @@ An aborted flight prints its cause and the session path on one line and exits 2.
 
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 import time
@@ -27,7 +28,7 @@ __all__ = ["ProgressListener", "command", "open_view", "summary_lines"]
 def open_view(*, mode: str, name: str) -> FlightListener:
     """The live view's listener (``groundstation.live.open_view``), imported only when asked."""
     try:
-        from groundstation import live
+        live = importlib.import_module("groundstation.live")
     except ImportError:
         raise GroundStationError(f"--view {mode} needs groundstation.live, which this "
                                  "installation lacks; use --view none") from None

@@ -1,0 +1,87 @@
+"""``groundstation fly`` and ``groundstation scan`` from the command line."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import usb.core
+from click.testing import CliRunner
+
+from groundstation.cli import main
+from groundstation.session import open_session
+
+
+def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(), "--out",
+                                    str(tmp_path), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    assert summary["setpoints"]["scheduled"] == 100 and not summary["aborted"]
+    s = open_session(summary["file"])
+    assert s.closed_cleanly and summary["file"].startswith(str(tmp_path))
+    assert s.json_meta("summary")["setpoints"] == summary["setpoints"]
+
+
+def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(cut_at=5.0),
+                                    "--out", str(tmp_path)])
+    assert res.exit_code == 2
+    last = res.output.strip().splitlines()[-1]
+    assert last.startswith("error: flight aborted: link lost") and str(tmp_path) in last
+    assert "gyro" in res.output and "dropped" in res.output  # the summary came first
+    assert open_session(last.rsplit(" ", 1)[-1]).closed_cleanly
+
+
+def test_fly_bad_plan_is_one_line(tmp_path):
+    res = CliRunner().invoke(main, ["fly", "no-such-plan", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and res.output.count("\n") == 1 and "no such plan" in res.output
+
+
+def test_view_without_live_module_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "groundstation.live", None)  # import fails
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--view", "rerun", "--out",
+                                    str(tmp_path)])
+    assert res.exit_code == 2 and "use --view none" in res.output
+    assert res.output.count("\n") == 1 and not list(tmp_path.iterdir())
+
+
+def test_scan_without_dongle_names_the_fix(monkeypatch):
+    monkeypatch.setattr(usb.core, "find", lambda **kw: iter(()))
+    res = CliRunner().invoke(main, ["scan"])
+    assert res.exit_code == 2
+    assert res.output.startswith("error: no Crazyradio found") and "udev" in res.output
+    assert res.output.count("\n") == 1
+
+
+def test_scan_without_usb_permission_or_backend(monkeypatch):
+    class Dev:
+        iSerialNumber, bus, address = 3, 1, 4
+
+    def denied(dev, index):
+        raise usb.core.USBError("Access denied", errno=13)
+
+    monkeypatch.setattr(usb.core, "find", lambda **kw: iter([Dev()]))
+    monkeypatch.setattr(usb.util, "get_string", denied)
+    res = CliRunner().invoke(main, ["scan"])
+    assert res.exit_code == 2 and "no permission" in res.output and "plugdev" in res.output
+
+    def no_backend(**kw):
+        raise usb.core.NoBackendError("No backend available")
+
+    monkeypatch.setattr(usb.core, "find", no_backend)
+    res = CliRunner().invoke(main, ["scan"])
+    assert res.exit_code == 2 and "libusb" in res.output
+
+
+def test_scan_lists_simulated_crazyflies(sim_uri, monkeypatch):
+    import groundstation.sim as gsim
+
+    monkeypatch.setattr(usb.core, "find", lambda **kw: iter(()))
+    uri = sim_uri()
+    gsim.simulator_for_uri(uri)  # a powered-on simulated vehicle
+    res = CliRunner().invoke(main, ["scan"])
+    assert res.exit_code == 0, res.output
+    address = uri.split("://")[1].split("?")[0]
+    assert f"crazyflie sim://{address}" in res.output
+    assert "warning: no Crazyradio" in res.output

@@ -1,0 +1,166 @@
+"""Each safety path ends with the motors stopped on the simulated vehicle, a readable file and the
+cause recorded as an event from source "safety".
+
+Known truth: the simulator's own stop counter and motor outputs, the plan's abort policy
+(``descend``: 2 s at <= 34000 PWM, level; ``stop``: nothing before the stop setpoint) and the
+10 Hz grid (no gap longer than one period while flying).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from groundstation.errors import FlightAborted, LinkError
+from groundstation.flight import RateLimits, fly_plan
+from groundstation.plans import load_plan
+
+from .checks import check_closed_with_stop, check_setpoints
+from .conftest import plan_variant, wait_for_stop
+
+
+def _safety_events(s):
+    return [e for e in s.events() if e.source == "safety" and e.level in ("error", "warning")]
+
+
+def _check_descent(s, *, thrust_ceiling: int, n: int) -> None:
+    sp = s["setpoints"].data
+    abort = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
+    assert len(abort) == n
+    assert (abort["thrust"] <= thrust_ceiling).all()
+    assert (abort["roll"] == 0).all() and (abort["pitch"] == 0).all()
+    kinds = [k.decode() for k in s["phases"].data["kind"]]
+    assert kinds[-1] == "abort"
+    # Never more than one period without a setpoint while flying (grid: 0.1 s, sim clock steps).
+    flying = sp[1:]  # from the first scheduled setpoint to the stop
+    gaps = np.diff(flying["host_time"])
+    assert np.median(gaps) == pytest.approx(0.1, abs=0.03)
+    assert np.percentile(gaps, 90) < 0.2
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_mid_excitation_descends_then_stops(sig, sim_uri, tmp_path):
+    plan, uri = load_plan("pitch-only"), sim_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    before = signal.getsignal(sig)
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), sig)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
+    assert signal.getsignal(sig) is before  # handlers restored
+    assert result.aborted and signal.Signals(sig).name in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    events = _safety_events(s)
+    assert events and signal.Signals(sig).name in events[0].text
+    rows = check_setpoints(s, plan, complete=False)
+    assert excitation.start_tick + 20 <= rows["tick"][-1] <= excitation.start_tick + 22
+    _check_descent(s, thrust_ceiling=34000, n=20)
+    with pytest.raises(FlightAborted, match=r"flight aborted: SIG.*session saved to"):
+        result.raise_if_aborted()
+
+
+def test_link_cut_records_the_loss_and_the_watchdog_stops_the_motors(sim_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), sim_uri(cut_at=6.0)
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri)
+    assert result.aborted and result.cause.startswith("link lost")
+    sim = wait_for_stop(uri)  # supervisor: no setpoint for 2 s -> motors off, locked
+    assert sim.vehicle.is_locked
+    s = check_closed_with_stop(result)
+    assert _safety_events(s)[0].text.startswith("link lost")
+    assert any("watchdog" in e.text for e in s.events())
+    assert "abort" not in [k.decode() for k in s["phases"].data["kind"]]  # no link: no descent
+    assert s["setpoints"].data["host_time"].max() >= 6.0 - 0.3
+
+
+def test_exception_in_the_runner_aborts_safely(sim_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), sim_uri()
+
+    def hook(k: int) -> None:
+        if k == 40:
+            raise RuntimeError("injected fault")
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
+    assert result.cause == "runner error: RuntimeError: injected fault"
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    assert "injected fault" in _safety_events(s)[0].text
+    assert s["setpoints"].data["tick"].max() == 39
+    _check_descent(s, thrust_ceiling=34000, n=20)
+
+
+def test_stop_policy_stops_at_once(sim_uri, tmp_path):
+    plan = plan_variant("hover-check", **{'on_abort = "descend"': 'on_abort = "stop"'})
+    uri = sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri,
+                      tick_hook=lambda k: k == 30 and os.kill(os.getpid(), signal.SIGINT))
+    assert "SIGINT" in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    sp = s["setpoints"].data
+    assert sp["tick"].max() <= 31 and (sp[sp["tick"] == -1]["thrust"][1:] == 0).all()
+    assert np.diff(sp["host_time"][-2:])[0] <= 0.2  # the stop follows within a period
+
+
+def test_rate_limit_violation_aborts(sim_uri, tmp_path):
+    plan, uri = load_plan("roll-only"), sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri,
+                      limits=RateLimits(max_rate_deg_s=40.0, samples=2))
+    assert result.cause.startswith("limit: gyro.")
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    gyro = s["gyro"].values()
+    assert (np.abs(gyro) > 40.0).any(axis=1).sum() >= 2  # the file shows the violation
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    assert s["setpoints"].data["tick"].max() >= excitation.start_tick  # PRBS caused it
+    _check_descent(s, thrust_ceiling=34000, n=20)
+
+
+def test_low_battery_refuses_to_take_off(sim_uri, tmp_path):
+    plan = plan_variant("hover-check", **{"min_vbat = 3.8 ": "min_vbat = 4.2 "})
+    uri = sim_uri()  # the simulated battery is at most 4.15 V
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri)
+    assert result.cause.startswith("battery 4.1") and "refusing to take off" in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    assert (s["setpoints"].data["thrust"] == 0).all() and s["motors"].values().max() == 0
+    assert s["battery"].values()[0, 0] < 4.2
+
+
+class _Listener:
+    def __init__(self, fail_at: int | None = None) -> None:
+        self.calls, self.fail_at, self.ended = 0, fail_at, None
+
+    def begin(self, *, streams, metadata) -> None:
+        self.streams = [s.name for s in streams]
+
+    def rows(self, stream, rows) -> None:
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise ValueError("listener bug")
+
+    def end(self, *, summary) -> None:
+        self.ended = summary
+
+
+def test_failing_listener_is_dropped_and_the_flight_goes_on(sim_uri, tmp_path):
+    bad, good = _Listener(fail_at=50), _Listener()
+    plan, uri = load_plan("hover-check"), sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[bad, good])
+    assert not result.aborted
+    assert bad.ended is None and good.ended is not None and bad.calls == 50
+    assert good.ended["setpoints"]["scheduled"] == len(plan.compile())
+    s = check_closed_with_stop(result)
+    assert any("listener dropped" in e.text and e.level == "error" for e in s.events())
+    assert len(s["setpoints"].data[s["setpoints"].data["tick"] >= 0]) == len(plan.compile())
+
+
+def test_unreachable_uri_is_a_one_line_link_error(tmp_path):
+    with pytest.raises(LinkError, match=r"^cannot connect to nosuch://0: .*groundstation scan"):
+        fly_plan(plan="hover-check", out=tmp_path, uri="nosuch://0", connect_timeout_s=1.0)
+    assert not list(tmp_path.iterdir())  # nothing flown, no file
