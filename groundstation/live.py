@@ -36,13 +36,14 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from groundstation.errors import GroundStationError
+from groundstation.flight import FlightListener  # the runner's listener protocol
 from groundstation.schedule import Schedule
 from groundstation.session_schema import StreamSpec, phases_spec, setpoints_spec
 from sysid.errors import ParameterError
@@ -69,16 +70,6 @@ _META_KEYS = ("plan_name", "uri", "firmware", "protocol_version", "start_time_is
 
 class ViewError(GroundStationError, ValueError):
     """The view cannot be opened as asked (unknown mode, no .rrd path for mode 'save')."""
-
-
-class FlightListener(Protocol):
-    """What the flight runner calls; rows are tuples in the stream's field order."""
-
-    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None: ...
-
-    def rows(self, stream: str, rows: Sequence[tuple]) -> None: ...
-
-    def end(self, *, summary: Mapping[str, Any]) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -354,9 +345,12 @@ class RerunView:
 
 
 def open_view(*, mode: str, name: str, rrd_path: Path | None = None) -> RerunView:
-    """A flight view: ``mode`` ``rerun`` (native viewer, or web viewer without a display),
-    ``serve`` (web viewer on localhost; the URL is logged and in ``view.url``) or ``save``
-    (``rrd_path``, written completely at ``end``)."""
+    """A flight view (a :class:`FlightListener`).
+
+    ``mode``: ``rerun`` (native viewer, or the web viewer without a display), ``serve`` (web
+    viewer on localhost; the URL is logged and in ``view.url``) or ``save`` (``rrd_path``,
+    complete once ``end`` returns).
+    """
     try:
         rec, url = open_recording(name=name, mode=mode, rrd_path=rrd_path,
                                   application_id="crazyflie-groundstation")
