@@ -108,10 +108,16 @@ def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
     for s in streams:
         by_kind.setdefault(s.kind, []).append(s)
     plots: list[rrb.View] = []
-    for s in by_kind.get("log", []):
-        units = {f.unit for f in s.fields if f.name not in _SKIP}
-        unit = f" [{units.pop()}]" if len(units) == 1 else ""
-        plots.append(rrb.TimeSeriesView(origin=f"/{s.name}", name=f"{s.name}{unit}"))
+    for s in by_kind.get("log", []):  # one panel per log block and unit
+        by_unit: dict[str, list[str]] = {}
+        for f in s.fields:
+            if f.name not in _SKIP:
+                by_unit.setdefault(f.unit, []).append(f"/{s.name}/{f.name}")
+        for unit, entities in by_unit.items():
+            name = f"{s.name} [{unit}]" if unit else s.name
+            plots.append(rrb.TimeSeriesView(origin=f"/{s.name}", name=name,
+                                            contents="$origin/**" if len(by_unit) == 1
+                                            else entities))
     if "setpoints" in by_kind:
         measured = [e for e in (_entity_of(streams, "stabilizer.roll"),
                                 _entity_of(streams, "stabilizer.pitch")) if e]

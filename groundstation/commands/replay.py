@@ -36,11 +36,15 @@ def specs_of(session: Session) -> list[StreamSpec]:
 
 
 def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
-    """Send every stream of ``session`` through ``view`` and end it; rows sent per stream."""
+    """Send every non-empty stream of ``session`` through ``view`` and end it.
+
+    Returns the rows sent per stream.
+    """
     meta = dict(session.meta) | {"problems": list(session.problems)}
-    view.begin(streams=specs_of(session), metadata=meta)
-    for name, stream in session.streams.items():
-        view.send_block(name, stream.data)
+    specs = [s for s in specs_of(session) if len(session[s.name])]  # no empty panels
+    view.begin(streams=specs, metadata=meta)
+    for spec in specs:
+        view.send_block(spec.name, session[spec.name].data)
     summary = session.json_meta("summary", {}) | {"duration_s": session.duration}
     view.end(summary=summary)
     return dict(view.sent_rows)

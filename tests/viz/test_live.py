@@ -9,7 +9,8 @@ import pytest
 
 from groundstation.commands.replay import replay_session, specs_of
 from groundstation.live import RerunView, ViewError, open_view
-from groundstation.session import open_session
+from groundstation.session import SessionWriter, open_session
+from groundstation.session_schema import log_block_spec
 from tests.viz.rrd import blueprint_views, load
 from tests.viz.sessions import LONG_TEXT, N_LOG, flight_rows, flight_specs, write_session
 
@@ -108,13 +109,29 @@ def test_blueprint_puts_setpoints_next_to_what_they_command(tmp_path):
     for name in ("motors [PWM (0-65535)]", "acc [g]", "gyro [deg/s]", "link quality [%]",
                  "link latency [ms]", "thrust setpoint [PWM]", "events", "phase", "session"):
         assert name in views
-    # Without a stabilizer block, roll/pitch setpoints stand alone: no gyro rates beside them.
-    specs = [s for s in flight_specs() if s.name != "attitude"]
+    # Without a stabilizer block, roll/pitch setpoints stand alone: no gyro rates beside them;
+    # a block mixing units gets one panel per unit.
+    mixed = log_block_spec(name="mixed", variables=[("baro.asl", "float"),
+                                                    ("pm.vbat", "float")], period_s=0.1)
+    specs = [s for s in flight_specs() if s.name != "attitude"] + [mixed]
     view = open_view(mode="save", name="bp2", rrd_path=tmp_path / "bp2.rrd")
     view.begin(streams=specs, metadata={})
     view.end(summary={})
-    assert blueprint_views(tmp_path / "bp2.rrd")["roll, pitch: setpoint [deg]"] == [
-        "/setpoints/roll", "/setpoints/pitch"]
+    views = blueprint_views(tmp_path / "bp2.rrd")
+    assert views["roll, pitch: setpoint [deg]"] == ["/setpoints/roll", "/setpoints/pitch"]
+    assert views["mixed [m]"] == ["/mixed/asl"] and views["mixed [V]"] == ["/mixed/vbat"]
+
+
+def test_replay_leaves_out_empty_streams(tmp_path):
+    rows = flight_rows()
+    with SessionWriter(tmp_path / "f.h5", streams=flight_specs()) as w:
+        w.extend("gyro", rows["gyro"])
+    view = open_view(mode="save", name="r", rrd_path=tmp_path / "r.rrd")
+    assert replay_session(session=open_session(tmp_path / "f.h5"), view=view) == {"gyro": N_LOG}
+    ents = load(tmp_path / "r.rrd")
+    assert not any(e.startswith(("/link", "/setpoints", "/motors")) for e in ents)
+    views = blueprint_views(tmp_path / "r.rrd")
+    assert "gyro [deg/s]" in views and "link quality [%]" not in views
 
 
 def test_rows_never_raise_and_drop_when_far_behind(tmp_path, caplog):
