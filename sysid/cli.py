@@ -8,6 +8,7 @@ and progress are for people (progress goes to stderr).
 
 from __future__ import annotations
 
+import importlib
 import json
 import logging
 import sys
@@ -150,18 +151,22 @@ def _fits_json(res: CompareResult) -> dict[str, float | None]:
             for n, f in zip(res.output_names, res.fit, strict=True)}
 
 
-def _viz(func: str, **kwargs: Any) -> None:
-    """Call ``sysid.viz.<func>(**kwargs)``; one-line error when the module is not there."""
+def _write_rrd(*, path: Path, name: str, model: StateSpaceModel,
+               comparisons: Sequence[CompareResult] = (), sweep: Any = None) -> None:
+    """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
+    :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing."""
     try:
-        from sysid import viz
+        viz = importlib.import_module("sysid.viz")
     except ImportError as exc:
         raise MissingDependencyError(f"--rrd needs sysid.viz, which cannot be imported ({exc});"
                                      " drop --rrd") from None
-    fn = getattr(viz, func, None)
-    if fn is None:
-        raise MissingDependencyError(f"--rrd: sysid.viz has no {func}(); update sysid or "
-                                     "drop --rrd")
-    fn(**kwargs)
+    rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
+    try:
+        viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
+                               sweep=sweep)
+    finally:
+        rec.disconnect()
+    log.info("wrote %s", path)
 
 
 _RRD = click.option("--rrd", type=click.Path(dir_okay=False, path_type=Path),
@@ -223,7 +228,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
     if out is not None:
         model.save(out)
     if rrd is not None:
-        _viz("log_identification", model=model, data=flights, path=rrd)
+        _write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
+                   comparisons=[sim, pred])
     poles = pole_table(model)
     if as_json:
         click.echo(json.dumps({
@@ -282,8 +288,8 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     modes = modes or [("simulation", {})]
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
     if rrd is not None:
-        _viz("log_comparison", model=model, data=flights, results=[r for _, r in results],
-             path=rrd)
+        _write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
+                   comparisons=[r for _, r in results])
     if as_json:
         click.echo(json.dumps({"model": str(model_path), "modes": [{
             "mode": label, "overall": _fits_json(res), "sessions": [
@@ -378,6 +384,7 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
         task = bar.add_task("sweep", total=total)
         result = run_sweep(flights, **grid, method=method.replace("-", "_"), validation=val,
                            horizon=horizon, window=window_s, workers=workers,
+                           keep_models=rrd is not None,
                            progress=lambda done, _total: bar.update(task, completed=done))
     ok = sorted((r for r in result.rows if r.error is None and np.isfinite(r.mean_fit)),
                 key=lambda r: -r.mean_fit)
@@ -385,8 +392,8 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
         best = result.best()
     except SysIdError:
         best = None
-    if rrd is not None:
-        _viz("log_sweep", result=result, path=rrd)
+    if rrd is not None and best is not None and best.model is not None:
+        _write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
     if as_json:
         click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
                                "n_failed": sum(r.error is not None for r in result.rows),

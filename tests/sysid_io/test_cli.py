@@ -152,6 +152,24 @@ def test_user_mistakes_exit_2_with_one_line(flights, tmp_path, monkeypatch, args
     assert all(w in err for w in words), err
 
 
+def test_rrd_reports_are_written(flights, tmp_path) -> None:
+    from tests.viz.rrd import load
+
+    out = tmp_path / "id.rrd"
+    res = run("identify", flights[0].path, *FAST, "--rrd", out)
+    assert res.exit_code == 0, res.output
+    model = sysid.iem(sysid.session_io.load_session(flights[0].path), order=4, past=20,
+                      future=10)
+    ents = load(out, sort_by=None)
+    poles = np.array(ents["/sysid/poles/A"].static["Points2D:positions"], dtype=float)
+    assert poles.shape == (4, 2)
+    np.testing.assert_allclose(np.sort_complex(poles[:, 0] + 1j * poles[:, 1]),
+                               np.sort_complex(model.poles()), atol=1e-6)
+    res = run("sweep", flights[0].path, "--pasts", "20", "--futures", "10", "--orders", "3,4",
+              "--rrd", tmp_path / "sw.rrd")
+    assert res.exit_code == 0 and "/sysid/sweep/poles/order_4" in load(tmp_path / "sw.rrd")
+
+
 @pytest.mark.parametrize("command", ["identify", "compare", "order", "sweep", "export"])
 def test_help_has_an_example(command) -> None:
     res = run(command, "--help")
