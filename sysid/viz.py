@@ -233,8 +233,11 @@ def identification_blueprint(
                          name="singular values"),
         rrb.BarChartView(origin=f"/{prefix}/order/singular_values/log10",
                          name="log10 singular values"),
-        rrb.Spatial2DView(origin=f"/{prefix}/poles", name="poles: A (red), A-KC (blue)"),
-        rrb.Spatial2DView(origin=f"/{prefix}/sweep/poles", name="sweep pole clouds"))
+        # Origins above the y-flipping transforms, so that the flip applies.
+        rrb.Spatial2DView(origin=f"/{prefix}", contents="$origin/poles/**",
+                          name="poles: A (red), A-KC (blue)"),
+        rrb.Spatial2DView(origin=f"/{prefix}/sweep", contents="$origin/poles/**",
+                          name="sweep pole clouds"))
     texts = rrb.Vertical(
         rrb.TextDocumentView(origin=f"/{prefix}/order/order", name="order"),
         *[rrb.TextDocumentView(origin=f"/{prefix}/{slug}/summary", name=f"{slug} fit")

@@ -92,6 +92,23 @@ def test_compare_series_and_fits(tmp_path, identified):
     assert sim.fit.min() > 90  # a correct model of a known system: the plot shows a good fit
 
 
+def test_compare_two_experiments(tmp_path, identified):
+    _, data, model = identified
+    halves = [sysid.IOData(u=data.u[a:b], y=data.y[a:b], dt=data.dt, output_names=("p", "q"))
+              for a, b in ((0, 700), (700, 1500))]
+    res = sysid.compare(model, halves)
+    path = tmp_path / "two.rrd"
+    rec, _ = viz.open_recording(name="two", mode="save", rrd_path=path)
+    viz.log_compare(rec=rec, result=res, dt=data.dt)
+    rec.disconnect()
+    ents = load(path, sort_by="t")
+    for e, half in enumerate(halves):
+        mod = ents[f"/sysid/simulation/exp{e}/q/model"]
+        np.testing.assert_allclose(mod.scalars(), res.y_model[e][:, 1], rtol=1e-12)
+        assert mod.times["t"][-1] == pytest.approx((len(half.y) - 1) * data.dt)
+        assert f"(fit {res.fits[e, 1]:.2f} %)" in mod.static["SeriesLines:names"][0]
+
+
 def test_sweep_pole_clouds(tmp_path, identified):
     _, data, _ = identified
     result = sysid.sweep(data, pasts=[8, 10], futures=[6, 8], orders=[3, 4])
