@@ -219,25 +219,20 @@ class Session:
         return hits[0].start_s, hits[-1].end_s
 
     def events(self) -> list[Event]:
-        """Events with continued texts joined."""
+        """Events with continued texts joined (bytes first, so split characters survive)."""
         if "events" not in self.streams:
             return []
-        out: list[Event] = []
+        parts: list[tuple[float, str, str, bytes]] = []
         for row in self.streams["events"].data:
-            text = bytes(row["text"]).decode("utf-8", errors="replace")
-            if row["cont"] and out:
-                prev = out[-1]
-                out[-1] = Event(prev.t, prev.level, prev.source, prev.text + text)
+            raw = bytes(row["text"])
+            if row["cont"] and parts:
+                t, level, source, prev = parts[-1]
+                parts[-1] = (t, level, source, prev + raw)
             else:
-                out.append(
-                    Event(
-                        float(row["host_time"]),
-                        _LEVEL_NAMES.get(int(row["level"]), "info"),
-                        _decode(row["source"]),
-                        text,
-                    )
-                )
-        return out
+                level = _LEVEL_NAMES.get(int(row["level"]), "info")
+                parts.append((float(row["host_time"]), level, _decode(row["source"]), raw))
+        return [Event(t, lv, src, raw.decode("utf-8", errors="replace"))
+                for t, lv, src, raw in parts]
 
 
 def _read_dataset(ds: h5py.Dataset, problems: list[str], name: str) -> np.ndarray:

@@ -70,7 +70,8 @@ def write_flight(path, *, n=600, drop=(), fw0=1000, compress=True, rng=None):
                 w.append("link", (t, 98.0, 4.5))
                 sent["link"].append((t, 98.0, 4.5))
         w.event(t=1.0, text="short", level="warning", source="link")
-        w.event(t=2.0, text="é" * TEXT_BYTES, source="console")  # 2 bytes each: spans 2 rows
+        # 2-byte characters after one ASCII byte: a row boundary splits a character
+        w.event(t=2.0, text="x" + "é" * TEXT_BYTES, source="console")
     return sent
 
 
