@@ -45,7 +45,8 @@ def check_setpoints(s: Session, plan: Plan, *, complete: bool) -> np.ndarray:
     t = rows["host_time"]
     late = t - k / sched.rate_hz
     late -= late.min()
-    assert np.median(late) < 0.05 and np.median(late[-20:]) < 0.05, np.median(late)
+    # (drifting deadlines t_{k-1} + 1/f would accumulate every late send into the end)
+    assert np.median(late) < 0.1 and np.median(late[-20:]) < 0.25, np.median(late)
     assert late.max() < 2.0  # the firmware's watchdog would stop the motors beyond 2 s
     span = (t[-1] - t[0]) / (len(t) - 1)
     assert abs(span - 1 / sched.rate_hz) < 2.0 / (len(t) - 1)
