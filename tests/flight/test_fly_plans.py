@@ -32,9 +32,16 @@ def test_shipped_plan_flies_and_records(name, sim_uri, tmp_path):
     # Phases in order, each lasting the plan's duration on the flight clock.
     phases = s["phases"].data
     assert [n.decode() for n in phases["name"]] == [p.name for p in plan.phases]
-    starts = np.append(phases["host_time"], rows["host_time"][-1] + 0.1)
-    planned = [p.n_ticks / plan.setpoint_rate_hz for p in plan.phases]
-    np.testing.assert_allclose(np.diff(starts), planned, atol=0.5)
+    # Each phase marker is written as its first setpoint goes out, and each phase spans the
+    # plan's number of setpoints: its duration on the deadline grid. (Send times on the in-process
+    # simulation clock can slip on a busy host; the grid cannot.)
+    first_ticks = np.cumsum([0] + [p.n_ticks for p in plan.phases[:-1]])
+    sent = rows["host_time"][first_ticks]
+    before = rows["host_time"][np.maximum(first_ticks - 1, 0)]
+    assert (phases["host_time"] <= sent + 1e-9).all() and (phases["host_time"] >= before).all()
+    n_per_phase = np.bincount(rows["phase_id"], minlength=len(plan.phases))
+    assert n_per_phase.tolist() == [p.n_ticks for p in plan.phases]
+    assert n_per_phase.sum() / plan.setpoint_rate_hz == pytest.approx(plan.duration)
     # The first setpoint released the thrust lock; the motors ran during the flight.
     first = s["setpoints"].data[0]
     assert first["thrust"] == 0 and first["tick"] == -1
