@@ -14,6 +14,10 @@ after the last one.
 see :mod:`groundstation.link`); this runner's thread sends, drains the queue, checks limits and
 feeds the listeners, in that order, so listener work never delays a setpoint.
 
+**Altitude hold.** With a plan's ``[altitude_hold]`` the altitude estimate is logged in an extra
+block and :class:`~groundstation.altitude.AltitudeHold` trims the thrust of each setpoint in the
+held phases; the setpoints stream records the thrust as sent.
+
 **Safety.** SIGINT/SIGTERM (handlers installed while flying, restored after), link loss, an
 exception in the runner, a measured rate beyond :class:`RateLimits` or a battery below
 ``vehicle.min_vbat`` at take-off each record an event (source ``safety``) and end with the stop
@@ -40,9 +44,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from groundstation.altitude import AltitudeHold
 from groundstation.clock import clock_for_uri
 from groundstation.errors import FlightAborted
-from groundstation.link import BATTERY_BLOCK, BLOCK_PERIOD_S, DEFAULT_URI, FLIGHT_BLOCKS, open_link
+from groundstation.link import (
+    BATTERY_BLOCK,
+    BLOCK_PERIOD_S,
+    DEFAULT_URI,
+    FLIGHT_BLOCKS,
+    install_drivers,
+    open_link,
+)
 from groundstation.plans import Plan, Schedule, load_plan
 from groundstation.recorder import Recorder, session_path
 from groundstation.session import event_rows, standard_streams
@@ -53,6 +65,8 @@ __all__ = ["FlightListener", "FlightResult", "RateLimits", "block_summary", "fly
 log = logging.getLogger(__name__)
 
 _FW_WRAP = 1 << 24  # log packets carry 24-bit firmware milliseconds
+ALTITUDE_BLOCK = "altitude"
+"""Log block of the plan's ``[altitude_hold]`` variable (only when the plan has one)."""
 
 
 class FlightListener(Protocol):
@@ -122,6 +136,7 @@ class _Runner:
         self.listeners: list[FlightListener] = [recorder, *listeners]
         self.connect_timeout_s = connect_timeout_s
         self.q: queue.SimpleQueue[tuple] = queue.SimpleQueue()
+        install_drivers()  # a link driver may bring its own clock (sim://): register it first
         self.clock = clock_for_uri(uri)
         self.origin = self.clock.now()
         self.start_ns = time.time_ns()
@@ -138,6 +153,10 @@ class _Runner:
         self.link: Any = None
         self.t_first = math.nan
         self.block_periods: dict[str, float] = {}
+        cfg = schedule.altitude_hold
+        self.hold = AltitudeHold(cfg, period_s=schedule.period) if cfg else None
+        self.extra_blocks = {ALTITUDE_BLOCK: (cfg.variable,)} if cfg else {}
+        self.z: float | None = None
 
     # ------------------------------------------------------------------ helpers
     def now(self) -> float:
@@ -177,6 +196,8 @@ class _Runner:
                 self.delivered[block] += 1
                 if block == BATTERY_BLOCK[0]:
                     self.vbat = float(values[0])
+                elif block == ALTITUDE_BLOCK:
+                    self.z = float(values[0])
                 elif block == "gyro" and self.flying:
                     self._check_rates(values)
             elif kind == "console":
@@ -246,7 +267,7 @@ class _Runner:
     # ------------------------------------------------------------------ the flight
     def preflight(self) -> bool:
         """Wait for every log block and a battery reading; refuse a low battery."""
-        names = [*FLIGHT_BLOCKS, BATTERY_BLOCK[0]]
+        names = [*FLIGHT_BLOCKS, BATTERY_BLOCK[0], *self.extra_blocks]
         give_up = time.monotonic() + max(3.0, self.connect_timeout_s / 2)
         t = self.clock.now()
         while not self.causes:
@@ -286,11 +307,26 @@ class _Runner:
             if ph.id != current:
                 current = ph.id
                 self.phase(phase_id=ph.id, name=ph.name, kind=ph.kind, planned_s=ph.duration)
-            self.send(s.setpoint(k), phase_id=ph.id, tick=k)
+            self.send(self._trimmed(s.setpoint(k), kind=ph.kind), phase_id=ph.id, tick=k)
             self.n_scheduled += 1
             k += 1
             self.dispatch()
         return k
+
+    def _trimmed(self, sp: tuple[float, float, float, int], *, kind: str
+                 ) -> tuple[float, float, float, int]:
+        """The setpoint with the altitude-hold trim added to its thrust (within the limits)."""
+        if self.hold is None:
+            return sp
+        active = kind in self.hold.config.kinds
+        if active and self.z is None:
+            self._cause(f"altitude hold: no {self.hold.config.variable} sample yet")
+        trim = self.hold.update(z=self.z, active=active)
+        if not trim:
+            return sp
+        v = self.schedule.vehicle
+        roll, pitch, yaw_rate, thrust = sp
+        return roll, pitch, yaw_rate, min(max(thrust + trim, v.thrust_min), v.thrust_max)
 
     def abort(self, k: int) -> None:
         """After a cause: the plan's descent if the link is up, then the stop setpoint."""
@@ -321,6 +357,9 @@ class _Runner:
             blocks = [*link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S),
                       *link.plan_blocks(blocks={BATTERY_BLOCK[0]: BATTERY_BLOCK[1]},
                                         period_s=BATTERY_BLOCK[2])]
+            if self.extra_blocks:  # altitude for the hold, at twice the setpoint rate
+                period = max(0.01, round(self.schedule.period / 2, 2))
+                blocks += link.plan_blocks(blocks=self.extra_blocks, period_s=period)
             self.block_periods = {b.name: b.period_s for b in blocks}
             meta = {**link.metadata(), **self._plan_metadata()}
             streams = [*(b.spec() for b in blocks), *standard_streams()]

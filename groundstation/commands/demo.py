@@ -1,62 +1,129 @@
-"""``groundstation demo``: the README's main command (fly, record, identify)."""
+"""``groundstation demo``: the README's main command: fly, record, identify, validate.
+
+Flies the thesis' ``prbs-3axis`` plan and a second realisation of it (every PRBS advanced in its
+m-sequence, see :func:`groundstation.plan_variants.advance_prbs`) on two simulated Crazyflies
+through the real cflib stack, records both sessions, identifies an 8th-order model with IEM from
+the first flight's excitation phase, and validates it on the second flight the way a quadrotor
+model must be validated: simulation over short windows (initial state estimated per window) and
+k-step-ahead prediction through the innovation form (see ``docs/sysid.md``).
+"""
 
 from __future__ import annotations
 
-import math
 import tempfile
+import time
 from pathlib import Path
 
 import click
+import numpy as np
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.table import Table
 
-from groundstation.commands.info import describe
-from groundstation.session import SessionWriter, open_session, standard_streams
-from groundstation.session_schema import log_block_spec
+from groundstation.flight import FlightResult, fly_plan
+from groundstation.plan_variants import advance_prbs
+from groundstation.plans import Plan, load_plan
 
 __all__ = ["command"]
 
 
-@click.command("demo")
-@click.option(
-    "--out",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Folder for the session files (default: a new temporary folder).",
-)
-def command(out: Path | None) -> None:
-    """Run the end-to-end demo.
+def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> FlightResult:
+    """Fly with a progress bar driven by the runner's tick hook (runs in the runner's thread)."""
+    n = plan.n_setpoints
+    columns = (TextColumn(f"[bold]{label}[/]"), BarColumn(), TextColumn("{task.description}"),
+               TimeRemainingColumn())
+    with Progress(*columns, console=console, transient=False) as progress:
+        task = progress.add_task("", total=n)
+        schedule = plan.compile()
 
-    Until the simulated flight lands, it writes a synthetic session (three 50 Hz log blocks,
-    setpoints, phases, events) and reads it back.
+        def tick(k: int) -> None:
+            phase = schedule.phases[int(schedule.phase_id[k])].name
+            progress.update(task, completed=k + 1, description=f"{phase:>10s}  {k + 1}/{n}")
+
+        result = fly_plan(plan=plan, out=out, uri=uri, tick_hook=tick)
+    result.raise_if_aborted()
+    return result
+
+
+def _poles_table(model) -> Table:
+    table = Table("pole", "|z|", "angle deg", "f Hz", "damping", title="IEM model poles")
+    for i, z in enumerate(sorted(model.poles(), key=lambda p: -abs(p))):
+        s = np.log(complex(z)) / model.dt if z != 0 else complex(-np.inf)
+        wn = abs(s)
+        zeta = -s.real / wn if np.isfinite(wn) and wn > 0 else float("nan")
+        table.add_row(f"{i + 1}", f"{abs(z):.4f}", f"{np.degrees(np.angle(z)):.1f}",
+                      f"{wn / (2 * np.pi):.2f}", f"{zeta:.3f}")
+    return table
+
+
+@click.command("demo")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Folder for the session and model files (default: a new temporary folder).")
+@click.option("--speed", type=click.FloatRange(1, 100), default=10.0, show_default=True,
+              help="Simulation speed factor (the 112 s plan takes 112/speed s).")
+@click.option("--order", type=click.IntRange(1, 40), default=8, show_default=True)
+@click.option("--past", type=click.IntRange(1, 500), default=60, show_default=True)
+@click.option("--future", type=click.IntRange(1, 200), default=17, show_default=True)
+@click.option("--advance", type=click.IntRange(1, 1_000_000), default=500, show_default=True,
+              help="Chips the validation flight's PRBS is advanced in its m-sequence.")
+def command(out: Path | None, speed: float, order: int, past: int, future: int,
+            advance: int) -> None:
+    """Fly two PRBS flights on the simulator, identify a model from one, validate on the other.
+
+    \b
+    The whole loop of the thesis, with the real cflib stack against the simulated Crazyflie:
+      1. fly prbs-3axis (roll/pitch ±25 deg, yaw rate ±50 deg/s) on sim://0
+      2. fly it again with the PRBS advanced by --advance chips on sim://1
+      3. identify with IEM (order 8, past 60, future 17) from flight 1's excitation phase
+      4. print the poles and the fits on flight 2: 2 s windowed simulation and k-step prediction
+
+    \b
+    Example:
+      groundstation demo --out demo-out --speed 20
+      groundstation info demo-out/prbs-3axis-*.h5
+      groundstation replay demo-out/prbs-3axis-*.h5 --rrd flight.rrd
     """
+    from sysid import compare, iem
+    from sysid.session_io import load_session
+
+    console = Console(highlight=False)
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
-    path = folder / "synthetic.h5"
-    blocks = [
-        log_block_spec(
-            name="motors",
-            variables=[(f"motor.m{i}", "uint16_t") for i in range(1, 5)],
-            period_s=0.02,
-        ),
-        log_block_spec(name="acc", variables=[(f"acc.{a}", "float") for a in "xyz"], period_s=0.02),
-        log_block_spec(
-            name="gyro", variables=[(f"gyro.{a}", "float") for a in "xyz"], period_s=0.02
-        ),
+    folder.mkdir(parents=True, exist_ok=True)
+    base = load_plan("prbs-3axis")
+    flights = [
+        (base, f"sim://0?speed={speed:g}&seed=1", "flight 1 (identification)"),
+        (advance_prbs(base, chips=advance), f"sim://1?speed={speed:g}&seed=2",
+         "flight 2 (validation)"),
     ]
-    with SessionWriter(
-        path,
-        streams=[*blocks, *standard_streams()],
-        metadata={"uri": "synthetic://", "plan_name": "synthetic"},
-    ) as w:
-        w.phase(t=0.0, phase_id=0, name="hover", kind="hover")
-        for k in range(500):
-            t = k * 0.02
-            w.append("motors", (t, 1000 + 20 * k, *(30000 + int(1000 * math.sin(t)),) * 4))
-            w.append("acc", (t, 1000 + 20 * k, 0.0, 0.0, 1.0))
-            w.append("gyro", (t, 1000 + 20 * k, math.sin(t), math.cos(t), 0.0))
-            if k % 5 == 0:
-                w.append("setpoints", (t, 0.0, 0.0, 0.0, 30000, 0, k // 5))
-        w.event(t=10.0, text="synthetic session complete")
-    d = describe(open_session(path))
-    click.echo(
-        f"wrote and read back {path}: {d['duration_s']:.2f} s, "
-        + ", ".join(f"{k} {v['rows']} rows" for k, v in d["streams"].items())
-    )
+    paths = []
+    for plan, uri, label in flights:
+        result = _fly(plan, uri=uri, out=folder, label=label, console=console)
+        s = result.summary
+        console.print(f"  recorded {result.path} ({s.get('duration_s', float('nan')):.1f} s)")
+        paths.append(result.path)
+
+    with console.status("identifying with IEM ..."):
+        t0 = time.perf_counter()
+        ident = load_session(paths[0], window="excitation")
+        model = iem(ident, order=order, past=past, future=future)
+        seconds = time.perf_counter() - t0
+    console.print(f"IEM: order {order}, past {past}, future {future}, "
+                  f"{ident.n_samples} samples, {seconds:.2f} s; stable: {model.is_stable}, "
+                  f"predictor stable: {model.predictor_is_stable}")
+    console.print(_poles_table(model))
+    model_path = folder / "iem-model.h5"
+    model.save(model_path)
+
+    val = load_session(paths[1], window="excitation")
+    names = list(val.output_names)
+    table = Table("validation on flight 2", *names, title="fit % (NRMSE, MATLAB compare)")
+    with console.status("validating on flight 2 ..."):
+        rows = [("simulation, 2 s windows", compare(model, val, window=2.0)),
+                ("1-step prediction", compare(model, val, horizon=1)),
+                ("10-step prediction (0.2 s)", compare(model, val, horizon=10))]
+    for label, result in rows:
+        table.add_row(label, *(f"{f:.1f}" for f in np.ravel(result.fit)))
+    console.print(table)
+    console.print(f"sessions: {paths[0]}\n          {paths[1]}\nmodel:    {model_path}")
+    console.print(f"next: groundstation replay {paths[0]} --rrd flight.rrd; "
+                  f"sysid compare {model_path} {paths[1]} --horizon 1")

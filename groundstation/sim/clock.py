@@ -9,6 +9,12 @@ has reached ``t``, which is ``(t - now()) / speed`` seconds of wall time while t
 up, and never lets the runner get ahead of the vehicle when it does not. Once the simulation has
 stopped the clock carries on as the host clock scaled by ``speed``, so it stays monotonic and
 ``sleep_until`` never hangs.
+
+Pacing: a scheduler that sleeps on this clock also paces the simulation
+(:meth:`groundstation.sim.driver.Simulator.pace`): simulated time runs at most a few ms past the
+time the scheduler asked to wake at, and waits (up to half a second of wall time) for it to sleep
+again. A host briefly too busy to wake the runner therefore freezes simulated time, as a faster
+host would, instead of delaying setpoints in simulated time.
 """
 
 from __future__ import annotations
@@ -65,6 +71,9 @@ class SimClock:
 
     def sleep_until(self, t: float) -> None:
         src = self._source
+        pace = getattr(src, "pace", None)
+        if pace is not None:
+            pace(until_s=t)
         with src.cond:
             while src.running and src.published_s < t:
                 src.cond.wait(0.05)

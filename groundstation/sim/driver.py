@@ -60,6 +60,8 @@ _WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
 _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
+_PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
+_PACE_HOLD_S = 0.5  # ... and holds there at most this long (wall s) for the scheduler
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
 _NEVER_ATTACHED_S = 10.0  # ... or this long if no link ever attached (created by its clock)
 
@@ -152,6 +154,8 @@ class Simulator:
         self._ever_attached = False
         self._cut = False
         self._on_lost: Callable[[str], None] | None = None
+        self._pace_ms: int | None = None  # paced: run no further than this (see pace())
+        self._pace_wall = 0.0
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"sim-{address}", daemon=True)
@@ -165,6 +169,28 @@ class Simulator:
     @property
     def running(self) -> bool:
         return not self._stop.is_set()
+
+    def pace(self, *, until_s: float) -> None:
+        """A scheduler sleeps until ``until_s``: let the simulation run to it and then hold,
+        at most ``_PACE_LEAD_MS`` past it, until the scheduler sleeps again (or ``_PACE_HOLD_S``
+        of wall time passes). A host too busy to wake its scheduler on time thus freezes
+        simulation time instead of making setpoints late: at speed 20, 25 ms of GIL contention
+        would otherwise be a 500 ms setpoint gap, which makes the firmware re-lock the thrust.
+        """
+        ms = math.ceil(until_s * 1000.0) + _PACE_LEAD_MS
+        with self.cond:
+            if self._pace_ms is None or ms > self._pace_ms:
+                self._pace_ms = ms
+            self._pace_wall = time.monotonic()
+        self._wake.set()
+
+    def _paced_target(self, target: int) -> int:
+        """``target`` capped at the pace limit while a scheduler holds the simulation."""
+        with self.cond:
+            limit, since = self._pace_ms, self._pace_wall
+        if limit is None or time.monotonic() - since > _PACE_HOLD_S:
+            return target
+        return min(target, max(limit, self.vehicle.firmware_ms))
 
     # ------------------------------------------------------------------ faults API
     def set_faults(self, *, drop: float | None = None, latency_ms: float | None = None,
@@ -319,6 +345,10 @@ class Simulator:
                 if target - v.firmware_ms > _MAX_LAG_MS:  # host too slow: let time slip
                     base_ms -= target - v.firmware_ms - _MAX_LAG_MS
                     target = v.firmware_ms + _MAX_LAG_MS
+                paced = self._paced_target(target)
+                if paced < target:  # held for the scheduler: time resumes from here later
+                    base_ms -= target - paced
+                    target = paced
             try:
                 self._advance_to(target)
             except Exception:
