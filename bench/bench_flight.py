@@ -16,6 +16,7 @@ log blocks streaming, no runner), so the runner's own share shows too.
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -68,7 +69,25 @@ def _idle_cpu(uri: str, seconds: float = 5.0) -> float:
         link.close()
 
 
+def _bare_jitter_ms(n: int = 100, period_s: float = 0.1) -> np.ndarray:
+    """Baseline: period jitter of bare deadline sleeps on this machine now (what the OS and
+    the interpreter allow), same definition and switch interval as the flight's."""
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    try:
+        clock = MonotonicClock()
+        t0 = clock.now() + period_s
+        sent = []
+        for k in range(n):
+            clock.sleep_until(t0 + k * period_s)
+            sent.append(clock.now())
+    finally:
+        sys.setswitchinterval(previous)
+    return np.abs(np.diff(sent) - period_s) * 1000.0
+
+
 def main() -> int:
+    bare = _bare_jitter_ms()
     port = _free_port()
     proc = _start_sim(port)
     uri = f"udp://127.0.0.1:{port}"
@@ -91,6 +110,10 @@ def main() -> int:
     print(f"setpoint period jitter p50 {jitter['p50']:.3f} ms, p99 {jitter['p99']:.3f} ms, "
           f"max {jitter['max']:.3f} ms; p99 / target {JITTER_P99_MS} ms = "
           f"{jitter['p99'] / JITTER_P99_MS:.2f}")
+    bare_p99 = float(np.percentile(bare, 99))
+    print(f"baseline: bare deadline sleeps on this machine now: p50 {np.median(bare):.3f} ms, "
+          f"p99 {bare_p99:.3f} ms; flight p99 / bare p99 = {jitter['p99'] / bare_p99:.2f} "
+          f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
     for name, b in result.summary["blocks"].items():
         print(f"log {name}: {b['received']} delivered by cflib, {b['received'] - missing[name]} "
               f"rows in the file, {b['dropped']} dropped on the link")
