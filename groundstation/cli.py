@@ -43,11 +43,13 @@ def main(verbose: int) -> None:
 
     \b
     Examples:
-      groundstation info sessions/2026-11-22T10-00-00.h5
+      groundstation info sessions/prbs-3axis-20261122T100000Z.h5
       groundstation demo
     """
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    # cflib logs link failures with full tracebacks; we report them in one line (see -vv).
+    logging.getLogger("cflib").setLevel(logging.DEBUG if verbose >= 2 else logging.CRITICAL)
 
 
 def _register() -> None:

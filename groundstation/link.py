@@ -244,6 +244,18 @@ class Link:
             log.exception("closing the link to %s failed", self.uri)
 
 
+def _connect_advice(why: str) -> str:
+    """What to do about a failed connect, from cflib's reason."""
+    low = why.lower()
+    if "crazyradio" in low or "dongle" in low:
+        return ("plug in the Crazyradio (groundstation scan lists radios; on Linux without "
+                "permission see the udev rule in docs/flying.md)")
+    if "access denied" in low or "permission" in low or "errno 13" in low:
+        return "no USB permission: install the udev rule in docs/flying.md and replug"
+    return ("check that the Crazyflie is on, the channel/address in the URI are right "
+            "(groundstation scan lists them) and nothing else is connected to it")
+
+
 def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) -> Link:
     """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
 
@@ -274,8 +286,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) ->
         except Exception:
             log.debug("close after failed connect", exc_info=True)
         why = failure[0] if failure else f"no answer within {timeout_s:g} s"
-        raise LinkError(f"cannot connect to {uri}: {why}; check that the Crazyflie is on and "
-                        "the URI is right (groundstation scan lists them)")
+        raise LinkError(f"cannot connect to {uri}: {why}; {_connect_advice(why)}")
     cf.connection_failed.remove_callback(failed)
     cf.connection_lost.remove_callback(failed)
     log.info("connected to %s in %.2f s", uri, time.monotonic() - t0)

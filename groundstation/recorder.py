@@ -23,9 +23,9 @@ log = logging.getLogger(__name__)
 
 
 def session_path(*, out: str | Path, plan_name: str) -> Path:
-    """A new file ``OUT/PLAN-YYYYmmddTHHMMSS.h5`` (``-2``, ``-3`` ... if it exists), checked
+    """A new file ``OUT/PLAN-YYYYmmddTHHMMSSZ.h5`` (UTC) (``-2``, ``-3`` ... if it exists), checked
     writable (one-line :class:`~groundstation.errors.SessionError` otherwise)."""
-    stamp = time.strftime("%Y%m%dT%H%M%S")
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())  # UTC, as start_time_iso
     base = Path(out) / f"{plan_name}-{stamp}"
     path, n = base.with_suffix(".h5"), 1
     while path.exists():

@@ -215,7 +215,9 @@ class Session:
         hits = [p for p in self.phases() if name_or_kind in (p.name, p.kind)]
         if not hits:
             names = sorted({p.name for p in self.phases()})
-            raise SessionError(f"{self.path}: no phase {name_or_kind!r}; phases are {names}")
+            kinds = sorted({p.kind for p in self.phases()})
+            raise SessionError(f"{self.path}: no phase {name_or_kind!r}; phases are {names} "
+                               f"(kinds {kinds})")
         return hits[0].start_s, hits[-1].end_s
 
     def events(self) -> list[Event]:

@@ -136,7 +136,11 @@ def _host_window(session: Session, window: Window) -> tuple[float, float] | None
     if window is None:
         return None
     if isinstance(window, str):
-        return session.phase_window(window)  # one-line SessionError naming file and phases
+        try:
+            return session.phase_window(window)
+        except SessionError as exc:  # names the file and the phases; add what to do
+            raise SessionError(f"{exc}; choose one of them, or a time window "
+                               "(CLI: --window NAME | T0:T1 seconds | all)") from None
     try:
         t0, t1 = (float(x) for x in window)
     except (TypeError, ValueError):

@@ -26,7 +26,7 @@ def describe(session: Session) -> dict[str, Any]:
             "rows": len(s),
             "fields": {f: session[name].units.get(f, "") for f in s.value_fields},
         }
-        if len(s) > 1:
+        if len(s) > 1 and s.kind in ("log", "setpoints", "link"):  # sampled streams only
             span = float(s.time[-1] - s.time[0])
             entry["span_s"] = span
             entry["rate_hz"] = (len(s) - 1) / span if span > 0 else None
@@ -81,7 +81,7 @@ def command(session: Path, as_json: bool, show_events: bool) -> None:
 
     \b
     Example:
-      groundstation info sessions/prbs-3axis-2026-11-22T10-00-00.h5
+      groundstation info sessions/prbs-3axis-20261122T100000Z.h5
       groundstation info flight.h5 --json | jq .streams.gyro.dropped
     """
     s = open_session(session)

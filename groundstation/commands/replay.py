@@ -62,7 +62,7 @@ def command(session: Path, rrd: Path | None, mode: str | None) -> None:
 
     \b
     Examples:
-      groundstation replay sessions/prbs-3axis-2026-11-22T10-00-00.h5
+      groundstation replay sessions/prbs-3axis-20261122T100000Z.h5
       groundstation replay flight.h5 --rrd flight.rrd
       groundstation replay flight.h5 --view serve
     """

@@ -85,3 +85,22 @@ def test_scan_lists_simulated_crazyflies(sim_uri, monkeypatch):
     address = uri.split("://")[1].split("?")[0]
     assert f"crazyflie sim://{address}" in res.output
     assert "warning: no Crazyradio" in res.output
+
+
+def test_fly_without_a_radio_is_one_line_with_the_fix(tmp_path):
+    """No Crazyradio on this machine: one line naming the fix, exit 2, no cflib traceback,
+    no session file (run as a real process: cflib logs through the root logger)."""
+    import subprocess
+
+    res = subprocess.run(
+        [sys.executable, "-c", "from groundstation.cli import main; main()", "fly",
+         "hover-check", "--uri", "radio://0/80/2M/E7E7E7E7E7", "--out", str(tmp_path),
+         "--timeout", "3"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert res.returncode == 2, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert lines[0].startswith("error: cannot connect to radio://0/80/2M/E7E7E7E7E7")
+    assert "Crazyradio" in lines[0] or "USB" in lines[0] or "libusb" in lines[0]
+    assert not list(tmp_path.glob("*.h5"))
