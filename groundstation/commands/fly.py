@@ -87,9 +87,11 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
         share = 100.0 * b["received"] / b["expected"] if b["expected"] else 0.0
         lines.append(f"  {name:<8} {b['received']:6d} / {b['expected']:6d} packets "
                      f"({share:.1f} %), {b['dropped']} dropped")
-    lines.append(f"  setpoints {sp.get('sent', 0)} sent ({sp.get('scheduled', 0)} of "
-                 f"{sp.get('planned', 0)} planned); period jitter p50 {jit.get('p50', 0):.1f} ms, "
-                 f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms")
+    extra = sp.get("sent", 0) - sp.get("scheduled", 0)
+    lines.append(f"  setpoints {sp.get('scheduled', 0)} of {sp.get('planned', 0)} planned sent "
+                 f"(+{extra} unlock/abort); period jitter p50 {jit.get('p50', 0):.1f} ms, "
+                 f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms "
+                 "on the flight clock")
     lines.append(f"  file {summary.get('file')}")
     return lines
 
