@@ -6,7 +6,8 @@ only reader.
 
 Crash safety: the writer uses HDF5 SWMR (single writer, multiple readers). All groups and
 attributes exist before SWMR starts; rows are buffered in memory and appended at most
-``flush_interval`` (1 s) apart, and the file is ``fsync``-ed every ``fsync_interval`` seconds, so a
+``flush_interval`` (1 s) apart, and the file is ``fsync``-ed every ``fsync_interval`` seconds (on a
+background thread: a slow card never delays the caller, the flight runner), so a
 process killed at any instant leaves a readable file that lacks at most about one second.
 A row resized but not yet written reads as NaN ``host_time`` and is dropped by the reader.
 """
@@ -16,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -116,6 +118,7 @@ class SessionWriter:
         self._file.swmr_mode = True
         self._file.flush()
         self._last_flush = self._last_fsync = time.monotonic()
+        self._fsync_thread: threading.Thread | None = None
         self.closed = False
         log.info("recording session to %s", self.path)
 
@@ -207,9 +210,28 @@ class SessionWriter:
         self._file.flush()
         now = time.monotonic()
         self._last_flush = now
-        if fsync or (fsync is None and now - self._last_fsync >= self.fsync_interval):
+        if fsync:
+            self._join_fsync()
             os.fsync(self._file.id.get_vfd_handle())
             self._last_fsync = now
+        elif fsync is None and now - self._last_fsync >= self.fsync_interval:
+            self._fsync_in_background()
+            self._last_fsync = now
+
+    def _fsync_in_background(self) -> None:
+        """``fsync`` off the caller's thread: on a slow card it can take longer than a setpoint
+        period, and the caller is the flight runner. One at a time; joined before closing."""
+        if self._fsync_thread is not None and self._fsync_thread.is_alive():
+            return  # the previous one is still syncing: it covers these rows too, or the next
+        self._fsync_thread = threading.Thread(
+            target=os.fsync, args=(self._file.id.get_vfd_handle(),), name="session-fsync",
+            daemon=True)
+        self._fsync_thread.start()
+
+    def _join_fsync(self) -> None:
+        if self._fsync_thread is not None:
+            self._fsync_thread.join()
+            self._fsync_thread = None
 
     def counts(self) -> dict[str, int]:
         """Rows per stream, written plus buffered."""

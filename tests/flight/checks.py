@@ -67,8 +67,11 @@ def check_setpoints(s: Session, plan: Plan, *, complete: bool) -> np.ndarray:
     late = t - k / sched.rate_hz
     late -= late.min()
     assert np.median(late) < 0.02 and np.median(late[-20:]) < 0.02, np.median(late)
-    # After 500 ms without a setpoint the firmware levels out and re-locks the thrust.
-    assert late.max() < 0.4, late.max()
+    # Never more than one setpoint period without a setpoint, from the thrust unlock on
+    # (20 ms margin: the simulator steps in 10 ms; a real link's host jitter is a few ms).
+    every = s["setpoints"].data["host_time"]
+    assert np.diff(every).max() <= 1 / sched.rate_hz + 0.02, np.diff(every).max()
+    assert late.max() < 0.05, late.max()
     span = (t[-1] - t[0]) / (len(t) - 1)
     assert abs(span - 1 / sched.rate_hz) < 2.0 / (len(t) - 1)
     return rows

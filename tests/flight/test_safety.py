@@ -35,15 +35,14 @@ def _check_descent(s, *, thrust_ceiling: int, n: int) -> None:
     assert (abort["roll"] == 0).all() and (abort["pitch"] == 0).all()
     kinds = [k.decode() for k in s["phases"].data["kind"]]
     assert kinds[-1] == "abort"
-    # One setpoint per 0.1 s deadline from the first scheduled one through the descent to the
-    # stop, which is due (n - 1) periods after the first (reference: the least late send). The
-    # in-process simulation clock advances in steps and, on a busy host, races ahead of the
-    # runner's thread now and then, so single gaps are only bounded by the firmware's 2 s
-    # motor-stop watchdog here; bench_flight measures the real-time cadence.
-    t = sp["host_time"][1:]
-    late = t - np.arange(len(t)) * 0.1
+    # One setpoint per 0.1 s deadline from the thrust unlock through the flight and the descent
+    # to the stop: never more than one period without a setpoint (the simulation is paced by
+    # the runner's clock, so this holds on a busy host too; 20 ms margin for the 10 ms steps).
+    t = sp["host_time"]
+    assert np.diff(t).max() <= 0.1 + 0.02, np.diff(t).max()
+    late = t[1:] - np.arange(len(t) - 1) * 0.1
     late -= late.min()
-    assert late[-1] < 0.3 and np.diff(t).max() < 2.0
+    assert late[-1] < 0.05
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

@@ -187,3 +187,32 @@ def test_info_command(tmp_path):
     bad = runner.invoke(cli, ["info", str(tmp_path / "nope.h5")])
     assert bad.exit_code == 2
     assert bad.output.strip().count("\n") == 0 and "no such file" in bad.output
+
+
+def test_a_slow_fsync_never_blocks_the_writer(tmp_path, monkeypatch):
+    """fsync runs off the caller's thread (the flight runner's); close waits for it."""
+    import threading
+
+    import groundstation.session as session_module
+
+    release, calls = threading.Event(), []
+
+    def slow_fsync(fd):
+        calls.append(fd)
+        release.wait(10)  # a card that takes "forever" to sync
+
+    monkeypatch.setattr(session_module.os, "fsync", slow_fsync)
+    w = SessionWriter(tmp_path / "f.h5", streams=blocks(), fsync_interval=0.0,
+                      flush_interval=0.0, compress_on_close=False)
+    for k in range(50):  # each append flushes; the first starts a background fsync
+        w.append("gyro", (k * 0.02, 20 * k, 0.0, 0.0, 0.0))
+    assert len(calls) == 1  # still blocked: no pile-up of sync threads, no blocked appends
+    assert w.counts()["gyro"] == 50
+    closer = threading.Thread(target=w.close)
+    closer.start()
+    closer.join(0.2)
+    assert closer.is_alive(), "close must wait for the running fsync"
+    release.set()
+    closer.join(10)
+    assert not closer.is_alive() and len(calls) == 2  # ... then syncs once more itself
+    assert len(open_session(tmp_path / "f.h5")["gyro"]) == 50
