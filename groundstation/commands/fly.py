@@ -134,4 +134,17 @@ def command(plan: str, uri: str, out: Path, view: str, max_rate: float, timeout_
         click.echo(json.dumps(result.summary, indent=2))
     else:
         click.echo("\n".join(summary_lines(result.summary)))
+    if view == "serve" and sys.stdin.isatty():
+        _keep_serving(listeners[0])
     result.raise_if_aborted()
+
+
+def _keep_serving(view: FlightListener) -> None:
+    """The web viewer lives in this process: keep it up after landing until Ctrl-C."""
+    url = getattr(view, "url", None) or "the web viewer"
+    click.echo(f"serving the flight at {url}; Ctrl-C to quit", err=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        click.echo("", err=True)
