@@ -6,6 +6,7 @@ assembles the group and turns user mistakes into one-line errors with exit code 
 
 from __future__ import annotations
 
+import importlib
 import logging
 import sys
 
@@ -17,8 +18,37 @@ from groundstation.errors import GroundStationError
 __all__ = ["main"]
 
 
+_COMMANDS: dict[str, tuple[str, str]] = {
+    # name: (module in groundstation.commands, one-line help shown by --help without importing it)
+    "fly": ("fly", "Fly a flight plan and record it to a session file."),
+    "plan": ("plan", "Validate and look at flight plans (flightplans/*.toml)."),
+    "scan": ("scan", "List Crazyradios and Crazyflies."),
+    "info": ("info", "Show what a session file holds: streams, rates, dropped packets, phases."),
+    "replay": ("replay", "Show a recorded session in Rerun, or write it to .rrd."),
+    "import": ("importer",
+               'Import uSD-card deck logs and cfclient "log to file" CSVs as session files.'),
+    "sim": ("sim", "Serve simulated Crazyflie 2.1s over UDP, in real time, until Ctrl-C."),
+    "demo": ("demo", "Fly two PRBS flights on the simulator, identify a model from one, "
+                     "validate on the other."),
+}
+"""Sub-commands, loaded on use: ``--help`` need not import cflib, scipy and rerun."""
+
+
 class _Group(click.Group):
-    """A click group whose user errors print one line and exit 2, never a traceback."""
+    """Lazily loaded sub-commands; user errors print one line and exit 2, never a traceback."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(_COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in _COMMANDS:
+            return None
+        module = importlib.import_module(f"groundstation.commands.{_COMMANDS[cmd_name][0]}")
+        return module.command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        with formatter.section("Commands"):
+            formatter.write_dl([(name, helptext) for name, (_, helptext) in _COMMANDS.items()])
 
     def invoke(self, ctx: click.Context):
         try:
@@ -52,11 +82,3 @@ def main(verbose: int) -> None:
     logging.getLogger("cflib").setLevel(logging.DEBUG if verbose >= 2 else logging.CRITICAL)
 
 
-def _register() -> None:
-    from groundstation.commands import demo, fly, importer, info, plan, replay, scan, sim
-
-    for module in (info, demo, sim, plan, importer, fly, scan, replay):
-        main.add_command(module.command)
-
-
-_register()

@@ -1,0 +1,34 @@
+"""Both command lines teach: every sub-command has --help with an example, and the top-level
+help (which lists sub-commands without importing them) says what each one really says."""
+
+from __future__ import annotations
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from groundstation.cli import _COMMANDS
+from groundstation.cli import main as gs_main
+from sysid.cli import main as sysid_main
+
+
+@pytest.mark.parametrize("name", list(_COMMANDS))
+def test_groundstation_subcommand_help(name):
+    cmd = gs_main.get_command(click.Context(gs_main), name)
+    assert cmd.get_short_help_str(limit=200) == _COMMANDS[name][1]
+    res = CliRunner().invoke(gs_main, [name, "--help"])
+    assert res.exit_code == 0 and "Usage:" in res.output
+    assert "xample" in res.output or isinstance(cmd, click.Group)
+
+
+def test_top_level_help_lists_every_command():
+    res = CliRunner().invoke(gs_main, ["--help"])
+    assert res.exit_code == 0
+    assert all(name in res.output for name in _COMMANDS)
+    assert CliRunner().invoke(gs_main, ["nope"]).exit_code == 2
+
+
+@pytest.mark.parametrize("name", ["identify", "compare", "order", "sweep", "export"])
+def test_sysid_subcommand_help_has_an_example(name):
+    res = CliRunner().invoke(sysid_main, [name, "--help"])
+    assert res.exit_code == 0 and "xample" in res.output
