@@ -124,6 +124,24 @@ def check_horizons(*, past: int, future: int) -> None:
             raise HorizonError(f"{name}={value!r}; pass an integer horizon >= {low} (samples)")
 
 
+def _warn_if_offset(flights: Sequence[IOData], *, u_std: np.ndarray, y_std: np.ndarray,
+                    ratio: float = 3.0) -> None:
+    """Subspace methods identify deviations from an operating point: a channel whose mean is
+    several standard deviations away from zero (hover thrust in PWM, 1 g on acc.z) biases the
+    model badly. Warn, naming the channels (``load_session`` detrends by default)."""
+    names = [*flights[0].input_names, *flights[0].output_names]
+    std = np.concatenate([u_std, y_std])
+    mean = np.mean([np.concatenate([d.u.mean(axis=0), d.y.mean(axis=0)]) for d in flights],
+                   axis=0)
+    off = [f"{n} (mean {mu:.3g}, std {sd:.3g})" for n, mu, sd in zip(names, mean, std,
+                                                                     strict=True)
+           if abs(mu) > ratio * sd]
+    if off:
+        log.warning("channels far from zero mean: %s; identify deviations from the operating "
+                    "point: detrend first (sysid.detrend_data, or load_session(detrend='mean'))",
+                    ", ".join(off))
+
+
 def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,
                    scale: bool = True) -> DataProducts:
     """Validate the data and build the Gram matrix of the joint Hankel matrix, one pass.
@@ -147,6 +165,7 @@ def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,
             "samples per flight (or shorter horizons)"
         )
     u_std, y_std = check_excited(flights)
+    _warn_if_offset(flights, u_std=u_std, y_std=y_std)
     u_scale = u_std if scale else np.ones(m)
     y_scale = y_std if scale else np.ones(ell)
     gram = np.zeros((rows, rows))

@@ -61,6 +61,10 @@ __all__ = ["iem", "iem_direct", "iem_order", "iem_signals", "realize_iem"]
 log = logging.getLogger(__name__)
 
 _BK = ("state", "thesis")
+_VARIANTS = {
+    "consistent": {"bk_method": "state", "weighting": "data", "refine": True},
+    "thesis": {"bk_method": "thesis", "weighting": "none", "refine": False},
+}
 _WEIGHTING = ("data", "none")
 
 
@@ -190,9 +194,9 @@ def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int
 
 
 def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
-        feedthrough: bool = False, bk_method: str = "state", weighting: str = "data",
-        scale: bool = True, factorization: str = "auto", direct: bool = False,
-        refine: bool = True) -> StateSpaceModel:
+        feedthrough: bool = False, variant: str = "consistent", bk_method: str | None = None,
+        weighting: str | None = None, scale: bool = True, factorization: str = "auto",
+        direct: bool = False, refine: bool | None = None) -> StateSpaceModel:
     """Identify an innovation-form model with IEM from one flight or a list of flights.
 
     Args:
@@ -200,17 +204,30 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         order: model order n. past, future: horizons p, f in samples.
         feedthrough: estimate D (and use the current input in the row regressions); False
             means D = 0, right for a loop without delay (u(k) already reacts to y(k)).
-        bk_method: "state" (closed-loop consistent, default) or "thesis" (eq. 3.15).
-        weighting: "data" (SVD of Γ_f L_p Z_p, default) or "none" (thesis eq. 3.32).
+        variant: a preset for the three choices below. "consistent" (default): state
+            regression for B, D, K, data weighting, predictor refinement. "thesis": Table 4.3
+            exactly (thesis B/D from eq. 3.15, no weighting, no refinement), for reproducing
+            the thesis; biased in closed loop. Arguments given explicitly override the preset.
+        bk_method: "state" (closed-loop consistent) or "thesis" (eq. 3.15).
+        weighting: "data" (SVD of Γ_f L_p Z_p) or "none" (thesis eq. 3.32).
         scale: divide channels by their std inside the identification (undone in the model).
         factorization: "auto", "cholesky" or "qr" (see :func:`sysid.factor.triangular_factor`).
         direct: use the per-row ``lstsq`` reference path instead of the fast one.
         refine: one linear least-squares fit of the one-step predictor over all samples
-            after step 5 (:func:`sysid.realize.refine_predictor`); False gives Table 4.3 as is.
+            after step 5 (:func:`sysid.realize.refine_predictor`; it re-estimates A as
+            A_K + K C, so A is then no longer the shift-invariance estimate). Off by default
+            with ``bk_method="thesis"``, which it would otherwise turn into a hybrid.
 
     Returns:
         ``StateSpaceModel`` in physical units with K and the innovation covariance.
     """
+    if variant not in _VARIANTS:
+        raise ParameterError(f"variant={variant!r}; use one of {tuple(_VARIANTS)}")
+    preset = _VARIANTS[variant]
+    bk_method = preset["bk_method"] if bk_method is None else bk_method
+    weighting = preset["weighting"] if weighting is None else weighting
+    if refine is None:
+        refine = preset["refine"] and bk_method != "thesis"
     if bk_method not in _BK:
         raise ParameterError(f"bk_method={bk_method!r}; use one of {_BK}")
     if weighting not in _WEIGHTING:
@@ -229,7 +246,8 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         gamma_lp, sig, order=order, n_inputs=m, n_outputs=ell, feedthrough=feedthrough,
         bk_method=bk_method, weighting=weighting, refine_on=refine_on)
     prov = {"method": "iem", "order": order, "past": past, "future": future,
-            "feedthrough": feedthrough, "bk_method": bk_method, "weighting": weighting,
+            "feedthrough": feedthrough, "variant": variant, "bk_method": bk_method,
+            "weighting": weighting,
             "n_flights": len(products.flights), "n_columns": products.n_columns,
             "n_samples": [fl.n_samples for fl in products.flights],
             "sources": [fl.source for fl in products.flights],

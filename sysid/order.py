@@ -28,6 +28,7 @@ def singular_values(data: IOData | Sequence[IOData], *, past: int, future: int,
     ``feedthrough`` defaults to False for IEM and True for PO-MOESP, as in those functions.
     The same values are stored in ``model.provenance["singular_values"]``.
     """
+    method = method.replace("_", "-")  # "po_moesp" as in the function's name
     if method not in _METHODS:
         raise ParameterError(f"method={method!r}; use one of {_METHODS}")
     products = build_products(data, past=past, future=future, scale=scale)
