@@ -33,7 +33,7 @@ from groundstation.session import open_session
 
 JITTER_P99_MS = 2.0
 CPU_SHARE = 0.10
-PLAN = "hover-check"
+PLAN = os.environ.get("BENCH_FLIGHT_PLAN", "prbs-3axis")  # 1123 setpoints: a meaningful p99
 
 
 def _free_port() -> int:
