@@ -29,6 +29,8 @@ def test_shipped_plan_flies_and_records(name, sim_uri, tmp_path):
     assert set(s.dropped().values()) == {0}  # no gaps in any block
     assert {"motors", "acc", "gyro", "battery"} <= set(s.dropped())
     check_airborne(s, plan)
+    link = s["link"].data  # cflib's latency pings, recorded as they arrive
+    assert np.isfinite(link["latency_ms"]).sum() >= plan.duration / 5
     rows = check_setpoints(s, plan, complete=True)
     assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
     # Phases in order, each lasting the plan's duration on the flight clock.
