@@ -198,8 +198,23 @@ class Link:
             "uri": self.uri,
             "firmware": self.firmware_version(),
             "protocol_version": int(self.cf.platform.get_protocol_version()),
-            "params": {g: dict(v) for g, v in self.cf.param.values.items()},
+            "params": self._typed_params(),
         }
+
+    def _typed_params(self) -> dict[str, dict[str, float | int | str]]:
+        """Parameters read at connect, as numbers typed from the param TOC (cflib keeps the
+        text it printed them as)."""
+        out: dict[str, dict[str, float | int | str]] = {}
+        for group, values in self.cf.param.values.items():
+            for name, text in values.items():
+                try:
+                    ctype = self.cf.param.toc.get_element(group, name).ctype
+                    value: float | int | str = float(text) if ctype in ("float", "double",
+                                                                        "FP16") else int(text)
+                except (AttributeError, KeyError, TypeError, ValueError):
+                    value = text  # keep what cflib read rather than lose it
+                out.setdefault(group, {})[name] = value
+        return out
 
     # ------------------------------------------------------------------ logging
     def start_blocks(self, blocks: Sequence[BlockPlan]) -> None:

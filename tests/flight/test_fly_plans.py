@@ -29,6 +29,9 @@ def test_shipped_plan_flies_and_records(name, sim_uri, tmp_path):
     assert set(s.dropped().values()) == {0}  # no gaps in any block
     assert {"motors", "acc", "gyro", "battery"} <= set(s.dropped())
     check_airborne(s, plan)
+    params = s.json_meta("params")  # read at connect, typed from the param TOC
+    assert params["pid_rate"]["roll_kp"] == pytest.approx(250.0)
+    assert isinstance(params["commander"]["enHighLevel"], int)
     link = s["link"].data  # cflib's latency pings, recorded as they arrive
     assert np.isfinite(link["latency_ms"]).sum() >= plan.duration / 5
     rows = check_setpoints(s, plan, complete=True)
