@@ -136,6 +136,7 @@ class _Runner:
         self.listeners: list[FlightListener] = [recorder, *listeners]
         self.connect_timeout_s = connect_timeout_s
         self.q: queue.SimpleQueue[tuple] = queue.SimpleQueue()
+        self.cancel = threading.Event()  # set by request_abort: also cancels a connect
         install_drivers()  # a link driver may bring its own clock (sim://): register it first
         self.clock = clock_for_uri(uri)
         self.origin = self.clock.now()
@@ -168,7 +169,9 @@ class _Runner:
                                                  source=source))
 
     def request_abort(self, cause: str) -> None:
-        """Thread- and signal-safe: the runner aborts at its next deadline."""
+        """Thread- and signal-safe: the runner aborts at its next deadline (or stops
+        connecting at once)."""
+        self.cancel.set()
         self.q.put(("abort", self.clock.now(), cause))
 
     def _cause(self, text: str, *, level: str = "error") -> None:
@@ -351,7 +354,7 @@ class _Runner:
 
     def run(self) -> FlightResult:
         link = self.link = open_link(uri=self.uri, clock=self.clock, post=self.q.put,
-                                     timeout_s=self.connect_timeout_s)
+                                     timeout_s=self.connect_timeout_s, cancel=self.cancel)
         k, begun = 0, False
         try:
             blocks = [*link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S),

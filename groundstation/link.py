@@ -271,10 +271,12 @@ def _connect_advice(why: str) -> str:
             "(groundstation scan lists them) and nothing else is connected to it")
 
 
-def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) -> Link:
+def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
+              cancel: threading.Event | None = None) -> Link:
     """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
 
-    ``timeout_s`` is wall-clock seconds. Failure raises a one-line :class:`LinkError`.
+    ``timeout_s`` is wall-clock seconds; setting ``cancel`` (Ctrl-C while connecting) gives up
+    at once. Failure raises a one-line :class:`LinkError`.
     """
     install_drivers()
     from cflib.crazyflie import Crazyflie
@@ -294,7 +296,12 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0) ->
     link = Link(cf=cf, uri=uri, clock=clock, post=post)
     t0 = time.monotonic()
     cf.open_link(uri)
-    ok = ready.wait(timeout_s) and not failure
+    deadline = time.monotonic() + timeout_s
+    while not ready.wait(0.05) and time.monotonic() < deadline:
+        if cancel is not None and cancel.is_set():
+            failure.append("connect cancelled")
+            break
+    ok = ready.is_set() and not failure
     if not ok:
         try:
             cf.close_link()

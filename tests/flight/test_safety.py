@@ -176,3 +176,24 @@ def test_unreachable_uri_is_a_one_line_link_error(tmp_path):
     with pytest.raises(LinkError, match=r"^cannot connect to nosuch://0: .*groundstation scan"):
         fly_plan(plan="hover-check", out=tmp_path, uri="nosuch://0", connect_timeout_s=1.0)
     assert not list(tmp_path.iterdir())  # nothing flown, no file
+
+
+def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
+    """A silent peer would hold the connect for its whole timeout; SIGINT ends it now."""
+    import os
+    import socket
+    import threading
+    import time
+
+    from groundstation.errors import LinkError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))  # a port that exists but never answers
+        port = s.getsockname()[1]
+        threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)).start()
+        t0 = time.monotonic()
+        with pytest.raises(LinkError, match="cancelled"):
+            fly_plan(plan="hover-check", out=tmp_path, uri=f"udp://127.0.0.1:{port}",
+                     connect_timeout_s=20.0)
+    assert time.monotonic() - t0 < 5.0
+    assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
