@@ -197,3 +197,38 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
                      connect_timeout_s=20.0)
     assert time.monotonic() - t0 < 5.0
     assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
+
+
+def test_second_signal_during_the_descent_stops_at_once(sim_uri, tmp_path):
+    plan, uri = load_plan("pitch-only"), sim_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    class SecondCtrlC:
+        """Presses Ctrl-C again once the descent has streamed a few setpoints."""
+
+        descent, pressed = 0, False
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints":
+                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+                if self.descent >= 5 and not self.pressed:
+                    self.pressed = True
+                    os.kill(os.getpid(), signal.SIGINT)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook,
+                      listeners=[SecondCtrlC()])
+    assert result.aborted
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    sp = s["setpoints"].data
+    descent = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
+    assert 5 <= len(descent) <= 7  # of the 20 planned: stopped at the next deadline
+    texts = [e.text for e in _safety_events(s)]
+    assert sum("during the abort" in t for t in texts) == 1, texts
