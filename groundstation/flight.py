@@ -48,6 +48,7 @@ from groundstation.altitude import AltitudeHold
 from groundstation.clock import clock_for_uri
 from groundstation.errors import FlightAborted
 from groundstation.link import (
+    ATTITUDE_BLOCK,
     BATTERY_BLOCK,
     BLOCK_PERIOD_S,
     DEFAULT_URI,
@@ -157,6 +158,8 @@ class _Runner:
         cfg = schedule.altitude_hold
         self.hold = AltitudeHold(cfg, period_s=schedule.period) if cfg else None
         self.extra_blocks = {ALTITUDE_BLOCK: (cfg.variable,)} if cfg else {}
+        self.slow_blocks = {name: (variables, period)
+                            for name, variables, period in (BATTERY_BLOCK, ATTITUDE_BLOCK)}
         self.z: float | None = None
 
     # ------------------------------------------------------------------ helpers
@@ -270,7 +273,7 @@ class _Runner:
     # ------------------------------------------------------------------ the flight
     def preflight(self) -> bool:
         """Wait for every log block and a battery reading; refuse a low battery."""
-        names = [*FLIGHT_BLOCKS, BATTERY_BLOCK[0], *self.extra_blocks]
+        names = [*FLIGHT_BLOCKS, *self.slow_blocks, *self.extra_blocks]
         give_up = time.monotonic() + max(3.0, self.connect_timeout_s / 2)
         t = self.clock.now()
         while not self.causes:
@@ -357,9 +360,9 @@ class _Runner:
                                      timeout_s=self.connect_timeout_s, cancel=self.cancel)
         k, begun = 0, False
         try:
-            blocks = [*link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S),
-                      *link.plan_blocks(blocks={BATTERY_BLOCK[0]: BATTERY_BLOCK[1]},
-                                        period_s=BATTERY_BLOCK[2])]
+            blocks = link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S)
+            for name, (variables, period) in self.slow_blocks.items():
+                blocks += link.plan_blocks(blocks={name: variables}, period_s=period)
             if self.extra_blocks:  # altitude for the hold, at twice the setpoint rate
                 period = max(0.01, round(self.schedule.period / 2, 2))
                 blocks += link.plan_blocks(blocks=self.extra_blocks, period_s=period)

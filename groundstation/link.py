@@ -60,6 +60,9 @@ FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
 """The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
 BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
 """A slow block (name, variables, period s) for the take-off check and the battery's sag."""
+ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
+"""The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
+the radio's budget stays with the thesis' three 50 Hz blocks)."""
 
 _WIRE_BYTES = {"uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "FP16": 2,
                "uint32_t": 4, "int32_t": 4, "float": 4}

@@ -7,7 +7,7 @@ import numpy as np
 from groundstation.flight import fly_plan
 from groundstation.live import open_view
 from groundstation.session import open_session
-from tests.viz.rrd import load
+from tests.viz.rrd import blueprint_views, load
 
 
 def test_live_view_receives_every_row_of_the_flight(sim_uri, tmp_path):
@@ -25,5 +25,9 @@ def test_live_view_receives_every_row_of_the_flight(sim_uri, tmp_path):
     for i in range(1, 5):
         assert len(entities[f"/motors/m{i}"].scalars()) == len(s["motors"])
     assert len(entities["/acc/z"].scalars()) == len(s["acc"])
+    # the attitude block reaches the view, in the panel of the roll/pitch setpoints
+    assert len(entities["/attitude/pitch"].scalars()) == len(s["attitude"])
+    panels = blueprint_views(rrd)
+    assert any({"/setpoints/pitch", "/attitude/pitch"} <= set(v) for v in panels.values())
     phase_entities = [e for e in entities if "phase" in e]
     assert phase_entities, sorted(entities)
