@@ -17,7 +17,7 @@ demo: $(STAMP)
 	$(BIN)/groundstation demo
 
 test: $(STAMP)
-	$(BIN)/ruff check groundstation sysid tests bench
+	$(BIN)/ruff check groundstation sysid tests hw_tests bench
 	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 lint: $(STAMP)
