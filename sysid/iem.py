@@ -43,6 +43,7 @@ from sysid.data import IOData, block_hankel
 from sysid.errors import ParameterError
 from sysid.factor import DataProducts, build_products, triangular_factor
 from sysid.model import StateSpaceModel
+from sysid.pem import pem_refine
 from sysid.realize import (
     Signals,
     ac_from_gamma,
@@ -196,7 +197,8 @@ def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int
 def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         feedthrough: bool = False, variant: str = "consistent", bk_method: str | None = None,
         weighting: str | None = None, scale: bool = True, factorization: str = "auto",
-        direct: bool = False, refine: bool | None = None) -> StateSpaceModel:
+        direct: bool = False, refine: bool | None = None, pem: bool = False
+        ) -> StateSpaceModel:
     """Identify an innovation-form model with IEM from one flight or a list of flights.
 
     Args:
@@ -217,6 +219,8 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
             after step 5 (:func:`sysid.realize.refine_predictor`; it re-estimates A as
             A_K + K C, so A is then no longer the shift-invariance estimate). Off by default
             with ``bk_method="thesis"``, which it would otherwise turn into a hybrid.
+        pem: then refine ``A_K``, C and the rest by prediction error (:mod:`sysid.pem`); the
+            IEM model is kept (and provenance["pem"] says why) if the cost does not decrease.
 
     Returns:
         ``StateSpaceModel`` in physical units with K and the innovation covariance.
@@ -240,11 +244,15 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
     else:
         gamma_lp, sig = iem_signals(products, feedthrough=feedthrough,
                                     factorization=factorization)
-    refine_on = ([(fl.u / products.u_scale, fl.y / products.y_scale)
-                  for fl in products.flights] if refine else None)
+    flights = [(fl.u / products.u_scale, fl.y / products.y_scale) for fl in products.flights]
+    refine_on = flights if refine else None
     (a, b, c, d, k, cov), sv, status = realize_iem(
         gamma_lp, sig, order=order, n_inputs=m, n_outputs=ell, feedthrough=feedthrough,
         bk_method=bk_method, weighting=weighting, refine_on=refine_on)
+    pem_status = "off"
+    if pem:
+        (a, b, c, d, k, cov), pem_status = pem_refine(matrices=(a, b, c, d, k, cov),
+                                                      flights=flights, feedthrough=feedthrough)
     prov = {"method": "iem", "order": order, "past": past, "future": future,
             "feedthrough": feedthrough, "variant": variant, "bk_method": bk_method,
             "weighting": weighting,
@@ -252,7 +260,7 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
             "n_samples": [fl.n_samples for fl in products.flights],
             "sources": [fl.source for fl in products.flights],
             "singular_values": sv.tolist(), "path": "direct" if direct else "fast",
-            "refine": status}
+            "refine": status, "pem": pem_status}
     return build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
                        y_scale=products.y_scale, template=products.flights[0],
                        provenance=prov)

@@ -53,6 +53,7 @@ __all__ = [
     "gamma_from_svd",
     "kalman_gain_from_residuals",
     "lstsq_coords",
+    "predictor_fit",
     "refine_predictor",
 ]
 
@@ -216,7 +217,18 @@ def _feature_columns(z: np.ndarray, lam: np.ndarray, keep: list[int]) -> np.ndar
 def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
                      flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples.
+    """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples
+    (:func:`predictor_fit` without the residuals)."""
+    fit = predictor_fit(a_k=a_k, c=c, flights=flights, feedthrough=feedthrough)
+    return None if fit is None else fit[:3]
+
+
+def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
+                  flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool,
+                  residuals: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]] | None:
+    """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples,
+    and (``residuals=True``) the prediction errors ``y - yhat`` ``(N, l)`` of each flight.
 
     With ``A_K = A - K C`` and C fixed, the predictor (thesis eq. 3.23's ``A_K, B_K``)
 
@@ -247,6 +259,7 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
     n_feat = n_bk + n_d + n * n_fl
     gram = np.zeros((n_feat, n_feat))
     fty = np.zeros((n_feat, ell))
+    feats = []
     for f_idx, (u, y) in enumerate(flights):
         w = np.hstack([u, y])
         z = np.empty((w.shape[0], cc, n), dtype=complex)
@@ -261,9 +274,12 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
         feat[:, x0:x0 + n] = _feature_columns(powers, lam, keep)[:, 0, :]
         gram += feat.T @ feat
         fty += feat.T @ y
+        if residuals:
+            feats.append(feat)
     # J_l maps parameters to feature coefficients for output l
     lhs = np.zeros((n_par, n_par))
     rhs = np.zeros(n_par)
+    jacs = []
     for out in range(ell):
         jac = np.zeros((n_feat, n_par))
         for ch in range(cc):
@@ -275,11 +291,16 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
             jac[x0:x0 + n, x0:x0 + n] = tau[:, out, :]
         lhs += jac.T @ gram @ jac
         rhs += jac.T @ fty[:, out]
+        jacs.append(jac)
     theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    errs = []
+    if residuals:
+        coef = np.stack([jac @ theta for jac in jacs], axis=1)  # (n_feat, l)
+        errs = [y - feat @ coef for feat, (_, y) in zip(feats, flights, strict=True)]
     # parameter index c * n + j is entry j of column c of [B_K, K]
     bk_all = theta[:n_bk].reshape(cc, n).T
     d = theta[n_bk:n_bk + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
-    return bk_all[:, :m], d, bk_all[:, m:]
+    return bk_all[:, :m], d, bk_all[:, m:], errs
 
 
 def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
