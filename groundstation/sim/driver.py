@@ -60,6 +60,7 @@ _WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
 _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
+_QUALITY_EVERY = 100  # received packets per link-quality report
 _PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
 _PACE_HOLD_S = 0.5  # ... and holds there at most this long (wall s) for the scheduler
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
@@ -423,6 +424,9 @@ class SimDriver(CRTPDriver):
         self._token = 0
         self._lost = False
         self._error_cb: Callable[[str], None] | None = None
+        self._stats_cb: Callable[[dict], None] | None = None
+        self._received = 0
+        self._dropped_at = 0
 
     def connect(self, uri, radio_link_statistics_callback, link_error_callback) -> None:
         if not str(uri).startswith("sim://"):
@@ -430,7 +434,9 @@ class SimDriver(CRTPDriver):
         opts = parse_uri(uri)
         self._sim = simulator_for_uri(uri)
         self._error_cb = link_error_callback
+        self._stats_cb = radio_link_statistics_callback
         self._token = self._sim.attach(faults=opts.faults, on_lost=self._link_lost)
+        self._dropped_at = self._sim.dropped_packets
 
     def _link_lost(self, message: str) -> None:
         self._lost = True
@@ -448,7 +454,21 @@ class SimDriver(CRTPDriver):
                 time.sleep(min(max(wait, 0), 0.1))
             return None
         packet = sim.receive(token=self._token, wait=wait)
-        return None if packet is None else CRTPPacket(packet[0], packet[1])
+        if packet is None:
+            return None
+        self._received += 1
+        if self._received % _QUALITY_EVERY == 0:
+            self._report_quality(sim)
+        return CRTPPacket(packet[0], packet[1])
+
+    def _report_quality(self, sim: Simulator) -> None:
+        """Link quality as the radio driver reports it: the share of packets that got through
+        (here: log packets not lost to the ``drop`` fault) over the last window, in %."""
+        dropped = sim.dropped_packets - self._dropped_at
+        self._dropped_at = sim.dropped_packets
+        if self._stats_cb is not None:
+            quality = 100.0 * _QUALITY_EVERY / (_QUALITY_EVERY + dropped)
+            self._stats_cb({"link_quality": quality})
 
     def get_status(self) -> str:
         return "simulated Crazyflie" if self._sim is None else f"simulated, {self._sim.speed}x"

@@ -34,6 +34,8 @@ def test_shipped_plan_flies_and_records(name, sim_uri, tmp_path):
     assert isinstance(params["commander"]["enHighLevel"], int)
     link = s["link"].data  # cflib's latency pings, recorded as they arrive
     assert np.isfinite(link["latency_ms"]).sum() >= plan.duration / 5
+    quality = link["quality"][np.isfinite(link["quality"])]
+    assert len(quality) >= plan.duration / 2 and (quality == 100.0).all()  # no drop fault
     rows = check_setpoints(s, plan, complete=True)
     assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
     # Phases in order, each lasting the plan's duration on the flight clock.

@@ -125,6 +125,8 @@ def test_drop_fault_shows_as_timestamp_gaps(sim_uri):
     uri = sim_uri + "&drop=0.1&seed=4"
     with connect(uri) as scf:
         sim = gsim.instance(uri)
+        quality: list[float] = []  # reported as a radio link reports it, through cflib
+        scf.cf.link_statistics.link_quality_updated.add_callback(quality.append)
         rec = Recorder(scf.cf, blocks={"gyro": BLOCKS["gyro"]})
         sim.clock.sleep_until(sim.clock.now() + 20.0)
         rec.configs[0].stop()
@@ -136,6 +138,7 @@ def test_drop_fault_shows_as_timestamp_gaps(sim_uri):
     missing = int(np.sum(gaps // 20 - 1))
     assert 0 <= dropped - missing <= 3  # drops before the first / after the last are invisible
     assert missing / (len(t) + missing) == pytest.approx(0.1, abs=0.03)
+    assert len(quality) >= 5 and np.mean(quality) == pytest.approx(90.0, abs=4.0)
 
 
 def test_latency_fault_delays_replies_in_simulation_time(sim_uri):
