@@ -497,6 +497,9 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     """
     plan = plan if isinstance(plan, Plan) else load_plan(plan)
     schedule = plan.compile()
+    if limits is None:  # the plan's [safety] max_rate_deg_s, else the default
+        rate = schedule.safety.max_rate_deg_s
+        limits = RateLimits() if rate is None else RateLimits(max_rate_deg_s=rate)
     recorder = Recorder(session_path(out=out, plan_name=plan.name))
     runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
                      listeners=listeners, limits=limits or RateLimits(),

@@ -327,13 +327,17 @@ def _check_thrust(
 
 
 def _read_safety(t: TomlTable, v: VehicleLimits, rate: float) -> Safety:
-    t.allow({"on_abort", "descent_duration", "descent_thrust"})
+    t.allow({"on_abort", "descent_duration", "descent_thrust", "max_rate_deg_s"})
+    max_rate = t.get("max_rate_deg_s", float, default=None, unit="deg/s")
+    if max_rate is not None:
+        max_rate = t.number("max_rate_deg_s", lo=10.0, hi=5000.0, unit="deg/s")
     if t.choice("on_abort", ("descend", "stop"), default="stop") == "stop":
-        return Safety()
+        return Safety(max_rate_deg_s=max_rate)
     ticks = t.ticks("descent_duration", rate_hz=rate, hi=10.0)
     thrust = t.pwm("descent_thrust")
     _check_thrust(t.src, ("safety", "descent_thrust"), thrust, v)
-    return Safety(on_abort="descend", descent_duration=ticks / rate, descent_thrust=thrust)
+    return Safety(on_abort="descend", descent_duration=ticks / rate, descent_thrust=thrust,
+                  max_rate_deg_s=max_rate)
 
 
 def _read_altitude_hold(t: TomlTable, v: VehicleLimits, hover: int) -> AltitudeHoldConfig:

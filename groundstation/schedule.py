@@ -51,6 +51,7 @@ class Safety:
     on_abort: str = "stop"
     descent_duration: float = 0.0  # s
     descent_thrust: int = 0  # PWM
+    max_rate_deg_s: float | None = None  # abort beyond this |gyro| (None: the runner's default)
 
 
 @dataclass(frozen=True)

@@ -104,12 +104,13 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
               show_default=True, help="Folder for the session file.")
 @click.option("--view", type=click.Choice(["none", "rerun", "serve"]), default="none",
               show_default=True, help="Live view: Rerun viewer, web viewer, or none.")
-@click.option("--max-rate", type=click.FloatRange(min=1.0), default=RateLimits.max_rate_deg_s,
-              show_default=True, help="Abort when a gyro axis exceeds this, deg/s.")
+@click.option("--max-rate", type=click.FloatRange(min=1.0), default=None,
+              help="Abort when a gyro axis exceeds this, deg/s [default: the plan's "
+                   "safety.max_rate_deg_s, else 1000].")
 @click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.5), default=10.0,
               show_default=True, help="Seconds to wait for the connection.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def command(plan: str, uri: str, out: Path, view: str, max_rate: float, timeout_s: float,
+def command(plan: str, uri: str, out: Path, view: str, max_rate: float | None, timeout_s: float,
             as_json: bool) -> None:
     """Fly a flight plan and record it to a session file.
 
@@ -129,7 +130,8 @@ def command(plan: str, uri: str, out: Path, view: str, max_rate: float, timeout_
     if sys.stdout.isatty() and not as_json:
         listeners.append(ProgressListener(duration_s=loaded.duration))
     result = fly_plan(plan=loaded, out=out, uri=uri, listeners=listeners,
-                      limits=RateLimits(max_rate_deg_s=max_rate), connect_timeout_s=timeout_s)
+                      limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
+                      connect_timeout_s=timeout_s)
     if as_json:
         click.echo(json.dumps(result.summary, indent=2))
     else:

@@ -117,18 +117,22 @@ def test_stop_policy_stops_at_once(sim_uri, tmp_path):
     assert np.diff(sp["host_time"][-2:])[0] <= 0.2  # the stop follows within a period
 
 
-def test_rate_limit_violation_aborts(sim_uri, tmp_path):
-    # Open-loop thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
+@pytest.mark.parametrize("where", ["plan", "api"])
+def test_rate_limit_violation_aborts(where, sim_uri, tmp_path):
+    # Thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
     # a vehicle resting on the ground has no body rates.
-    plan = plan_variant("roll-only", **{"hover_thrust = 39000": "hover_thrust = 40500"})
+    edits = {"hover_thrust = 39000": "hover_thrust = 40500"}
+    if where == "plan":  # the plan's [safety] max_rate_deg_s
+        edits['[safety]\n'] = '[safety]\nmax_rate_deg_s = 10.0\n'
+    plan = plan_variant("roll-only", **edits)
     uri = sim_uri()
-    result = fly_plan(plan=plan, out=tmp_path, uri=uri,
-                      limits=RateLimits(max_rate_deg_s=5.0, samples=2))
-    assert result.cause.startswith("limit: gyro.")
+    limits = RateLimits(max_rate_deg_s=10.0, samples=2) if where == "api" else None
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, limits=limits)
+    assert result.cause.startswith("limit: gyro.") and "beyond 10 deg/s" in result.cause
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
     gyro = s["gyro"].values()
-    assert (np.abs(gyro) > 5.0).any(axis=1).sum() >= 2  # the file shows the violation
+    assert (np.abs(gyro) > 10.0).any(axis=1).sum() >= 2  # the file shows the violation
     assert 0 <= s["setpoints"].data["tick"].max() < len(plan.compile()) - 1  # cut short
     _check_descent(s, thrust_ceiling=34000, n=20)
 

@@ -77,3 +77,12 @@ def test_bad_altitude_hold_tables_are_refused_with_their_line(table, message):
     assert message in str(info.value) and "\n" not in str(info.value)
     if "kinds" in table or "gain" in table:
         assert f"p.toml:{line}:" in str(info.value)
+
+
+def test_safety_max_rate_is_read_and_bounded():
+    text = load_plan("roll-only").text
+    plan = parse_plan(text=text.replace("[safety]\n", "[safety]\nmax_rate_deg_s = 400\n", 1))
+    assert plan.compile().safety.max_rate_deg_s == 400.0
+    assert load_plan("roll-only").compile().safety.max_rate_deg_s is None  # runner default
+    with pytest.raises(PlanError, match="max_rate_deg_s"):
+        parse_plan(text=text.replace("[safety]\n", "[safety]\nmax_rate_deg_s = 1\n", 1))
