@@ -59,3 +59,20 @@ def test_shipped_plan_flies_and_records(name, sim_uri, tmp_path):
     assert s.meta["plan_name"] == plan.name and s.meta["uri"] == uri
     assert "simulated" in s.meta["firmware"] and int(s.meta["protocol_version"]) == 12
     assert s.json_meta("summary")["blocks"]["gyro"]["received"] == len(s["gyro"])
+
+
+def test_console_text_is_recorded_as_events(sim_uri, tmp_path):
+    """The firmware's console lines reach the file (source "console"), whole and in order."""
+    import groundstation.sim as gsim
+    from groundstation.session import open_session
+
+    uri = sim_uri()
+
+    def raise_low_voltage(k: int) -> None:  # pm.lowVoltage above the battery: once the motors
+        if k == 0:  # stop after landing, the firmware warns on its console
+            gsim.instance(uri).vehicle.write_param("pm.lowVoltage", 4.2)
+
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, tick_hook=raise_low_voltage)
+    console = [e for e in open_session(result.path).events() if e.source == "console"]
+    assert [e.text for e in console if e.text.startswith("PM: Battery low (")], console
+    assert all(not e.text.endswith("\n") for e in console)
