@@ -1,7 +1,7 @@
 """A simulated Crazyflie 2.1 that speaks real CRTP.
 
 In process, through cflib: call :func:`install` once, then open ``sim://0?speed=20`` like any
-other URI (options in :mod:`groundstation.sim.driver`); :func:`instance` reaches the simulation
+other URI (options in :mod:`groundstation.sim.simulator`); :func:`instance` reaches the simulation
 behind a URI (its ``.vehicle``, fault methods and clock). Over UDP: :class:`UdpServer` (the
 ``groundstation sim`` command) serves the cflib >= 0.1.32 UDP protocol on ``udp://127.0.0.1:19850``.
 See ``docs/simulator.md``.
@@ -9,12 +9,11 @@ See ``docs/simulator.md``.
 
 from groundstation.sim.clock import SimClock
 from groundstation.sim.crtp import CrtpPeer
-from groundstation.sim.driver import (
+from groundstation.sim.driver import SimDriver, install
+from groundstation.sim.simulator import (
     Faults,
-    SimDriver,
     Simulator,
     close_all,
-    install,
     instance,
     parse_uri,
     simulator_for_uri,

@@ -11,7 +11,7 @@ stopped the clock carries on as the host clock scaled by ``speed``, so it stays 
 ``sleep_until`` never hangs.
 
 Pacing: a scheduler that sleeps on this clock also paces the simulation
-(:meth:`groundstation.sim.driver.Simulator.pace`): simulated time runs at most a few ms past the
+(:meth:`groundstation.sim.simulator.Simulator.pace`): simulated time runs at most a few ms past the
 time the scheduler asked to wake at, and waits (up to half a second of wall time) for it to sleep
 again. A host briefly too busy to wake the runner therefore freezes simulated time, as a faster
 host would, instead of delaying setpoints in simulated time.
@@ -83,7 +83,7 @@ class SimClock:
 
 
 def _clock_for(uri: str) -> Clock | None:
-    from groundstation.sim.driver import simulator_for_uri
+    from groundstation.sim.simulator import simulator_for_uri
 
     return simulator_for_uri(uri).clock
 

@@ -19,7 +19,7 @@ import threading
 
 from groundstation.errors import LinkError
 from groundstation.sim.crtp import LINK_TIMEOUT_MS
-from groundstation.sim.driver import Simulator
+from groundstation.sim.simulator import Simulator
 
 __all__ = ["MAX_DATAGRAM", "UdpServer"]
 

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from groundstation.clock import clock_for_uri
-from groundstation.sim.driver import _PACE_HOLD_S, _PACE_LEAD_MS
+from groundstation.sim.simulator import _PACE_HOLD_S, _PACE_LEAD_MS
 
 
 def test_busy_scheduler_freezes_simulated_time(sim_uri):

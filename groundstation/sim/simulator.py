@@ -1,0 +1,404 @@
+"""The simulation behind a ``sim://`` URI: a simulated Crazyflie on its own thread.
+
+URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every option optional):
+
+====================  ==========================================================================
+``N``                 which simulated vehicle (default 0); one simulation per ``N`` at a time
+``speed``             simulation seconds per wall-clock second (default 1; ``inf``: flat out)
+``seed``              the vehicle's random seed (default 0)
+``drop``              fraction of log data packets lost on the way down (default 0)
+``latency_ms``        delay, in simulation ms, added to every packet the link returns
+``cut_at``            simulation time, s, at which the link goes silent for good
+====================  ==========================================================================
+
+A :class:`Simulator` steps the vehicle from one thread at ``speed`` x real time, splitting its steps
+at the firmware ms where log packets are due, so every log packet carries the exact firmware time;
+a scheduler sleeping on its clock paces it (:meth:`Simulator.pace`). Faults act on what the link
+returns (log packets dropped, everything delayed); a cut link stops both directions and fires the
+link's error callback, the vehicle left to its supervisor watchdog. A lost link (``cut_at``)
+leaves the simulation running until the vehicle has been at rest for a second, as a real one
+would; :func:`instance` reaches it for inspection. The cflib side: :mod:`groundstation.sim.driver`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import parse_qsl, urlsplit
+
+from groundstation.errors import LinkError
+from groundstation.sim.clock import SimClock
+from groundstation.sim.crtp import CrtpPeer, Packet
+
+__all__ = ["Faults", "SimOptions", "Simulator", "close_all", "instance", "parse_uri",
+           "running_addresses", "simulator_for_uri"]
+
+logger = logging.getLogger(__name__)
+
+_WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
+_CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
+_CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
+_MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
+_PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
+_PACE_HOLD_S = 0.5  # ... and holds there at most this long (wall s) for the scheduler
+_REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
+_NEVER_ATTACHED_S = 10.0  # ... or this long if no link ever attached (created by its clock)
+
+
+@dataclass
+class Faults:
+    """Link faults: ``drop`` fraction of log packets, ``latency_ms`` added to every packet the
+    link returns (simulation ms), the link cut for good at ``cut_at`` simulation seconds."""
+
+    drop: float = 0.0
+    latency_ms: float = 0.0
+    cut_at: float | None = None
+
+
+@dataclass
+class SimOptions:
+    """A parsed ``sim://`` URI."""
+
+    address: str = "0"
+    speed: float = 1.0
+    seed: int = 0
+    faults: Faults | None = None
+
+
+def _number(name: str, text: str, *, kind: type, low: float, high: float = math.inf) -> Any:
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not (low <= value <= high) or (kind is float and math.isnan(value)):
+        raise LinkError(f"sim:// option {name}={text!r} must be a number in [{low}, {high}]; "
+                        "e.g. sim://0?speed=20&seed=3")
+    return value
+
+
+def parse_uri(uri: str) -> SimOptions:
+    """The options of a ``sim://`` URI (:class:`LinkError` naming a bad option)."""
+    parts = urlsplit(uri)
+    if parts.scheme != "sim":
+        raise LinkError(f"{uri!r} is not a sim:// URI; use e.g. sim://0?speed=20")
+    opts, faults = SimOptions(address=(parts.netloc + parts.path).strip("/") or "0"), Faults()
+    for key, text in parse_qsl(parts.query, keep_blank_values=True):
+        if key == "speed":
+            opts.speed = _number(key, text, kind=float, low=1e-3)
+        elif key == "seed":
+            opts.seed = _number(key, text, kind=int, low=0, high=2**63)
+        elif key == "drop":
+            faults.drop = _number(key, text, kind=float, low=0.0, high=1.0)
+        elif key == "latency_ms":
+            faults.latency_ms = _number(key, text, kind=float, low=0.0, high=60_000.0)
+        elif key == "cut_at":
+            faults.cut_at = _number(key, text, kind=float, low=0.0)
+        else:
+            raise LinkError(f"unknown sim:// option {key!r}; "
+                            "use speed, seed, drop, latency_ms or cut_at")
+    opts.faults = faults
+    return opts
+
+
+class Simulator:
+    """One simulated Crazyflie: a vehicle, its :class:`CrtpPeer`, and the thread stepping them.
+
+    Packets come in through :meth:`submit` and go out through :meth:`receive` (the ``sim://``
+    driver) or, when ``sink`` is given, straight to ``sink(header, payload)`` from the simulation
+    thread (the UDP server). ``linger=False`` keeps it running until :meth:`close`. With
+    ``link_timeout_ms`` (simulation ms) silence on the link resets logging as the firmware does;
+    ``None`` (the ``sim://`` link, whose client pings on wall time) ties it to attach/detach/cut.
+    """
+
+    def __init__(self, *, address: str = "0", speed: float = 1.0, seed: int = 0,
+                 vehicle: Any = None, sink: Callable[[int, bytes], None] | None = None,
+                 linger: bool = True, link_timeout_ms: int | None = None) -> None:
+        if vehicle is None:
+            from groundstation.sim.vehicle import SimVehicle
+
+            vehicle = SimVehicle(seed=seed)
+        self.address, self.speed, self.vehicle = address, speed, vehicle
+        self.peer = CrtpPeer(vehicle=vehicle, link_timeout_ms=link_timeout_ms)
+        self.faults = Faults()
+        self.cond = threading.Condition()
+        self.clock = SimClock(source=self)
+        self.dropped_packets = 0  # log packets lost to the drop fault
+        self._rng = random.Random(seed * 7919 + 17)
+        self._sink, self._linger = sink, linger
+        self._rx: deque[tuple[int, int, bytes]] = deque()
+        self._out: deque[tuple[int, int, bytes]] = deque()  # (release ms, header, payload)
+        self._published_ms = vehicle.firmware_ms
+        self._published_s = vehicle.time_s
+        self._token = 0  # the link currently attached (0: none)
+        self._ever_attached = False
+        self._cut = False
+        self._on_lost: Callable[[str], None] | None = None
+        self._pace_ms: int | None = None  # paced: run no further than this (see pace())
+        self._pace_wall = 0.0
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"sim-{address}", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ clock source
+    @property
+    def published_s(self) -> float:
+        return self._published_s
+
+    @property
+    def running(self) -> bool:
+        return not self._stop.is_set()
+
+    def pace(self, *, until_s: float) -> None:
+        """A scheduler sleeps until ``until_s``: let the simulation run to it and then hold,
+        at most ``_PACE_LEAD_MS`` past it, until the scheduler sleeps again (or ``_PACE_HOLD_S``
+        of wall time passes). A host too busy to wake its scheduler on time thus freezes
+        simulation time instead of making setpoints late: at speed 20, 25 ms of GIL contention
+        would otherwise be a 500 ms setpoint gap, which makes the firmware re-lock the thrust.
+        """
+        ms = math.ceil(until_s * 1000.0) + _PACE_LEAD_MS
+        with self.cond:
+            if self._pace_ms is None or ms > self._pace_ms:
+                self._pace_ms = ms
+            self._pace_wall = time.monotonic()
+        self._wake.set()
+
+    def _paced_target(self, target: int) -> int:
+        """``target`` capped at the pace limit while a scheduler holds the simulation."""
+        with self.cond:
+            limit, since = self._pace_ms, self._pace_wall
+        if limit is None or time.monotonic() - since > _PACE_HOLD_S:
+            return target
+        return min(target, max(limit, self.vehicle.firmware_ms))
+
+    # ------------------------------------------------------------------ faults API
+    def set_faults(self, *, drop: float | None = None, latency_ms: float | None = None,
+                   cut_at: float | None = None) -> None:
+        """Change link faults while running (``None`` leaves a fault as it is)."""
+        with self.cond:
+            if drop is not None:
+                self.faults.drop = drop
+            if latency_ms is not None:
+                self.faults.latency_ms = latency_ms
+            if cut_at is not None:
+                self.faults.cut_at = cut_at
+
+    def cut_link(self) -> None:
+        """Cut the link now (at the current simulation time)."""
+        self.set_faults(cut_at=self._published_s)
+
+    # ------------------------------------------------------------------ link side
+    def attach(self, *, faults: Faults | None = None,
+               on_lost: Callable[[str], None] | None = None) -> int:
+        """Attach a new link (replacing any other); returns its token."""
+        with self.cond:
+            self._token += 1
+            self._ever_attached, self._cut, self._on_lost = True, False, on_lost
+            self.faults = faults or Faults()
+            self._out.clear()
+            return self._token
+
+    def detach(self, *, token: int) -> None:
+        """The link ``token`` is gone; nothing more goes out to it."""
+        with self.cond:
+            if token == self._token:
+                self._token, self._on_lost = 0, None
+                self._out.clear()
+                self._rx.append((-1, 0, b""))  # tells the simulation thread: link down
+                self.cond.notify_all()
+
+    def submit(self, *, header: int, data: bytes, token: int = 0) -> None:
+        """An incoming packet (from link ``token``; 0 for a transport without tokens)."""
+        self._rx.append((token, header, bytes(data)))
+        self._wake.set()
+
+    def receive(self, *, token: int, wait: float) -> Packet | None:
+        """The next released outgoing packet for link ``token`` (``wait`` as cflib's driver)."""
+        deadline = None if wait < 0 else time.monotonic() + wait
+        with self.cond:
+            while True:
+                if token != self._token or not self.running:
+                    return None
+                if self._out and self._out[0][0] <= self._published_ms:
+                    _, header, data = self._out.popleft()
+                    return header, data
+                remaining = 0.1 if deadline is None else deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self.cond.wait(min(remaining, 0.1))
+
+    def close(self) -> None:
+        """Power off: stop the simulation thread and wait for it."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=5)
+        with self.cond:
+            self.cond.notify_all()
+
+    # ------------------------------------------------------------------ simulation thread
+    def _emit(self, packets: list[Packet], *, log: bool = False) -> None:
+        if not packets or self._cut:
+            return
+        faults = self.faults
+        release = self.vehicle.firmware_ms + int(faults.latency_ms)
+        with self.cond:
+            for header, data in packets:
+                if log and faults.drop and self._rng.random() < faults.drop:
+                    self.dropped_packets += 1
+                    continue
+                self._out.append((release, header, data))
+
+    def _process_rx(self) -> None:
+        peer, rx = self.peer, self._rx
+        while rx:
+            token, header, data = rx.popleft()
+            if token == -1:
+                peer.link_down()
+                continue
+            if self._cut or (token and token != self._token):
+                continue
+            self._emit(peer.handle(header=header, data=data))
+
+    def _check_cut(self) -> None:
+        cut_at = self.faults.cut_at
+        if self._cut or cut_at is None or self.vehicle.time_s < cut_at:
+            return
+        with self.cond:
+            self._cut, on_lost = True, self._on_lost
+            self._out.clear()
+        self.peer.link_down()
+        logger.info("sim-%s: link cut at %.3f s", self.address, self.vehicle.time_s)
+        if on_lost is not None:  # off this thread: cflib's handlers may block or close the link
+            threading.Thread(target=on_lost, args=("simulated radio link lost (cut_at)",),
+                             name=f"sim-{self.address}-lost", daemon=True).start()
+
+    def _advance_to(self, target_ms: int) -> None:
+        v, peer = self.vehicle, self.peer
+        while v.firmware_ms < target_ms and not self._stop.is_set():
+            now = v.firmware_ms
+            step_to = min(target_ms, now + _CHUNK_MS)
+            due = peer.next_due_ms()
+            if due is not None and now < due < step_to:
+                step_to = due
+            v.advance((step_to - now) / 1000.0)
+            self._emit(peer.due_log_packets(), log=True)
+            self._check_cut()
+            if self._rx:
+                self._process_rx()
+
+    def _flush_sink(self) -> None:
+        out, sink = self._out, self._sink
+        while out and out[0][0] <= self._published_ms:
+            with self.cond:
+                _, header, data = out.popleft()
+            sink(header, data)
+
+    def _sleep_s(self, base_wall: float, base_ms: int) -> float:
+        """Wall seconds until the next log packet is due, within [0.5 ms, the clock's
+        resolution]: 10 ms of wall time, or 40 ms of simulation time at high speed."""
+        longest = min(_WAKE_S, _CLOCK_RESOLUTION_MS / 1000.0 / self.speed)
+        due = self.peer.next_due_ms()
+        if due is None:
+            return longest
+        until = base_wall + (due - base_ms) / (1000.0 * self.speed) - time.perf_counter()
+        return min(longest, max(until, 0.0005))
+
+    def _should_power_off(self, rest_since: float | None) -> bool:
+        if not self._linger or self._token:
+            return False
+        limit = _REST_S if self._ever_attached else _NEVER_ATTACHED_S
+        return rest_since is not None and time.monotonic() - rest_since > limit
+
+    def _run(self) -> None:
+        v = self.vehicle
+        base_wall, base_ms = time.perf_counter(), v.firmware_ms
+        rest_since: float | None = time.monotonic()
+        failed = False
+        while not self._stop.is_set():
+            self._process_rx()
+            if math.isinf(self.speed):
+                target = v.firmware_ms + _CHUNK_MS
+            else:
+                target = base_ms + int((time.perf_counter() - base_wall) * self.speed * 1000.0)
+                if target - v.firmware_ms > _MAX_LAG_MS:  # host too slow: let time slip
+                    base_ms -= target - v.firmware_ms - _MAX_LAG_MS
+                    target = v.firmware_ms + _MAX_LAG_MS
+                paced = self._paced_target(target)
+                if paced < target:  # held for the scheduler: time resumes from here later
+                    base_ms -= target - paced
+                    target = paced
+            try:
+                self._advance_to(target)
+            except Exception:
+                if not failed:
+                    logger.exception("sim-%s: vehicle step failed", self.address)
+                failed = True
+            self._emit(self.peer.console_packets())
+            with self.cond:
+                self._published_ms, self._published_s = v.firmware_ms, v.time_s
+                self.cond.notify_all()
+            if self._sink is not None:
+                self._flush_sink()
+            at_rest = not v.is_flying and not any(v.motors_pwm)
+            if not at_rest or self._token:
+                rest_since = None
+            elif rest_since is None:
+                rest_since = time.monotonic()
+            if self._should_power_off(rest_since):
+                logger.info("sim-%s: no link and at rest: powered off", self.address)
+                self._stop.set()
+                break
+            if not math.isinf(self.speed):
+                self._wake.wait(self._sleep_s(base_wall, base_ms))
+                self._wake.clear()
+        with self.cond:
+            self.cond.notify_all()
+
+
+# ---------------------------------------------------------------------- registry
+_registry: dict[str, Simulator] = {}
+_registry_lock = threading.Lock()
+
+
+def simulator_for_uri(uri: str) -> Simulator:
+    """The running simulation behind ``uri``, powered on (from the URI's options) if there is
+    none."""
+    opts = parse_uri(uri)
+    with _registry_lock:
+        sim = _registry.get(opts.address)
+        if sim is None or not sim.running:
+            sim = Simulator(address=opts.address, speed=opts.speed, seed=opts.seed)
+            _registry[opts.address] = sim
+        return sim
+
+
+def instance(uri: str) -> Simulator:
+    """The simulation behind ``uri`` (running, or the last one, powered off, for inspection)."""
+    address = parse_uri(uri).address
+    with _registry_lock:
+        sim = _registry.get(address)
+    if sim is None:
+        raise LinkError(f"no simulation for {uri!r}; connect to it (or get its clock) first")
+    return sim
+
+
+def running_addresses() -> list[str]:
+    """Addresses ``N`` of the simulations running now (what a ``sim://`` scan finds)."""
+    with _registry_lock:
+        return [a for a, s in _registry.items() if s.running]
+
+
+def close_all() -> None:
+    """Power off every simulation (tests call this in teardown)."""
+    with _registry_lock:
+        sims = list(_registry.values())
+    for sim in sims:
+        sim.close()
