@@ -29,16 +29,13 @@ so there is never more than one period without a setpoint. A listener that raise
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import queue
-import signal
 import threading
 import time
 from collections import defaultdict
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -47,6 +44,7 @@ import numpy as np
 from groundstation.altitude import AltitudeHold
 from groundstation.clock import clock_for_uri
 from groundstation.errors import FlightAborted
+from groundstation.flight_result import FlightResult, RateLimits, block_summary
 from groundstation.link import (
     ATTITUDE_BLOCK,
     BATTERY_BLOCK,
@@ -57,6 +55,7 @@ from groundstation.link import (
     open_link,
 )
 from groundstation.plans import Plan, Schedule, load_plan
+from groundstation.realtime import prompt_thread_switches, signal_handlers
 from groundstation.recorder import Recorder, session_path
 from groundstation.session import event_rows, standard_streams
 from groundstation.session_schema import StreamSpec
@@ -65,7 +64,6 @@ __all__ = ["FlightListener", "FlightResult", "RateLimits", "block_summary", "fly
 
 log = logging.getLogger(__name__)
 
-_FW_WRAP = 1 << 24  # log packets carry 24-bit firmware milliseconds
 ALTITUDE_BLOCK = "altitude"
 """Log block of the plan's ``[altitude_hold]`` variable (only when the plan has one)."""
 
@@ -80,50 +78,6 @@ class FlightListener(Protocol):
         ...
 
     def end(self, *, summary: Mapping[str, Any]) -> None: ...
-
-
-@dataclass(frozen=True)
-class RateLimits:
-    """Abort when ``|gyro|`` on any axis exceeds ``max_rate_deg_s`` (deg/s) for ``samples``
-    consecutive log packets (20 ms each) while flying. 1000 deg/s is about three times the
-    largest rate a ±25° PRBS step produces: a tumbling or crashed vehicle."""
-
-    max_rate_deg_s: float = 1000.0
-    samples: int = 3
-
-
-@dataclass(frozen=True)
-class FlightResult:
-    """What :func:`fly_plan` returns: ``cause`` is ``""`` for a flight that ran to the end."""
-
-    path: Path
-    summary: dict[str, Any] = field(default_factory=dict)
-    cause: str = ""
-
-    @property
-    def aborted(self) -> bool:
-        return bool(self.cause)
-
-    def raise_if_aborted(self) -> None:
-        """One-line :class:`FlightAborted` naming the cause and the file."""
-        if self.cause:
-            raise FlightAborted(f"flight aborted: {self.cause}; session saved to {self.path}")
-
-
-def block_summary(*, fw_ms: Sequence[int], period_s: float) -> dict[str, Any]:
-    """Packets of one log block: received, expected from the firmware-time span
-    :math:`\\lfloor (t_{last} - t_{first}) / T \\rceil + 1`, dropped from timestamp gaps
-    (steps beyond 1.5 periods count :math:`\\mathrm{round}(\\Delta t / T) - 1`)."""
-    ms = np.asarray(fw_ms, dtype=np.int64)
-    if len(ms) < 2:
-        return {"received": len(ms), "expected": len(ms), "dropped": 0}
-    dt = np.diff(ms) % _FW_WRAP / 1000.0  # unwraps the 24-bit counter
-    gaps = dt[dt > 1.5 * period_s]
-    return {
-        "received": len(ms),
-        "expected": round(dt.sum() / period_s) + 1,
-        "dropped": int(np.sum(np.round(gaps / period_s) - 1)),
-    }
 
 
 class _Runner:
@@ -453,37 +407,6 @@ class _Runner:
         }
 
 
-@contextlib.contextmanager
-def _prompt_thread_switches(interval_s: float = 0.0005) -> Iterator[None]:
-    """While flying, hand the GIL over every 0.5 ms instead of CPython's 5 ms, so the runner's
-    thread wakes on its deadline even while cflib's threads run Python code (restored after)."""
-    import sys
-
-    previous = sys.getswitchinterval()
-    sys.setswitchinterval(min(previous, interval_s))
-    try:
-        yield
-    finally:
-        sys.setswitchinterval(previous)
-
-
-@contextlib.contextmanager
-def _signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
-    """SIGINT and SIGTERM request an abort while flying (main thread only); restored after."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous[sig] = signal.signal(sig, lambda n, _f: abort(f"{signal.Signals(n).name} "
-                                                               "received"))
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-
 def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI,
              listeners: Sequence[FlightListener] = (), limits: RateLimits | None = None,
              connect_timeout_s: float = 10.0,
@@ -504,5 +427,5 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
                      listeners=listeners, limits=limits or RateLimits(),
                      connect_timeout_s=connect_timeout_s, tick_hook=tick_hook)
-    with _signal_handlers(runner.request_abort), _prompt_thread_switches():
+    with signal_handlers(runner.request_abort), prompt_thread_switches():
         return runner.run()

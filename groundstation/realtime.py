@@ -1,0 +1,43 @@
+"""Process-level settings for the time a flight runs: signal handlers and prompt thread switches.
+
+Both are installed by :func:`groundstation.flight.fly_plan` for the flight only and restored after.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+
+__all__ = ["prompt_thread_switches", "signal_handlers"]
+
+
+@contextlib.contextmanager
+def prompt_thread_switches(interval_s: float = 0.0005) -> Iterator[None]:
+    """While flying, hand the GIL over every 0.5 ms instead of CPython's 5 ms, so the runner's
+    thread wakes on its deadline even while cflib's threads run Python code (restored after)."""
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(min(previous, interval_s))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(previous)
+
+
+@contextlib.contextmanager
+def signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
+    """SIGINT and SIGTERM request an abort while flying (main thread only); restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, lambda n, _f: abort(f"{signal.Signals(n).name} "
+                                                               "received"))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
