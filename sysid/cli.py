@@ -8,11 +8,9 @@ and progress are for people (progress goes to stderr).
 
 from __future__ import annotations
 
-import importlib
 import json
 import logging
-import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -22,15 +20,27 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 from rich.table import Table
 
-from sysid.data import IOData
-from sysid.errors import MissingDependencyError, ParameterError, SysIdError
+from sysid.cli_support import (
+    JSON_OPTION,
+    RRD_OPTION,
+    Group,
+    console,
+    fit_table,
+    fits_json,
+    load_flights,
+    parse_range,
+    parse_window,
+    pole_table,
+    session_options,
+    write_rrd,
+)
+from sysid.errors import ParameterError, SysIdError
 from sysid.iem import iem
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
 from sysid.order import singular_values
-from sysid.session_io import SessionFileError, Window, load_sessions
 from sysid.sweep import sweep as run_sweep
-from sysid.validate import CompareResult, compare
+from sysid.validate import compare
 
 __all__ = ["main", "parse_range", "parse_window", "pole_table"]
 
@@ -39,147 +49,10 @@ log = logging.getLogger(__name__)
 _METHODS: dict[str, Callable[..., StateSpaceModel]] = {"iem": iem, "po-moesp": po_moesp}
 
 
-class _Group(click.Group):
-    """A click group whose user errors print one line and exit 2, never a traceback."""
-
-    def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except (SysIdError, SessionFileError) as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-            msg = f"{exc.strerror}: {exc.filename}"
-        except np.linalg.LinAlgError as exc:
-            msg = f"numerical failure ({exc}); try another order or horizons"
-        click.echo(f"error: {msg}", err=True)
-        sys.exit(2)
-
-
-# ------------------------------------------------------------------------------- parsing
-def parse_window(text: str) -> Window:
-    """``all`` -> None, ``T0:T1`` -> host-time seconds, anything else a phase name or kind."""
-    if text.lower() in ("all", "none", ""):
-        return None
-    if ":" in text:
-        try:
-            t0, t1 = (float(x) for x in text.split(":"))
-        except ValueError:
-            raise ParameterError(f"--window {text!r}: use a phase name, T0:T1 seconds or all")\
-                from None
-        return (t0, t1)
-    return text
-
-
-def parse_range(*, text: str, option: str) -> list[int]:
-    """``20:80:10`` -> 20, 30, ..., 80 (stop included); ``6,8`` -> 6, 8; ``8`` -> 8."""
-    try:
-        if ":" in text:
-            parts = [int(x) for x in text.split(":")]
-            start, stop, step = [*parts, 1][:3] if len(parts) == 2 else parts
-            if step < 1 or stop < start or len(parts) > 3:
-                raise ValueError
-            return list(range(start, stop + 1, step))
-        values = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise ParameterError(f"{option} {text!r}: use START:STOP:STEP, a,b,c or one integer")\
-            from None
-    if not values or min(values) < 1:
-        raise ParameterError(f"{option} {text!r}: give positive integers")
-    return values
-
-
-def _names(text: str) -> list[str]:
-    return [x.strip() for x in text.split(",") if x.strip()]
-
-
-def _session_options(func: Callable) -> Callable:
-    """Options shared by every command that reads sessions."""
-    opts = [
-        click.option("--inputs", default="motors", show_default=True, help=(
-                     "Input channels: STREAM, STREAM.FIELD or group.variable, comma-separated.")),
-        click.option("--outputs", default="acc,gyro", show_default=True,
-                     help="Output channels, as --inputs."),
-        click.option("--window", default="excitation", show_default=True,
-                     help="Phase name or kind, T0:T1 (session seconds), or 'all'."),
-        click.option("--dt", default=0.02, show_default=True, type=click.FloatRange(min=1e-4),
-                     help="Grid period in seconds (zero-order hold)."),
-        click.option("--detrend", default="mean", show_default=True,
-                     type=click.Choice(["mean", "linear", "none"])),
-    ]
-    for opt in reversed(opts):
-        func = opt(func)
-    return func
-
-
-def _load(paths: Sequence[Path], *, opts: dict[str, Any], inputs: Sequence[str] | None = None,
-          outputs: Sequence[str] | None = None) -> list[IOData]:
-    return load_sessions(
-        list(paths), inputs=inputs or _names(opts["inputs"]),
-        outputs=outputs or _names(opts["outputs"]), window=parse_window(opts["window"]),
-        dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
-
-
-# ------------------------------------------------------------------------------- output
-def pole_table(model: StateSpaceModel) -> list[dict[str, float]]:
-    """Poles with modulus, frequency (Hz) and damping ratio of the equivalent s-plane pole.
-
-    :math:`s = \\ln z / \\Delta t`, :math:`f = |\\operatorname{Im} s| / 2\\pi`,
-    :math:`\\zeta = -\\operatorname{Re} s / |s|`.
-    """
-    rows = []
-    for z in sorted(model.poles(), key=lambda p: (-abs(p), p.imag)):
-        s = np.log(complex(z)) / model.dt if z != 0 else complex(-np.inf)
-        rows.append({"re": float(z.real), "im": float(z.imag), "abs": float(abs(z)),
-                     "freq_hz": float(abs(s.imag) / (2 * np.pi)) if np.isfinite(s.real) else 0.0,
-                     "damping": float(-s.real / abs(s)) if np.isfinite(s.real) and s else 1.0})
-    return rows
-
-
-def _console() -> Console:
-    return Console(highlight=False, width=max(Console().width, 100))
-
-
 _IDENTIFY_WINDOW_S = 2.0
 
 
-def _fit_table(*, title: str, names: Sequence[str], rows: list[tuple[str, np.ndarray]]) -> Table:
-    table = Table("", *names, title=title)
-    for label, fit in rows:
-        table.add_row(label, *[f"{f:.1f}" if np.isfinite(f) and abs(f) < 1e4 else "diverged"
-                               for f in fit])
-    return table
-
-
-def _fits_json(res: CompareResult) -> dict[str, float | None]:
-    return {n: (float(f) if np.isfinite(f) else None)
-            for n, f in zip(res.output_names, res.fit, strict=True)}
-
-
-def _write_rrd(*, path: Path, name: str, model: StateSpaceModel,
-               comparisons: Sequence[CompareResult] = (), sweep: Any = None) -> None:
-    """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
-    :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing."""
-    try:
-        viz = importlib.import_module("sysid.viz")
-    except ImportError as exc:
-        raise MissingDependencyError(f"--rrd needs sysid.viz, which cannot be imported ({exc});"
-                                     " drop --rrd") from None
-    rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
-    try:
-        viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
-                               sweep=sweep)
-    finally:
-        rec.disconnect()
-    log.info("wrote %s", path)
-
-
-_RRD = click.option("--rrd", type=click.Path(dir_okay=False, path_type=Path),
-                    help="Also write the results to this Rerun recording (.rrd).")
-_JSON = click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-
-
-# ------------------------------------------------------------------------------- commands
-@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="cf-sysid", prog_name="sysid")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
@@ -202,11 +75,11 @@ def main(verbose: int) -> None:
 @click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
 @click.option("--feedthrough/--no-feedthrough", default=None,
               help="Estimate D (default: no for iem, yes for po-moesp).")
-@_session_options
+@session_options
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Save the model (.h5, .json or .mat).")
-@_JSON
-@_RRD
+@JSON_OPTION
+@RRD_OPTION
 def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, future: int,
              feedthrough: bool | None, out: Path | None, as_json: bool, rrd: Path | None,
              **opts: Any) -> None:
@@ -223,7 +96,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
         --inputs controller.cmd_roll,controller.cmd_pitch,controller.cmd_yaw \\
         --outputs controller.r_roll,controller.r_pitch,controller.r_yaw
     """
-    flights = _load(sessions, opts=opts)
+    flights = load_flights(sessions, opts=opts)
     kwargs = {} if feedthrough is None else {"feedthrough": feedthrough}
     with Console(stderr=True).status(f"identifying ({method}, n={order})"):
         model = _METHODS[method](flights, order=order, past=past, future=future, **kwargs)
@@ -235,7 +108,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
     if out is not None:
         model.save(out)
     if rrd is not None:
-        _write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
+        write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
                    comparisons=[sim, pred])
     poles = pole_table(model)
     if as_json:
@@ -244,11 +117,11 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
             "past": past, "future": future, "n_samples": [d.n_samples for d in flights],
             "dt_s": model.dt, "poles": poles, "stable": model.is_stable,
             "predictor_stable": model.predictor_is_stable,
-            "fit_percent": {"simulation": _fits_json(sim), "1-step": _fits_json(pred)},
+            "fit_percent": {"simulation": fits_json(sim), "1-step": fits_json(pred)},
             "simulation_window_s": window_s,
             "model": str(out) if out else None}, indent=1))
         return
-    con = _console()
+    con = console()
     table = Table("pole", "re", "im", "|z|", "f [Hz]", "damping", title=f"{method} order {order}")
     for i, p in enumerate(poles):
         table.add_row(str(i), f"{p['re']:.4f}", f"{p['im']:.4f}", f"{p['abs']:.4f}",
@@ -256,7 +129,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
     con.print(table)
     con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
               f"predictor A - KC stable: {model.predictor_is_stable}")
-    con.print(_fit_table(title="fit on the identification data [%]", names=model.output_names,
+    con.print(fit_table(title="fit on the identification data [%]", names=model.output_names,
                          rows=[(f"simulation, {window_s:g} s windows", sim.fit),
                                ("1-step prediction", pred.fit)]))
     if out is not None:
@@ -273,8 +146,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
               help="Phase name or kind, T0:T1 (session seconds), or 'all'.")
 @click.option("--detrend", default="mean", show_default=True,
               type=click.Choice(["mean", "linear", "none"]))
-@_JSON
-@_RRD
+@JSON_OPTION
+@RRD_OPTION
 def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | None,
                 window_s: float | None, as_json: bool, rrd: Path | None, **opts: Any) -> None:
     """Fit of a model on sessions: per channel and per session, in percent (NRMSE).
@@ -287,7 +160,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
       sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
     """
     model = load_model(model_path)
-    flights = _load(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
+    flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                     outputs=model.output_names)
     modes: list[tuple[str, dict[str, Any]]] = []
     if window_s is not None:
@@ -297,11 +170,11 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     modes = modes or [("simulation", {})]
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
     if rrd is not None:
-        _write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
+        write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
                    comparisons=[r for _, r in results])
     if as_json:
         click.echo(json.dumps({"model": str(model_path), "modes": [{
-            "mode": label, "overall": _fits_json(res), "sessions": [
+            "mode": label, "overall": fits_json(res), "sessions": [
                 {"path": str(p), "fit_percent": dict(zip(res.output_names,
                                                          [float(f) for f in fits], strict=True))}
                 for p, fits in zip(sessions, res.fits, strict=True)]}
@@ -309,10 +182,10 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
             "stable": model.is_stable, "predictor_stable": model.predictor_is_stable},
             indent=1))
         return
-    con = _console()
+    con = console()
     for label, res in results:
         rows = [(p.name, f) for p, f in zip(sessions, res.fits, strict=True)]
-        con.print(_fit_table(title=f"{label}: fit [%]", names=res.output_names,
+        con.print(fit_table(title=f"{label}: fit [%]", names=res.output_names,
                              rows=[*rows, ("all", res.fit)] if len(rows) > 1 else rows))
     if not model.predictor_is_stable:
         con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
@@ -325,8 +198,8 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
 @click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
 @click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
               help="How many singular values to list.")
-@_session_options
-@_JSON
+@session_options
+@JSON_OPTION
 def order(session: Path, method: str, past: int, future: int, show: int, as_json: bool,
           **opts: Any) -> None:
     """Singular values of the order-selection SVD and a suggested order (largest gap).
@@ -337,7 +210,7 @@ def order(session: Path, method: str, past: int, future: int, show: int, as_json
     Example:
       sysid order flight.h5 --past 60 --future 17
     """
-    flights = _load([session], opts=opts)
+    flights = load_flights([session], opts=opts)
     sv = singular_values(flights, past=past, future=future, method=method)
     head = sv[: min(show, sv.size)]
     with np.errstate(divide="ignore"):
@@ -347,7 +220,7 @@ def order(session: Path, method: str, past: int, future: int, show: int, as_json
         click.echo(json.dumps({"session": str(session), "singular_values": sv.tolist(),
                                "suggested_order": suggested}, indent=1))
         return
-    con = _console()
+    con = console()
     table = Table("n", "singular value", "log10 gap to next", title=f"{method} p={past} f={future}")
     for i, s in enumerate(head):
         gap = f"{gaps[i]:.2f}" if i < gaps.size else ""
@@ -369,9 +242,9 @@ def order(session: Path, method: str, past: int, future: int, show: int, as_json
 @click.option("--window-s", type=click.FloatRange(min=0, min_open=True),
               help="Score by simulation over windows of this many seconds.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1))
-@_session_options
-@_JSON
-@_RRD
+@session_options
+@JSON_OPTION
+@RRD_OPTION
 def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str, workers: int,
               validate: tuple[Path, ...], horizon: int | None, window_s: float | None, top: int,
               as_json: bool, rrd: Path | None, **opts: Any) -> None:
@@ -385,8 +258,8 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
     grid = {"pasts": parse_range(text=pasts, option="--pasts"),
             "futures": parse_range(text=futures, option="--futures"),
             "orders": parse_range(text=orders, option="--orders")}
-    flights = _load([session], opts=opts)
-    val = _load(list(validate), opts=opts) if validate else None
+    flights = load_flights([session], opts=opts)
+    val = load_flights(list(validate), opts=opts) if validate else None
     total = len(grid["pasts"]) * len(grid["futures"]) * len(grid["orders"])
     with Progress("sweep", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), disable=as_json) as bar:
@@ -402,14 +275,14 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
     except SysIdError:
         best = None
     if rrd is not None and best is not None and best.model is not None:
-        _write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
+        write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
     if as_json:
         click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
                                "n_failed": sum(r.error is not None for r in result.rows),
                                "best": best.to_record() if best else None,
                                "top": [r.to_record() for r in ok[:top]]}, indent=1))
         return
-    con = _console()
+    con = console()
     table = Table("past", "future", "order", "mean fit [%]", "max |pole|", "stable", "pred. stable",
                   title=f"best {min(top, len(ok))} of {len(result.rows)} models")
     for r in ok[:top]:
