@@ -19,6 +19,7 @@ __all__ = [
     "closed_loop",
     "open_loop",
     "pbsid_example1",
+    "pbsid_example1_closed_loop",
     "pole_error",
     "random_stable_system",
 ]
@@ -121,6 +122,22 @@ def closed_loop(system: StateSpaceModel, *, n_samples: int, rng: np.random.Gener
     u, y = _run(system, u_fn=lambda t, yt: r[t] - f @ yt, n_samples=n_samples, e=e, r=r)
     return Experiment(data=IOData(u=u, y=y, dt=system.dt), y_clean=system.simulate(u),
                       e=e, r=r, system=system)
+
+
+#: Noise scale of the toolbox's closed-loop experiment (``e = 0.7.*e`` before ``lsim(CL, [r e])``).
+PBSID_CLOSED_LOOP_NOISE_STD = 0.7
+
+
+def pbsid_example1_closed_loop(*, rng: np.random.Generator, n_samples: int = 4000) -> Experiment:
+    """The PBSID toolbox Example 1 closed-loop experiment, as the toolbox's script runs it.
+
+    ``u = r - 0.25 y`` (``F = diag(0.25, 0.25)``, no delay), ``r ~ N(0, I)`` and innovations
+    ``e ~ N(0, 0.7^2 I)``: the script draws ``e = randn(N, 2)`` for its open-loop experiment and
+    scales it by 0.7 for the closed-loop one. Unit-variance ``e`` gives pole errors about
+    1/0.7 times larger for every method.
+    """
+    return closed_loop(pbsid_example1(), n_samples=n_samples, rng=rng, gain=0.25,
+                       noise_std=PBSID_CLOSED_LOOP_NOISE_STD)
 
 
 def pole_error(true_poles: np.ndarray, est_poles: np.ndarray) -> float:

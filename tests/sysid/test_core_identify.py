@@ -10,6 +10,7 @@ from tests.sysid.systems import (
     closed_loop,
     open_loop,
     pbsid_example1,
+    pbsid_example1_closed_loop,
     pole_error,
     random_stable_system,
 )
@@ -74,12 +75,13 @@ def test_closed_loop_iem_consistent_po_moesp_biased() -> None:
 
 
 def test_pbsid_example1_monte_carlo() -> None:
-    """PBSID toolbox Example 1, u = r - 0.25 y, N=4000, n=4, p=f=10 (10 of the 20 runs)."""
+    """PBSID toolbox Example 1 as its script runs it: u = r - 0.25 y, e scaled by 0.7,
+    N=4000, n=4, p=f=10, 20 Monte Carlo runs: mean worst-pole error at or below 0.005."""
     system = pbsid_example1()
     rng = np.random.default_rng(0)
     e_iem, e_moesp = [], []
-    for _ in range(10):
-        ex = closed_loop(system, n_samples=4000, rng=rng, gain=0.25)
+    for _ in range(20):
+        ex = pbsid_example1_closed_loop(rng=rng)
         e_iem.append(pole_error(system.poles(),
                                 sysid.iem(ex.data, order=4, past=10, future=10).poles()))
         e_moesp.append(pole_error(system.poles(), sysid.po_moesp(
