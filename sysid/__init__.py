@@ -5,6 +5,7 @@
 >>> model = sysid.iem(data, order=8, past=60, future=17)          # doctest: +SKIP
 """
 
+from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import (
     DataError,
@@ -22,7 +23,7 @@ from sysid.moesp import po_moesp
 from sysid.order import singular_values
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
 from sysid.sweep import SweepResult, select_order, sweep
-from sysid.validate import CompareResult, compare, fit_percent, stable_predictor
+from sysid.validate import compare, fit_percent, stable_predictor
 
 __all__ = [
     "CompareResult",

@@ -20,11 +20,11 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import MissingDependencyError, ParameterError, SysIdError
 from sysid.model import StateSpaceModel
 from sysid.session_io import SessionFileError, Window, load_sessions
-from sysid.validate import CompareResult
 
 __all__ = [
     "JSON_OPTION",

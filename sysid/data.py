@@ -183,16 +183,29 @@ def check_excited(flights: Sequence[IOData], *, rel_tol: float = 1e-12) -> tuple
     """Per-channel standard deviation of inputs and outputs over all flights.
 
     Returns ``(u_std (m,), y_std (l,))`` in the channels' units; raises :class:`DataError`
-    naming the first constant channel (std <= ``rel_tol`` times its mean magnitude).
+    naming the first channel that is constant within every flight: its standard deviation in
+    the flight is at most ``rel_tol`` times the larger of its mean magnitude and the largest
+    standard deviation of any channel in that flight. The second reference catches what is left
+    of a constant channel after linear detrending (rounding noise around zero). A channel
+    constant within each flight makes its delayed copies in the data matrix identical, however
+    the constants differ between flights.
     """
+    ref = flights[0]
+    labels = [("input", c, ref.input_names[c]) for c in range(ref.n_inputs)] + [
+        ("output", c, ref.output_names[c]) for c in range(ref.n_outputs)]
+    constant = np.ones(len(labels), dtype=bool)
+    spread = np.zeros(len(labels))
+    for d in flights:
+        arr = np.hstack([d.u, d.y])
+        std = arr.std(axis=0)
+        floor = rel_tol * np.maximum(np.abs(arr).mean(axis=0), std.max())
+        constant &= std <= np.maximum(floor, 1e-300)
+        spread = np.maximum(spread, std)
+    for j in np.flatnonzero(constant)[:1]:
+        kind, c, name = labels[j]
+        where = "in every flight" if len(flights) > 1 else ""
+        raise DataError(f"{kind} channel {c} ({name!r}) is constant{' ' + where if where else ''}"
+                        f" (std {spread[j]:.3g}); drop it or excite it before identifying")
     u = np.vstack([d.u for d in flights])
     y = np.vstack([d.y for d in flights])
-    ref = flights[0]
-    for name, arr, labels in (("input", u, ref.input_names), ("output", y, ref.output_names)):
-        std = arr.std(axis=0)
-        scale = np.abs(arr).mean(axis=0)
-        for c in range(arr.shape[1]):
-            if std[c] <= rel_tol * max(scale[c], 1e-300):
-                raise DataError(f"{name} channel {c} ({labels[c]!r}) is constant; "
-                                "drop it or excite it before identifying")
     return u.std(axis=0), y.std(axis=0)

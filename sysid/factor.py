@@ -159,11 +159,17 @@ def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,
         need = min_samples(past=past, future=future, n_channels=m + ell,
                            n_flights=len(flights))
         have = min(d.n_samples for d in flights)
+        hint = (f" (u and y are (n_samples, n_channels): {m + ell} channels for {have} samples "
+                "looks transposed)" if have < m + ell else "")
         raise DataError(
             f"{have} samples{' per flight' if len(flights) > 1 else ''} are too few for "
             f"past={past}, future={future} with {m + ell} channels; need at least {need} "
-            "samples per flight (or shorter horizons)"
+            f"samples per flight (or shorter horizons){hint}"
         )
+    short = [i for i, d in enumerate(flights) if hankel_columns(d.n_samples, block_rows=blocks) < 1]
+    if short:
+        log.warning("flight(s) %s shorter than past + future = %d samples contribute nothing",
+                    short, blocks)
     u_std, y_std = check_excited(flights)
     _warn_if_offset(flights, u_std=u_std, y_std=y_std)
     u_scale = u_std if scale else np.ones(m)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.io
 
 from sysid.errors import ModelFileError
 
@@ -65,7 +66,7 @@ def load(path: Path) -> StateSpaceModel:
             return StateSpaceModel.from_dict(json.loads(path.read_text()))
         if suffix == ".mat":
             return StateSpaceModel.from_dict(_load_mat(path))
-    except (OSError, KeyError, json.JSONDecodeError) as exc:
+    except (OSError, KeyError, json.JSONDecodeError, scipy.io.matlab.MatReadError) as exc:
         raise ModelFileError(f"{str(path)!r} is not a readable sysid model ({exc}); "
                              "pass a file written by model.save") from exc
     raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")

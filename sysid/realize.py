@@ -81,14 +81,20 @@ class Signals:
 
 def check_order(*, order: int, past: int, future: int, n_inputs: int, n_outputs: int) -> None:
     """Raise :class:`OrderError` unless ``1 <= order <= min((f-1) l, p (m+l))``."""
-    limit = min((future - 1) * n_outputs, past * (n_inputs + n_outputs))
+    by_future = (future - 1) * n_outputs
+    by_past = past * (n_inputs + n_outputs)
+    limit = min(by_future, by_past)
     if isinstance(order, bool) or not isinstance(order, int | np.integer) or order < 1:
         raise OrderError(f"order={order!r}; pass a positive integer model order")
     if order > limit:
-        raise OrderError(
-            f"order={order} exceeds the rank available ({limit} with past={past}, "
-            f"future={future}, {n_outputs} outputs); lower the order or raise future"
-        )
+        if by_future <= by_past:
+            why = f"(future - 1) x {n_outputs} outputs = {by_future}"
+            fix = f"future >= {-(-order // n_outputs) + 1}"
+        else:
+            why = f"past x {n_inputs + n_outputs} channels = {by_past}"
+            fix = f"past >= {-(-order // (n_inputs + n_outputs))}"
+        raise OrderError(f"order={order} exceeds the rank available ({why} with past={past}, "
+                         f"future={future}); lower the order or use {fix}")
 
 
 def lstsq_coords(target: np.ndarray, regressors: np.ndarray) -> np.ndarray:

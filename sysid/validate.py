@@ -35,10 +35,10 @@ from __future__ import annotations
 import itertools
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from sysid.comparison import CompareResult
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, DimensionError, HorizonError
 from sysid.model import StateSpaceModel
@@ -195,8 +195,7 @@ def predict(
     A, B, C, D = _matrices(model)
     K = model.K
     n_samples, n = u.shape[0], A.shape[0]
-    if horizon < 1:
-        raise HorizonError(f"horizon = {horizon}; pass a positive number of steps (or None)")
+    _check_steps(horizon)
     ak = A - K @ C
     bu = u @ (B - K @ D).T + y @ K.T  # predictor input term, (N, n)
     forced = _run_states(A=ak, Bu=bu[None], x0=np.zeros((1, n)))[0]
@@ -221,6 +220,12 @@ def predict(
     return y_pred, x0v
 
 
+def _check_steps(horizon: object) -> None:
+    if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
+        raise HorizonError(f"horizon = {horizon!r}; pass a positive whole number of steps "
+                           "(or None for simulation)")
+
+
 def _as_state(x0: object, n: int) -> np.ndarray:
     arr = np.asarray(x0, dtype=float).reshape(-1)
     if arr.shape != (n,):
@@ -230,49 +235,6 @@ def _as_state(x0: object, n: int) -> np.ndarray:
 
 def _matrices(model: StateSpaceModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return model.A, model.B, model.C, model.D
-
-
-@dataclass(frozen=True)
-class CompareResult:
-    """Outcome of :func:`compare`.
-
-    ``fit`` (l,) percent over all experiments together; ``fits`` (E, l) per experiment;
-    ``y_model`` / ``y_measured`` one (N_e, l) array per experiment; ``x0`` one (W_e, n) array
-    of initial states per experiment (W_e windows); ``horizon`` steps (None: simulation);
-    ``window`` samples (None: whole record); stability flags of the model (eig A) and of its
-    predictor (eig A - KC); ``diverged`` when the model output is not finite.
-    """
-
-    fit: np.ndarray
-    fits: np.ndarray
-    y_model: tuple[np.ndarray, ...]
-    y_measured: tuple[np.ndarray, ...]
-    x0: tuple[np.ndarray, ...]
-    horizon: int | None
-    window: int | None
-    model_stable: bool
-    predictor_stable: bool
-    diverged: bool
-    output_names: tuple[str, ...]
-
-    @property
-    def mode(self) -> str:
-        """``"simulation"``, ``"windowed simulation"`` or ``"k-step prediction"``."""
-        if self.horizon is not None:
-            return f"{self.horizon}-step prediction"
-        return "simulation" if self.window is None else "windowed simulation"
-
-    def summary(self) -> str:
-        """One line per output channel: name and fit in percent, then the flags."""
-        lines = [f"{self.mode}:"]
-        lines += [f"  {n}: {f:7.2f} %" for n, f in zip(self.output_names, self.fit, strict=True)]
-        if not self.model_stable:
-            lines.append("  model is unstable (max |eig A| >= 1)")
-        if not self.predictor_stable:
-            lines.append("  predictor A - KC is unstable: use sysid.stable_predictor(model)")
-        if self.diverged:
-            lines.append("  model output diverged (non-finite)")
-        return "\n".join(lines)
 
 
 def compare(
@@ -305,7 +267,12 @@ def compare(
         raise DataError("a given x0 fits one experiment; pass one IOData or x0='estimate'")
     if horizon is not None and window is not None:
         raise HorizonError("window applies to simulation; pass either horizon or window")
+    if horizon is not None:
+        _check_steps(horizon)
     dt = flights[0].dt
+    if abs(dt - model.dt) > 1e-6 * model.dt:
+        raise DataError(f"data sampled at dt={dt} s but the model has dt={model.dt} s; "
+                        "resample the data to the model's rate (sysid.zoh_resample)")
     win = None
     if window is not None:
         win = round(window / dt)

@@ -42,10 +42,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from sysid.comparison import CompareResult
 from sysid.errors import ParameterError
 from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult
-from sysid.validate import CompareResult
 
 __all__ = [
     "MODES",

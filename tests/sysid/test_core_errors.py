@@ -49,7 +49,12 @@ def test_too_few_samples_states_the_minimum(data) -> None:
 def test_order_larger_than_available_rank(data, method) -> None:
     with pytest.raises(sysid.OrderError) as exc:
         method(data, order=20, past=10, future=8)
-    _one_line(exc, "order=20", "rank available (14", "lower the order")
+    _one_line(exc, "order=20", "rank available ((future - 1) x 2 outputs = 14",
+              "lower the order or use future >= 11")
+    # when the past sets the limit, the advice names the past
+    with pytest.raises(sysid.OrderError) as exc:
+        method(data, order=5, past=1, future=8)
+    _one_line(exc, "past x 4 channels = 4", "past >= 2")
 
 
 def test_order_must_be_positive(data) -> None:
@@ -65,6 +70,48 @@ def test_constant_channel(data) -> None:
         sysid.iem(sysid.IOData(u=u, y=data.y, dt=data.dt, input_names=["m1", "m2"]),
                   order=2, past=10, future=8)
     _one_line(exc, "input channel 1", "'m2'", "constant")
+
+
+def test_channel_constant_after_linear_detrend(data) -> None:
+    """What linear detrending leaves of a constant channel (rounding noise) is still constant."""
+    u = data.u.copy()
+    u[:, 0] = 3.0
+    flat, _ = sysid.detrend_data(sysid.IOData(u=u, y=data.y, dt=data.dt), kind="linear")
+    assert 0 < flat.u[:, 0].std() < 1e-12
+    for call in (lambda: sysid.iem(flat, order=2, past=10, future=8),
+                 lambda: sysid.po_moesp(flat, order=2, past=10, future=8),
+                 lambda: sysid.singular_values(flat, past=10, future=8)):
+        with pytest.raises(sysid.DataError) as exc:
+            call()
+        _one_line(exc, "input channel 0", "constant")
+
+
+def test_channel_constant_within_each_flight(data) -> None:
+    """Different constants per flight still make the channel's delayed copies identical."""
+    flights = []
+    for i, part in enumerate((slice(0, 300), slice(300, 600))):
+        u = data.u[part].copy()
+        u[:, 1] = 1000.0 * (i + 1)
+        flights.append(sysid.IOData(u=u, y=data.y[part], dt=data.dt))
+    with pytest.raises(sysid.DataError) as exc:
+        sysid.iem(flights, order=2, past=5, future=5)
+    _one_line(exc, "input channel 1", "constant in every flight")
+    # constant in one flight only is fine: the other flight excites it
+    flights[1] = sysid.IOData(u=data.u[300:], y=data.y[300:], dt=data.dt)
+    assert sysid.iem(flights, order=2, past=5, future=5).n_states == 2
+
+
+def test_transposed_arrays_get_a_hint(data) -> None:
+    with pytest.raises(sysid.DataError) as exc:
+        sysid.iem(sysid.IOData(u=data.u.T, y=data.y.T, dt=data.dt), order=2, past=5, future=5)
+    _one_line(exc, "looks transposed")
+
+
+def test_short_flight_in_a_list_is_logged(data, caplog) -> None:
+    short = sysid.IOData(u=data.u[:8], y=data.y[:8], dt=data.dt)
+    with caplog.at_level("WARNING", logger="sysid.factor"):
+        sysid.iem([data, short], order=2, past=5, future=5)
+    assert "flight(s) [1] shorter than past + future = 10 samples" in caplog.text
 
 
 def test_mismatched_lengths(data) -> None:

@@ -107,6 +107,10 @@ def test_bad_model_files(tmp_path) -> None:
     (tmp_path / "x.txt").write_text("x")
     with pytest.raises(sysid.ModelFileError, match="suffix"):
         sysid.load_model(tmp_path / "x.txt")
+    for suffix in (".mat", ".h5", ".json"):
+        (tmp_path / f"empty{suffix}").write_bytes(b"")
+        with pytest.raises(sysid.ModelFileError, match="not a readable sysid model"):
+            sysid.load_model(tmp_path / f"empty{suffix}")
     d = pbsid_example1().to_dict()
     d["version"] = 99
     with pytest.raises(sysid.ModelFileError, match="newer"):

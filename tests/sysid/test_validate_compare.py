@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sysid.data import IOData
-from sysid.errors import DimensionError, HorizonError
+from sysid.errors import DataError, DimensionError, HorizonError
 from sysid.model import StateSpaceModel
 from sysid.validate import compare, fit_percent, predict
 from tests.sysid.systems import closed_loop, pbsid_example1, random_stable_system
@@ -139,6 +139,18 @@ def test_multi_experiment_compare_gives_each_its_own_x0_and_fit() -> None:
     assert np.all(res.fits > 99.9999)
 
 
+def test_compare_result_is_the_per_channel_fit() -> None:
+    """``compare(...) -> per-channel fit``: the result acts as the (l,) fit array."""
+    system = pbsid_example1()
+    data = _noise_free(system, n=200, x0=np.ones(4), seed=12)
+    res = compare(system, data, horizon=3)
+    fit = np.asarray(res)
+    assert fit.shape == (2,) and np.array_equal(fit, res.fit)
+    assert len(res) == 2 and res[1] == res.fit[1] and list(res) == list(res.fit)
+    assert np.array_equal(res >= 99.0, res.fit >= 99.0) and bool(np.all(res > 99.0))
+    assert np.array_equal(res - fit, np.zeros(2)) and np.mean(res) == np.mean(res.fit)
+
+
 def test_compare_rejects_bad_requests() -> None:
     system = pbsid_example1()
     data = _noise_free(system, n=100, x0=np.zeros(4), seed=11)
@@ -148,6 +160,10 @@ def test_compare_rejects_bad_requests() -> None:
         compare(system, data, window=1.0)  # dt = 1 s: 1 sample, 2 outputs, 4 states
     with pytest.raises(HorizonError, match="positive"):
         compare(system, data, horizon=0)
+    with pytest.raises(HorizonError, match="whole number"):
+        compare(system, data, horizon=2.5)
+    with pytest.raises(DataError, match=r"dt=2\.0 s but the model has dt=1\.0 s"):
+        compare(system, IOData(u=data.u, y=data.y, dt=2.0))
     with pytest.raises(DimensionError, match="x0 has 3 entries"):
         compare(system, data, x0=np.zeros(3))
     with pytest.raises(DimensionError, match="2 inputs/2 outputs"):
