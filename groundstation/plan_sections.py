@@ -135,8 +135,11 @@ def read_vehicle(t: TomlTable) -> VehicleLimits:
 def check_thrust(
     src: TomlSource, path: tuple, value: float, v: VehicleLimits, what: str = "thrust"
 ) -> None:
-    """Refuse a thrust outside ``[thrust_min, thrust_max]``, naming the key, value and limit."""
-    key = "thrust_min" if value < v.thrust_min else "thrust_max" if value > v.thrust_max else ""
+    """Refuse a thrust outside ``[thrust_min, thrust_max]``, naming the key, value and limit
+    (written so that a nan is refused too)."""
+    key = "" if v.thrust_min <= value <= v.thrust_max else (
+        "thrust_max" if value > v.thrust_min else "thrust_min"
+    )
     if key:
         raise src.error(
             path,
@@ -163,11 +166,13 @@ def read_altitude_hold(t: TomlTable, v: VehicleLimits, hover: int) -> AltitudeHo
     """``[altitude_hold]``: every key optional (defaults in :class:`AltitudeHoldConfig`)."""
     d = AltitudeHoldConfig()
     t.allow(set(AltitudeHoldConfig.__dataclass_fields__))
-    kinds = tuple(t.get("kinds", list, default=list(d.kinds)))
-    bad = [k for k in kinds if k not in ("hover", "excitation")]
-    if bad or not kinds:
-        raise t.src.error((*t.path, "kinds"), f"{bad or kinds} must be a non-empty list of "
-                          "'hover' and 'excitation'; take-off and landing follow the plan")
+    raw = t.data.get("kinds", list(d.kinds))
+    bad = [k for k in raw if k not in ("hover", "excitation")] if isinstance(raw, list) else raw
+    if bad or not raw:
+        raise t.src.error((*t.path, "kinds"), f"{bad or raw!r} is not a valid value: kinds must "
+                          'be a non-empty list of phase kinds from "hover" and "excitation", '
+                          'e.g. ["hover"]; take-off and landing follow the plan')
+    kinds = tuple(raw)
     variable = t.get("variable", str, default=d.variable)
     if "." not in variable:
         raise t.src.error((*t.path, "variable"), f"'{variable}' is not a log variable "
@@ -241,7 +246,7 @@ def read_signal(
         raise t.src.error(at, f"{amplitude:g} {unit} must be {'> 0' if symmetric else '!= 0'}")
     if axis in _AXIS_LIMIT:
         limit = getattr(v, _AXIS_LIMIT[axis])
-        if abs(amplitude) > limit:
+        if not abs(amplitude) <= limit:  # not `>`: refuse a nan too
             raise t.src.error(
                 at,
                 f"±{abs(amplitude):g} {unit} exceeds "
@@ -270,11 +275,13 @@ def read_signal(
         spec["sweep"] = t.choice("sweep", ("linear", "log"), default="linear")
         for key in ("f_start_hz", "f_end_hz"):
             f = spec[key] = t.number(key, lo=0, hi=nyquist, unit="Hz")
-            if f == nyquist or (spec["sweep"] == "log" and f == 0):
+            log_sweep = spec["sweep"] == "log"
+            if f == nyquist or (log_sweep and f == 0):
+                low = "> 0 Hz (a log sweep cannot start or end at 0)" if log_sweep else ">= 0 Hz"
                 raise t.src.error(
                     (*t.path, key),
-                    f"{f:g} Hz must be > 0 for a log sweep and "
-                    f"< {nyquist:g} Hz (Nyquist of the setpoint rate)",
+                    f"{f:g} Hz is out of range for a {spec['sweep']} sweep; use a value {low} "
+                    f"and < {nyquist:g} Hz (Nyquist of the setpoint rate {rate:g} Hz)",
                 )
     return ExcitationSpec(**spec)
 

@@ -4,8 +4,9 @@
 text once and maps every key path, e.g. ``("phase", 2, "roll", "amplitude")`` for the
 ``amplitude`` key of the third ``[[phase]]``'s ``roll`` table, to its 1-based line; it follows
 ``[table]`` and ``[[array]]`` headers, dotted keys, inline tables, and skips multi-line arrays
-and strings. :class:`TomlTable` refuses unknown keys (with a "did you mean" hint), wrong types
-and out-of-range numbers, each as a one-line :class:`~groundstation.errors.PlanError` that reads
+and strings. :class:`TomlTable` refuses unknown keys (with a "did you mean" hint), wrong types,
+non-finite numbers (TOML ``nan``, ``inf``; they compare false with every limit) and out-of-range
+numbers, each as a one-line :class:`~groundstation.errors.PlanError` that reads
 ``FILE:LINE: key.path: problem; what to change``.
 """
 
@@ -169,6 +170,12 @@ class TomlTable:
             return default
         value = self.data[key]
         numeric = isinstance(value, int | float) and not isinstance(value, bool)
+        if kind in (float, int) and numeric and not math.isfinite(value):
+            # TOML's nan/inf compare false with every limit: refuse them before any range check
+            want = "a finite number" if kind is float else "an integer"
+            raise self.src.error(
+                path, f"{value!r} is not a finite number; use {want}{f' in {unit}' if unit else ''}"
+            )
         if kind is float and numeric:
             return float(value)
         if kind is int and numeric and float(value).is_integer():
@@ -191,7 +198,10 @@ class TomlTable:
     ) -> Any:
         """A number within ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``), refused otherwise."""
         value = self.get(key, kind, default=default, unit=unit)
-        if value is not None and (value < lo or (lo_open and value == lo) or value > hi):
+        if value is None:
+            return value
+        inside = lo < value <= hi if lo_open else lo <= value <= hi  # False for nan, too
+        if not inside:
             low = f"> {lo:g}" if lo_open else f">= {lo:g}"
             raise self.src.error(
                 (*self.path, key),

@@ -68,6 +68,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 SHIPPED_PLANS_DIR = Path(__file__).resolve().parent.parent / "flightplans"
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}")
+"""A plan name: it becomes part of the session file name, so no path separators, no leading dot,
+at most 64 characters."""
 _TOP_KEYS = (
     "name",
     "description",
@@ -166,6 +169,24 @@ def load_plan(path: str | Path) -> Plan:
     return parse_plan(text=text, source=str(path), name=path.stem)
 
 
+def _plan_name(top: TomlTable, *, default: str) -> str:
+    """``name`` (or ``default``, the file name) checked against :data:`_NAME`."""
+    value = top.get("name", str, default=default)
+    if _NAME.fullmatch(value):
+        return value
+    shown = repr(value) if len(value) <= 40 else f"{value[:37]!r}... ({len(value)} characters)"
+    rule = (
+        "1-64 characters from letters, digits, '-', '_', '.', not starting with '.' "
+        "(it becomes part of the session file name)"
+    )
+    if "name" in top.data:
+        raise top.src.error(("name",), f"{shown} is not a valid plan name; use {rule}")
+    raise PlanError(
+        f"{top.src.source}: the plan name defaults to the file name {shown}, which is not a "
+        f"valid plan name; add name = \"...\" with {rule}, or rename the file"
+    )
+
+
 def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan:
     """Validate TOML ``text``; ``source`` prefixes errors, ``name`` is the default plan name."""
     try:
@@ -177,6 +198,7 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         raise PlanError(f"{at}: invalid TOML: {msg}; fix the syntax on that line") from None
     src = TomlSource(text=text, source=source)
     top = TomlTable(src, (), data).allow(set(_TOP_KEYS))
+    plan_name = _plan_name(top, default=name)
     rate = top.number("setpoint_rate_hz", lo=2.0, hi=100.0, unit="Hz", default=10.0)
     vehicle = read_vehicle(TomlTable(src, ("vehicle",), top.get("vehicle", dict)))
     hover = top.pwm("hover_thrust")
@@ -204,7 +226,7 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
                 f"phase[{named.index(phases[-1].name)}]; rename it",
             )
     plan = Plan(
-        name=top.get("name", str, default=name),
+        name=plan_name,
         text=text,
         source=source,
         description=top.get("description", str, default=""),

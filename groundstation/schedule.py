@@ -8,7 +8,8 @@ All arrays have shape ``(n,)`` and are read-only; units are in :data:`UNITS`.
 
 Construction re-checks every setpoint against the :class:`VehicleLimits` (the plan loader has
 already refused out-of-limit keys with their line; this is the last line of defence and covers
-hand-made schedules), so a Schedule that exists is within its vehicle's limits.
+hand-made schedules), so a Schedule that exists is within its vehicle's limits; a nan setpoint,
+a nan or infinite limit or rate is refused too.
 """
 
 from __future__ import annotations
@@ -31,6 +32,13 @@ SETPOINT_CHANNELS = ("roll", "pitch", "yaw_rate", "thrust")
 UNITS = {"t": "s", "roll": "deg", "pitch": "deg", "yaw_rate": "deg/s", "thrust": "PWM"}
 
 
+def _require_finite(obj: Any, table: str) -> None:
+    """Refuse nan/inf in a limits dataclass: a nan limit compares false and would disable it."""
+    for key, value in vars(obj).items():
+        if isinstance(value, int | float) and not np.isfinite(value):
+            raise PlanError(f"{table}.{key} = {value!r} is not a finite number")
+
+
 @dataclass(frozen=True)
 class VehicleLimits:
     """The plan's ``[vehicle]`` table: hard limits every setpoint must respect."""
@@ -42,6 +50,9 @@ class VehicleLimits:
     thrust_max: int  # PWM
     min_vbat: float  # V: battery voltage needed to take off
 
+    def __post_init__(self) -> None:
+        _require_finite(self, "vehicle")
+
 
 @dataclass(frozen=True)
 class Safety:
@@ -52,6 +63,9 @@ class Safety:
     descent_duration: float = 0.0  # s
     descent_thrust: int = 0  # PWM
     max_rate_deg_s: float | None = None  # abort beyond this |gyro| (None: the runner's default)
+
+    def __post_init__(self) -> None:
+        _require_finite(self, "safety")
 
 
 @dataclass(frozen=True)
@@ -130,6 +144,8 @@ class Schedule:
                 raise PlanError(f"schedule {name} has shape {arr.shape}, expected ({n},)")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise PlanError(f"schedule rate_hz = {self.rate_hz!r} must be a finite number > 0")
         t = np.arange(n) / self.rate_hz
         t.flags.writeable = False
         object.__setattr__(self, "t", t)
@@ -149,13 +165,14 @@ class Schedule:
 
     def _check_limits(self) -> None:
         v = self.vehicle
+        # `~(x <= limit)` rather than `x > limit`: a nan setpoint is refused, not let through
         checks = [
-            (axis, np.abs(getattr(self, axis)) > getattr(v, key), key, getattr(v, key))
+            (axis, ~(np.abs(getattr(self, axis)) <= getattr(v, key)), key, getattr(v, key))
             for axis, key in _LIMITS.items()
         ]
         checks += [
-            ("thrust", self.thrust < v.thrust_min, "thrust_min", v.thrust_min),
-            ("thrust", self.thrust > v.thrust_max, "thrust_max", v.thrust_max),
+            ("thrust", ~(self.thrust >= v.thrust_min), "thrust_min", v.thrust_min),
+            ("thrust", ~(self.thrust <= v.thrust_max), "thrust_max", v.thrust_max),
         ]
         for axis, bad, key, limit in checks:
             if np.any(bad):
