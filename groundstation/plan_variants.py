@@ -18,7 +18,8 @@ from sysid.excitation import mls_bits
 
 __all__ = ["advance_prbs", "advanced_seed"]
 
-_SEED_LINE = re.compile(r"^(\s*seed\s*=\s*)(\d+)")
+# `seed = 3`, `roll.seed = 3`, `{ ..., seed = 0x3 }`: the key and its TOML integer literal
+_SEED = re.compile(r"(?<![\w-])(seed\s*=\s*)(\+?(?:0x[0-9A-Fa-f_]+|0o[0-7_]+|0b[01_]+|\d[\d_]*))")
 
 
 def advanced_seed(*, register_length: int, seed: int, chips: int) -> int:
@@ -38,22 +39,41 @@ def advance_prbs(plan: Plan, *, chips: int) -> Plan:
     lines = plan.text.splitlines(keepends=True)
     where = key_lines(plan.text)
     inserts: list[tuple[int, str]] = []
-    found = False
+    expected: dict[tuple[int, str], int] = {}
     for i, phase in enumerate(plan.phases):
         for exc in phase.excitation:
             if exc.signal != "prbs":
                 continue
-            found = True
-            new = advanced_seed(register_length=exc.register_length, seed=exc.seed, chips=chips)
+            new = expected[i, exc.axis] = advanced_seed(
+                register_length=exc.register_length, seed=exc.seed, chips=chips
+            )
             line = where.get(("phase", i, exc.axis, "seed"))
             if line is not None:
                 text = lines[line - 1]
-                lines[line - 1] = _SEED_LINE.sub(lambda m, v=new: f"{m.group(1)}{v}", text, 1)
-            else:  # seed defaulted to 1: add it under the table header
-                inserts.append((where[("phase", i, exc.axis)], f"seed = {new}\n"))
-    if not found:
+                lines[line - 1] = _SEED.sub(lambda m, v=new: f"{m.group(1)}{v}", text, 1)
+                continue
+            # seed defaulted to 1: add it to the axis table, whichever way it is written
+            line = where[("phase", i, exc.axis)]
+            text = lines[line - 1]
+            inline = re.match(rf"(\s*{exc.axis}\s*=\s*\{{)", text)
+            if inline:  # roll = { ... }: inline tables cannot be extended on a later line
+                lines[line - 1] = f"{inline.group(1)} seed = {new},{text[inline.end():]}"
+            elif text.lstrip().startswith("["):  # [phase.roll]: under the header
+                inserts.append((line, f"seed = {new}\n"))
+            else:  # roll.signal = ... (dotted keys)
+                inserts.append((line, f"{exc.axis}.seed = {new}\n"))
+    if not expected:
         raise PlanError(f"{plan.source}: plan '{plan.name}' has no PRBS to advance")
     for line, text in sorted(inserts, reverse=True):
         lines.insert(line, text)
     header = f"# PRBS advanced by {chips} chips from the shipped plan (groundstation)\n"
-    return parse_plan(text=header + "".join(lines), source=plan.source, name=plan.name)
+    advanced = parse_plan(text=header + "".join(lines), source=plan.source, name=plan.name)
+    for i, phase in enumerate(advanced.phases):  # never fly the old realisation by mistake
+        for exc in phase.excitation:
+            if (i, exc.axis) in expected and exc.seed != expected[i, exc.axis]:
+                raise PlanError(
+                    f"{plan.source}: could not rewrite phase[{i}].{exc.axis}.seed "
+                    f"(got {exc.seed}, wanted {expected[i, exc.axis]}); write it as seed = N "
+                    "on its own line"
+                )
+    return advanced

@@ -16,9 +16,10 @@ from click.testing import CliRunner
 from groundstation.cli import main
 from groundstation.errors import PlanError
 from groundstation.plan_toml import TomlSource, TomlTable
+from groundstation.plan_variants import advance_prbs, advanced_seed
 from groundstation.plans import SHIPPED_PLANS_DIR, Schedule, load_plan, parse_plan
 from groundstation.schedule import Safety, VehicleLimits
-from tests.plans.conftest import line_of
+from tests.plans.conftest import BASE, line_of
 
 # Every numeric key of the schema, each on its own line tagged `# @<key path>`.
 FULL = """\
@@ -281,3 +282,36 @@ def test_chirp_frequency_messages_fit_the_sweep(sweep, key, value, expected):
     msg = str(info.value)
     assert msg.startswith(f"c.toml:{line}: phase[3].pitch.{key}: ") and expected in msg, msg
     assert "\n" not in msg and (sweep == "log" or "log sweep" not in msg)
+
+
+_DOTTED = 'roll.signal = "prbs"\nroll.register_length = 5\nroll.amplitude = 20.0\n'
+_ROLL = '[phase.roll]\nsignal = "prbs"\nregister_length = 5\namplitude = 20.0\nseed = 3\n'
+
+
+@pytest.mark.parametrize(
+    ("table", "seed"),
+    [
+        (_ROLL, 3),
+        (_ROLL.replace("seed = 3", "seed = 0x3"), 3),
+        (_ROLL.replace("seed = 3", "seed = +3"), 3),
+        (_ROLL.replace("seed = 3", "seed = 1_0  # not seed = 2"), 10),
+        (_ROLL.replace("seed = 3\n", ""), 1),
+        ('roll = { signal = "prbs", register_length = 5, amplitude = 20.0, seed = 3 }\n', 3),
+        ('roll = { signal = "prbs", register_length = 5, amplitude = 20.0 }\n', 1),
+        (_DOTTED + "roll.seed = 3\n", 3),
+        (_DOTTED, 1),
+    ],
+    ids=["plain", "hex", "plus", "underscore", "default", "inline", "inline-default", "dotted",
+         "dotted-default"],
+)
+def test_advance_prbs_rewrites_the_seed_however_it_is_written(table, seed):
+    text = BASE.replace(_ROLL, "")
+    text = text.replace('duration = 3.1\n', f"duration = 3.1\n{table}", 1)
+    plan = parse_plan(text=text, source="v.toml")
+    roll = next(e for e in plan.phases[1].excitation if e.axis == "roll")
+    assert roll.seed == seed
+    other = advance_prbs(plan, chips=7)
+    new = next(e for e in other.phases[1].excitation if e.axis == "roll")
+    assert new.seed == advanced_seed(register_length=5, seed=seed, chips=7)
+    k = slice(other.compile().phases[1].start_tick, other.compile().phases[1].end_tick)
+    np.testing.assert_array_equal(other.compile().roll[k], np.roll(plan.compile().roll[k], -7))
