@@ -12,7 +12,8 @@ is one log variable ``group.name`` as ``str(value)``. :func:`read_cfclient_csv` 
 timestamps in seconds (shape ``(n,)``, 24-bit wrap-arounds undone) and one float64 array per
 variable (shape ``(n,)``).
 A last line cut short (the client was killed while writing) is dropped with a warning; any other
-malformed line is a one-line :class:`CsvFormatError` naming the file and line.
+malformed line, a non-finite value (``nan``, ``inf``) or a timestamp going backwards (beyond the
+24-bit wrap-around) is a one-line :class:`CsvFormatError` naming the file and line.
 """
 
 from __future__ import annotations
@@ -101,6 +102,7 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
     if len(set(variables)) != len(variables):
         raise CsvFormatError(f"{path}: a variable appears twice in the header {variables}")
     rows: list[list[float]] = []
+    linenos: list[int] = []
     for i, line in enumerate(lines[1:], start=2):
         row = _parse(line, path=path, lineno=i, width=len(header))
         if row is None:
@@ -112,9 +114,16 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
                 f"header {len(header)}; fix or delete that line"
             )
         rows.append(row)
+        linenos.append(i)
     if not rows:
         raise CsvFormatError(f"{path}: header only, no samples")
     data = np.array(rows, dtype=np.float64)  # (n, 1 + n_variables)
+    bad = np.flatnonzero(~np.all(np.isfinite(data), axis=1))
+    if len(bad):
+        row = bad[0]
+        col = header[int(np.flatnonzero(~np.isfinite(data[row]))[0])]
+        raise CsvFormatError(f"{path}: line {linenos[row]} has a non-finite {col} "
+                             f"({data[row][header.index(col)]:g}); fix or delete that line")
     stamps_ms = data[:, 0]
     if np.any(stamps_ms != np.round(stamps_ms)) or np.any(stamps_ms < 0):
         raise CsvFormatError(f"{path}: Timestamp must be whole milliseconds >= 0")
@@ -127,5 +136,12 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
     # cflib carries a 24-bit tick: undo its wrap-arounds so time never goes backwards
     wraps = np.concatenate([[0], np.cumsum(np.diff(stamps_ms) < -(_WRAP // 2))])
     stamps_ms = stamps_ms + wraps * _WRAP
+    back = np.flatnonzero(np.diff(stamps_ms) < 0)
+    if len(back):
+        j = int(back[0]) + 1
+        raise CsvFormatError(
+            f"{path}: line {linenos[j]}: Timestamp {data[j, 0]:.0f} ms goes back from "
+            f"{data[j - 1, 0]:.0f} ms on line {linenos[j - 1]}; the file is not one "
+            "recording in time order (fix or delete those lines)")
     return CsvLog(path=path, name=block_name_of(path), timestamps_s=stamps_ms / 1000.0,
                   values=values, ctypes=ctypes)

@@ -28,6 +28,8 @@ __all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "read_usd"]
 log = logging.getLogger(__name__)
 
 _MAGIC = 0xBC
+_SALVAGE = ("; import with --allow-damaged (allow_damaged=True from Python) to salvage the "
+            "records")
 _TYPES = {"B": np.uint8, "b": np.int8, "H": np.uint16, "h": np.int16, "I": np.uint32,
           "i": np.int32, "f": np.float32, "e": np.float16}
 
@@ -94,7 +96,7 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         msg = (f"{path}: CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x}); "
                "the file is damaged or truncated")
         if not allow_damaged:
-            raise UsdFormatError(msg + "; pass allow_damaged=True to salvage the records")
+            raise UsdFormatError(msg + _SALVAGE)
         log.warning(msg)
     version, n_types = struct.unpack_from("<HH", data, 1)
     if version not in (1, 2):
@@ -154,5 +156,5 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
 
 def _damaged(path: Path, what: str, allow: bool) -> None:
     if not allow:
-        raise UsdFormatError(f"{path}: {what}; pass allow_damaged=True to salvage the records")
+        raise UsdFormatError(f"{path}: {what}{_SALVAGE}")
     log.warning("%s: %s; keeping the records before it", path, what)
