@@ -20,6 +20,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from groundstation.plans import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
+from sysid.cli_types import check_output
 from sysid.excitation import prbs_shift
 
 __all__ = ["command", "plot_lines", "summarize"]
@@ -263,6 +264,9 @@ def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | N
     Example:
       groundstation plan show pitch-only --height 8
     """
+    if rrd is not None and not as_json:  # before any work; an existing .rrd is replaced
+        check_output(rrd, option="--rrd", suffixes=(".rrd",),
+                     inputs=[Path(plan)] if Path(plan).is_file() else [], overwrite=True)
     schedule = load_plan(plan).compile()
     if as_json:
         click.echo(json.dumps(schedule.to_dict()))

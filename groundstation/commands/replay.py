@@ -16,6 +16,7 @@ import click
 from groundstation.live import RerunView, open_view
 from groundstation.session import Session, open_session
 from groundstation.session_schema import Field, StreamSpec
+from sysid.cli_types import check_output
 
 __all__ = ["command", "replay_session", "specs_of"]
 
@@ -68,6 +69,8 @@ def command(session: Path, rrd: Path | None, mode: str | None) -> None:
     """
     if rrd is not None and mode is not None:
         raise click.UsageError("--rrd writes a file and --view shows a viewer; pass only one")
+    if rrd is not None:  # before any work: never the session itself, never a missing folder
+        check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=[session], overwrite=True)
     s = open_session(session)
     t0 = time.perf_counter()
     view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd)
