@@ -19,12 +19,14 @@ block and :class:`~groundstation.altitude.AltitudeHold` trims the thrust of each
 held phases; the setpoints stream records the thrust as sent.
 
 **Safety.** SIGINT/SIGTERM (handlers installed while flying, restored after), link loss, an
-exception in the runner, a measured rate beyond :class:`RateLimits` or a battery below
-``vehicle.min_vbat`` at take-off each record an event (source ``safety``) and end with the stop
-setpoint; if the plan's ``on_abort`` is ``descend`` and the link is up, the
+exception in the runner, a measured rate beyond :class:`RateLimits`, a setpoint that is not
+finite (NaN or inf is never sent) or a battery below ``vehicle.min_vbat`` at take-off each
+record an event (source ``safety``) and end with the stop setpoint; if the plan's
+``on_abort`` is ``descend`` and the link is up, the
 :meth:`~groundstation.schedule.Schedule.abort_schedule` descent streams first at the same rate,
 so there is never more than one period without a setpoint. A listener that raises is dropped
-(with an event); the flight goes on. Without its recorder the flight aborts.
+(with an event); the flight goes on. Without its recorder the flight aborts; a session file
+that cannot be created (folder, name) is a one-line error before take-off, nothing flown.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ import numpy as np
 
 from groundstation.altitude import AltitudeHold
 from groundstation.clock import clock_for_uri
-from groundstation.errors import FlightAborted
+from groundstation.errors import FlightAborted, GroundStationError, SessionError
 from groundstation.flight_result import FlightResult, RateLimits, block_summary
 from groundstation.link import (
     ATTITUDE_BLOCK,
@@ -51,6 +53,7 @@ from groundstation.link import (
     BLOCK_PERIOD_S,
     DEFAULT_URI,
     FLIGHT_BLOCKS,
+    check_uri,
     install_drivers,
     open_link,
 )
@@ -267,7 +270,12 @@ class _Runner:
             if ph.id != current:
                 current = ph.id
                 self.phase(phase_id=ph.id, name=ph.name, kind=ph.kind, planned_s=ph.duration)
-            self.send(self._trimmed(s.setpoint(k), kind=ph.kind), phase_id=ph.id, tick=k)
+            sp = self._trimmed(s.setpoint(k), kind=ph.kind)
+            if not _finite(sp):
+                self._cause(f"setpoint {k} (phase {ph.name}) is not finite "
+                            f"({', '.join(f'{v:g}' for v in sp)}); not sent")
+                break
+            self.send(sp, phase_id=ph.id, tick=k)
             self.n_scheduled += 1
             k += 1
             self.dispatch()
@@ -299,7 +307,11 @@ class _Runner:
                 self.wait(self._deadline(k + j))
                 if len(self.causes) > n_causes or self.link.lost:
                     break
-                self.send(descent.setpoint(j), phase_id=-1, tick=-1)
+                sp = descent.setpoint(j)
+                if not _finite(sp):
+                    self._cause(f"descent setpoint {j} is not finite; stopping at once")
+                    break
+                self.send(sp, phase_id=-1, tick=-1)
                 self.dispatch()
             else:
                 self.wait(self._deadline(k + len(descent)))
@@ -323,11 +335,17 @@ class _Runner:
             self.block_periods = {b.name: b.period_s for b in blocks}
             meta = {**link.metadata(), **self._plan_metadata()}
             streams = [*(b.spec() for b in blocks), *standard_streams()]
-            for listener in list(self.listeners):
-                self._call(listener, "begin", streams=streams, metadata=meta)
+            try:  # the file first: a flight that cannot be recorded is not flown
+                self.recorder.begin(streams=streams, metadata=meta)
+            except GroundStationError as exc:
+                raise SessionError(f"{exc}; nothing flown") from None
+            except Exception as exc:
+                log.debug("recorder.begin failed", exc_info=True)
+                raise FlightAborted(f"cannot record to {self.recorder.path} "
+                                    f"({type(exc).__name__}: {exc}); nothing flown") from None
             begun = True
-            if self.recorder not in self.listeners:
-                raise FlightAborted(f"cannot record to {self.recorder.path}; nothing flown")
+            for listener in [x for x in self.listeners if x is not self.recorder]:
+                self._call(listener, "begin", streams=streams, metadata=meta)
             link.start_blocks(blocks)
             try:
                 if self.preflight():
@@ -407,6 +425,11 @@ class _Runner:
         }
 
 
+def _finite(sp: Sequence[float]) -> bool:
+    """Whether every value of a setpoint is a finite number (never send NaN or inf)."""
+    return all(math.isfinite(v) for v in sp)
+
+
 def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI,
              listeners: Sequence[FlightListener] = (), limits: RateLimits | None = None,
              connect_timeout_s: float = 10.0,
@@ -418,12 +441,15 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     the flight aborts safely). Raises :class:`~groundstation.errors.LinkError` when the Crazyflie
     cannot be reached or lacks a logged variable (nothing is flown then).
     """
+    check_uri(uri)
     plan = plan if isinstance(plan, Plan) else load_plan(plan)
     schedule = plan.compile()
     if limits is None:  # the plan's [safety] max_rate_deg_s, else the default
         rate = schedule.safety.max_rate_deg_s
         limits = RateLimits() if rate is None else RateLimits(max_rate_deg_s=rate)
-    recorder = Recorder(session_path(out=out, plan_name=plan.name))
+    # The folder and the file name are checked before connecting; the name is claimed when the
+    # file is created (Recorder.begin), so two flights into one folder never collide.
+    recorder = Recorder(session_path(out=out, plan_name=plan.name), unique=True)
     runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
                      listeners=listeners, limits=limits or RateLimits(),
                      connect_timeout_s=connect_timeout_s, tick_hook=tick_hook)

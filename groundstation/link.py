@@ -39,8 +39,10 @@ __all__ = [
     "DEFAULT_URI",
     "FLIGHT_BLOCKS",
     "LOG_MAX_BYTES",
+    "URI_SCHEMES",
     "BlockPlan",
     "Link",
+    "check_uri",
     "install_drivers",
     "open_link",
     "plan_blocks",
@@ -49,6 +51,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
+URI_SCHEMES = ("radio", "usb", "udp", "sim")
+"""The link URI schemes the ground station flies over (cflib's drivers plus the simulator's)."""
+_OTHER_SCHEMES = ("tcp", "prrt")  # cflib has drivers for these too; rarely used, not advertised
 LOG_MAX_BYTES = 26
 """Data bytes in one log packet (firmware ``LOG_MAX_LEN``, cflib ``LogConfig.MAX_LEN``)."""
 BLOCK_PERIOD_S = 0.020
@@ -262,9 +267,24 @@ class Link:
             log.exception("closing the link to %s failed", self.uri)
 
 
+def check_uri(uri: str) -> str:
+    """``uri`` if its scheme is one a link driver serves; one-line :class:`LinkError` naming the
+    supported schemes otherwise (checked before anything is created or connected)."""
+    scheme, sep, _ = uri.partition("://")
+    if not sep or scheme.lower() not in (*URI_SCHEMES, *_OTHER_SCHEMES):
+        supported = ", ".join(f"{s}://" for s in URI_SCHEMES)
+        raise LinkError(f"cannot connect to {uri}: unknown link URI scheme "
+                        f"{scheme + sep if sep else scheme!r}; use one of {supported} (e.g. "
+                        f"{DEFAULT_URI}; groundstation scan lists the Crazyflies in reach)")
+    return uri
+
+
 def _connect_advice(why: str) -> str:
     """What to do about a failed connect, from cflib's reason."""
     low = why.lower()
+    if "malformed uri" in low:
+        return (f"check the URI's form, e.g. {DEFAULT_URI}, usb://0, udp://127.0.0.1:19850 "
+                "or sim://0?speed=20")
     if "crazyradio" in low or "dongle" in low:
         return ("plug in the Crazyradio (groundstation scan lists radios; on Linux without "
                 "permission see the udev rule in docs/flying.md)")
@@ -281,6 +301,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
     ``timeout_s`` is wall-clock seconds; setting ``cancel`` (Ctrl-C while connecting) gives up
     at once. Failure raises a one-line :class:`LinkError`.
     """
+    check_uri(uri)
     install_drivers()
     from cflib.crazyflie import Crazyflie
 

@@ -4,56 +4,144 @@
 :class:`groundstation.session.SessionWriter`: ``begin`` creates the file with every stream,
 ``rows`` queues rows (the writer appends them at most ``flush_interval`` s apart, crash-safe),
 ``end`` stores the summary, marks the file closed cleanly and compresses it.
+
+The file name is claimed when the file is created, by an exclusive create (``O_EXCL``): with
+``unique=True`` a name another process took first (two flights started in the same second into
+one folder) moves on to ``-2``, ``-3`` ...; an existing file is never written over.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import logging
+import os
+import secrets
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from groundstation.session import SessionWriter, check_writable
+from groundstation.errors import SessionError
+from groundstation.session import SessionWriter
 from groundstation.session_schema import StreamSpec
 
-__all__ = ["Recorder", "session_path"]
+__all__ = ["Recorder", "check_folder", "session_path"]
 
 log = logging.getLogger(__name__)
 
+_MAX_SUFFIX = 1000
+
+
+def _candidates(path: Path):
+    """``path``, then ``stem-2.h5``, ``stem-3.h5`` ... (at most :data:`_MAX_SUFFIX`)."""
+    yield path
+    for n in range(2, _MAX_SUFFIX + 1):
+        yield path.with_name(f"{path.stem}-{n}{path.suffix}")
+
+
+def _os_error(path: Path, exc: OSError, *, option: str = "--out folder") -> SessionError:
+    """A one-line error for a file that cannot be created."""
+    if exc.errno == errno.ENAMETOOLONG:
+        return SessionError(f"cannot create {path}: file name too long ({len(path.name)} "
+                            "characters); give the plan a shorter name or choose a shorter "
+                            f"{option}")
+    return SessionError(f"cannot create {path}: {exc.strerror or exc}; choose another {option}")
+
+
+def _claim(path: Path, *, unique: bool) -> Path:
+    """Create an empty file exclusively at ``path`` (or, with ``unique``, the first free
+    ``-N`` name) and return its path; one-line :class:`SessionError` when that is impossible."""
+    for candidate in _candidates(path) if unique else (path,):
+        try:
+            fd = os.open(candidate, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise _os_error(candidate, exc) from None
+        os.close(fd)
+        return candidate
+    raise SessionError(f"{path}: already exists; choose another output path" if not unique else
+                       f"{path}: {_MAX_SUFFIX} sessions of that name exist; choose another "
+                       "--out folder")
+
+
+def check_folder(out: str | Path) -> Path:
+    """Create the session folder ``out`` if missing and check that files can be created in
+    it; one-line :class:`SessionError` otherwise."""
+    folder = Path(out)
+    if folder.exists() and not folder.is_dir():
+        raise SessionError(f"{folder}: is a file, not a folder; choose another --out folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SessionError(f"cannot create folder {folder}: {exc.strerror or exc}; choose "
+                           "another --out folder") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise SessionError(f"{folder}: not writable; choose another --out folder")
+    return folder
+
 
 def session_path(*, out: str | Path, plan_name: str) -> Path:
-    """A new file ``OUT/PLAN-YYYYmmddTHHMMSSZ.h5`` (UTC) (``-2``, ``-3`` ... if it exists), checked
-    writable (one-line :class:`~groundstation.errors.SessionError` otherwise)."""
+    """The first choice of file name, ``OUT/PLAN-YYYYmmddTHHMMSSZ.h5`` (UTC), checked before
+    anything connects: the folder is created if missing, and a file of that name (or the next
+    free ``-N``) is created and removed again, so a read-only folder, a pseudo file system or an
+    over-long name is a one-line :class:`SessionError` now rather than after take-off. The
+    name itself is claimed when :meth:`Recorder.begin` creates the file."""
+    folder = check_folder(out)
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())  # UTC, as start_time_iso
-    base = Path(out) / f"{plan_name}-{stamp}"
-    path, n = base.with_suffix(".h5"), 1
-    while path.exists():
-        n += 1
-        path = base.with_name(f"{base.name}-{n}.h5")
-    check_writable(path)
+    path = folder / f"{plan_name}-{stamp}.h5"
+    probe = _claim(path, unique=True)
+    try:
+        os.unlink(probe)
+    except OSError as exc:
+        raise _os_error(probe, exc) from None
     return path
 
 
 class Recorder:
     """Writes every row the flight runner hands out to the session file ``path``.
 
-    ``metadata`` may carry ``start_time_ns`` (wall clock at the session's time origin).
+    ``metadata`` may carry ``start_time_ns`` (wall clock at the session's time origin). With
+    ``unique`` the file may end up as ``stem-2.h5`` ... when ``path`` is taken by the time it is
+    created (``self.path`` is the file's name once :meth:`begin` returned); without it an
+    existing ``path`` is a :class:`SessionError`.
     """
 
     def __init__(self, path: str | Path, *, flush_interval: float = 1.0,
-                 compress_on_close: bool = True) -> None:
+                 compress_on_close: bool = True, unique: bool = False) -> None:
         self.path = Path(path)
         self._flush_interval = flush_interval
         self._compress = compress_on_close
+        self._unique = unique
         self._writer: SessionWriter | None = None
 
     def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
+        """Create the file: claim its name exclusively, write it under a temporary name in the
+        same folder and rename it onto the claimed (empty) file. One-line
+        :class:`SessionError` when it cannot be created."""
         meta = dict(metadata)
         start_ns = meta.pop("start_time_ns", None)
-        self._writer = SessionWriter(self.path, streams=streams, metadata=meta,
-                                     start_time_ns=start_ns, flush_interval=self._flush_interval,
-                                     compress_on_close=self._compress)
+        path = _claim(self.path, unique=self._unique)
+        tmp = path.with_name(f".gs-{os.getpid()}-{secrets.token_hex(4)}.h5.part")
+        try:
+            writer = SessionWriter(tmp, streams=streams, metadata=meta,
+                                   start_time_ns=start_ns, flush_interval=self._flush_interval,
+                                   compress_on_close=self._compress)
+        except OSError as exc:
+            _remove(path, tmp)
+            raise _os_error(path, exc) from None
+        except BaseException:
+            _remove(path, tmp)
+            raise
+        try:
+            os.replace(tmp, path)  # onto our own placeholder: nobody else's file
+        except OSError as exc:
+            writer.close()
+            _remove(path, tmp)
+            raise _os_error(path, exc) from None
+        writer.path = path
+        self.path, self._writer = path, writer
 
     def rows(self, stream: str, rows: Sequence[tuple]) -> None:
         if self._writer is None:
@@ -71,3 +159,9 @@ class Recorder:
         self._writer.close(duration_s=None if duration is None else float(duration),
                            summary=summary)
         log.info("session written: %s", self.path)
+
+
+def _remove(*paths: Path) -> None:
+    for p in paths:
+        with contextlib.suppress(OSError):
+            p.unlink()

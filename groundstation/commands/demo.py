@@ -11,6 +11,7 @@ k-step-ahead prediction through the innovation form (see ``docs/sysid.md``).
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -24,6 +25,7 @@ from rich.table import Table
 from groundstation.flight import FlightResult, fly_plan
 from groundstation.plan_variants import advance_prbs
 from groundstation.plans import Plan, load_plan
+from sysid.cli_types import FiniteFloat
 
 __all__ = ["command"]
 
@@ -57,10 +59,24 @@ def _poles_table(model) -> Table:
     return table
 
 
+def _check_folder(folder: Path) -> None:
+    """Create ``folder`` if missing; a one-line ``--out`` error if it cannot hold the files."""
+    if folder.exists() and not folder.is_dir():
+        raise click.BadParameter(f"{str(folder)!r} is a file; --out takes a folder",
+                                 param_hint="--out")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise click.BadParameter(f"cannot create folder {str(folder)!r} ({exc.strerror})",
+                                 param_hint="--out") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise click.BadParameter(f"folder {str(folder)!r} is not writable", param_hint="--out")
+
+
 @click.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Folder for the session and model files (default: a new temporary folder).")
-@click.option("--speed", type=click.FloatRange(1, 100), default=10.0, show_default=True,
+@click.option("--speed", type=FiniteFloat(min=1, max=100), default=10.0, show_default=True,
               help="Simulation speed factor (the 112 s plan takes 112/speed s).")
 @click.option("--order", type=click.IntRange(1, 40), default=8, show_default=True)
 @click.option("--past", type=click.IntRange(1, 500), default=60, show_default=True)
@@ -87,9 +103,9 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
     from sysid import compare, iem
     from sysid.session_io import load_session
 
-    console = Console(highlight=False)
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
-    folder.mkdir(parents=True, exist_ok=True)
+    _check_folder(folder)
+    console = Console(highlight=False)
     base = load_plan("prbs-3axis")
     flights = [
         (base, f"sim://0?speed={speed:g}&seed=1", "flight 1 (identification)"),

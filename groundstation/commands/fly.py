@@ -18,9 +18,11 @@ import click
 
 from groundstation.errors import GroundStationError
 from groundstation.flight import FlightListener, RateLimits, fly_plan
-from groundstation.link import DEFAULT_URI
+from groundstation.link import DEFAULT_URI, check_uri
 from groundstation.plans import load_plan
+from groundstation.recorder import check_folder
 from groundstation.session_schema import StreamSpec
+from sysid.cli_types import FiniteFloat
 
 __all__ = ["ProgressListener", "command", "open_view", "summary_lines"]
 
@@ -104,10 +106,10 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
               show_default=True, help="Folder for the session file.")
 @click.option("--view", type=click.Choice(["none", "rerun", "serve"]), default="none",
               show_default=True, help="Live view: Rerun viewer, web viewer, or none.")
-@click.option("--max-rate", type=click.FloatRange(min=1.0), default=None,
+@click.option("--max-rate", type=FiniteFloat(min=1.0), default=None,
               help="Abort when a gyro axis exceeds this, deg/s [default: the plan's "
                    "safety.max_rate_deg_s, else 1000].")
-@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.5), default=10.0,
+@click.option("--timeout", "timeout_s", type=FiniteFloat(min=0.5), default=10.0,
               show_default=True, help="Seconds to wait for the connection.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def command(plan: str, uri: str, out: Path, view: str, max_rate: float | None, timeout_s: float,
@@ -124,6 +126,8 @@ def command(plan: str, uri: str, out: Path, view: str, max_rate: float | None, t
       groundstation fly prbs-3axis --uri sim://0?speed=20 --out sessions --view rerun
     """
     loaded = load_plan(plan)
+    check_uri(uri)  # before any viewer opens; fly_plan checks the file name before connecting
+    check_folder(out)
     listeners: list[FlightListener] = []
     if view != "none":
         listeners.append(open_view(mode=view, name=loaded.name))

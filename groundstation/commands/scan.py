@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import string
 from typing import Any
 
 import click
@@ -77,6 +78,17 @@ def scan_crazyflies(address: int | None = None) -> list[str]:
     return uris
 
 
+def _radio_address(text: str) -> int:
+    """A radio address: 1 to 10 hex digits (5 bytes at most, ``0x`` allowed); one-line
+    ``--address`` error otherwise."""
+    digits = text.strip()
+    digits = digits[2:] if digits[:2].lower() == "0x" else digits
+    if not digits or len(digits) > 10 or any(c not in string.hexdigits for c in digits):
+        raise click.BadParameter(f"{text!r} is not a radio address: 1 to 10 hex digits "
+                                 "(5 bytes), e.g. E7E7E7E7E7", param_hint="--address")
+    return int(digits, 16)
+
+
 @click.command("scan")
 @click.option("--address", default=None, help="Radio address to scan, hex (default E7E7E7E7E7).")
 def command(address: str | None) -> None:
@@ -87,11 +99,7 @@ def command(address: str | None) -> None:
       groundstation scan
       groundstation scan --address E7E7E7E7E8
     """
-    try:
-        addr = None if address is None else int(address, 16)
-    except ValueError:
-        raise click.BadParameter(f"{address!r} is not hex; e.g. E7E7E7E7E7",
-                                 param_hint="--address") from None
+    addr = None if address is None else _radio_address(address)
     try:
         devices, problem = find_usb_devices(), ""
     except LinkError as exc:  # still list what other links (sim://, udp://) can reach

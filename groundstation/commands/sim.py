@@ -8,6 +8,7 @@ import time
 import click
 
 from groundstation.sim.udp import UdpServer
+from sysid.cli_types import FiniteFloat
 
 __all__ = ["command"]
 
@@ -23,7 +24,7 @@ logger = logging.getLogger(__name__)
               help="Address to bind; 0.0.0.0 serves other machines too.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(0),
               help="Random seed of the first vehicle (vehicle i uses SEED + i).")
-@click.option("--duration", default=0.0, type=click.FloatRange(0.0), hidden=True,
+@click.option("--duration", default=0.0, type=FiniteFloat(min=0.0), hidden=True,
               help="Stop after this many seconds (0: run until Ctrl-C).")
 def command(port: int, count: int, host: str, seed: int, duration: float) -> None:
     """Serve simulated Crazyflie 2.1s over UDP, in real time, until Ctrl-C.

@@ -4,7 +4,8 @@ URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every opti
 
 ====================  ==========================================================================
 ``N``                 which simulated vehicle (default 0); one simulation per ``N`` at a time
-``speed``             simulation seconds per wall-clock second (default 1; ``inf``: flat out)
+``speed``             simulation seconds per wall-clock second (default 1, at most 100; ``inf``:
+                      flat out)
 ``seed``              the vehicle's random seed (default 0)
 ``drop``              fraction of log data packets lost on the way down (default 0)
 ``latency_ms``        delay, in simulation ms, added to every packet the link returns
@@ -42,6 +43,8 @@ __all__ = ["Faults", "SimOptions", "Simulator", "close_all", "instance", "parse_
 
 logger = logging.getLogger(__name__)
 
+MAX_SPEED = 100.0
+"""The largest finite ``speed`` (the simulator manages ~45x flat out; ``inf`` asks for that)."""
 _WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
 _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
@@ -92,6 +95,10 @@ def parse_uri(uri: str) -> SimOptions:
     for key, text in parse_qsl(parts.query, keep_blank_values=True):
         if key == "speed":
             opts.speed = _number(key, text, kind=float, low=1e-3)
+            if MAX_SPEED < opts.speed < math.inf:
+                raise LinkError(f"sim:// option speed={text!r} is beyond {MAX_SPEED:g}; the "
+                                "simulator manages about 45x flat out: use speed=20, or "
+                                "speed=inf for as fast as it can")
         elif key == "seed":
             opts.seed = _number(key, text, kind=int, low=0, high=2**63)
         elif key == "drop":

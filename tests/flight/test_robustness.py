@@ -1,0 +1,214 @@
+"""User mistakes and odd inputs around ``groundstation fly`` (and its siblings ``demo``, ``sim``,
+``scan``): one line, exit 2, no traceback, nothing connected or written over; and the runner
+never sends a setpoint that is not a finite number."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import groundstation.flight as flight_mod
+import groundstation.recorder as recorder_mod
+import groundstation.sim as gsim
+from groundstation.cli import main
+from groundstation.errors import LinkError, SessionError
+from groundstation.flight import fly_plan
+from groundstation.plans import load_plan
+from groundstation.recorder import Recorder, session_path
+from groundstation.schedule import Schedule
+from groundstation.session import open_session, standard_streams
+
+from .checks import check_closed_with_stop
+from .conftest import wait_for_stop
+
+
+def one_line_error(res, *, code: int = 2) -> str:
+    """Exit ``code``, no traceback, exactly one error line; returns that line."""
+    assert res.exit_code == code, res.output
+    assert "Traceback" not in res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    errors = [ln for ln in res.output.splitlines() if ln.lower().startswith("error")]
+    assert len(errors) == 1, res.output
+    return errors[0]
+
+
+def never_connected(uri: str) -> bool:
+    try:
+        gsim.instance(uri)
+    except LinkError:
+        return True
+    return False
+
+
+# ------------------------------------------------------------------ non-finite numbers
+@pytest.mark.parametrize("args", [["--max-rate", "nan"], ["--max-rate", "inf"],
+                                  ["--timeout", "nan"], ["--timeout", "inf"]])
+def test_fly_refuses_non_finite_options(args, sim_uri, tmp_path):
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out",
+                                    str(tmp_path / "s"), *args])
+    assert "finite" in one_line_error(res)
+    assert never_connected(uri) and not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("cmd", [["demo", "--speed", "nan"], ["demo", "--speed", "inf"],
+                                 ["sim", "--duration", "nan"], ["sim", "--duration", "inf"]])
+def test_other_float_options_refuse_non_finite(cmd):
+    assert "finite" in one_line_error(CliRunner().invoke(main, cmd))
+
+
+def test_non_finite_setpoint_aborts_through_the_abort_path(sim_uri, tmp_path, monkeypatch):
+    """A NaN reaching the runner is never sent: abort, plan's descent, stop, file kept."""
+    setpoint = Schedule.setpoint
+
+    def poisoned(self, k):
+        sp = setpoint(self, k)
+        return (math.nan, *sp[1:]) if k == 40 and not self.name.endswith(":abort") else sp
+
+    monkeypatch.setattr(Schedule, "setpoint", poisoned)
+    uri = sim_uri()
+    result = fly_plan(plan=load_plan("hover-check"), out=tmp_path, uri=uri)
+    assert result.aborted and "setpoint 40" in result.cause and "not finite" in result.cause
+    sim = wait_for_stop(uri)
+    assert not any(sim.vehicle.motors_pwm)
+    s = check_closed_with_stop(result)
+    sp = s["setpoints"].data
+    assert all(np.isfinite(sp[c]).all() for c in ("roll", "pitch", "yaw_rate"))
+    assert sp["tick"].max() == 39
+    abort = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
+    assert len(abort) == 20 and (abort["thrust"] <= 34000).all()  # the plan's descent
+    assert any("not finite" in e.text and e.source == "safety" for e in s.events())
+
+
+# ------------------------------------------------------------------ output folder and file name
+def test_fly_out_is_a_file_fails_before_connecting(sim_uri, tmp_path):
+    uri, out = sim_uri(), tmp_path / "taken"
+    out.write_text("keep me")
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(out)])
+    line = one_line_error(res)
+    assert "--out" in line and str(out) in line
+    assert never_connected(uri) and out.read_text() == "keep me"
+
+
+def test_fly_out_that_cannot_be_created_fails_before_connecting(sim_uri, tmp_path):
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", "/proc/gs-x"])
+    assert "cannot create folder /proc/gs-x" in one_line_error(res)
+    assert never_connected(uri)
+
+
+def test_over_long_file_name_is_one_line_before_connecting(sim_uri, tmp_path):
+    with pytest.raises(SessionError, match="file name too long") as err:
+        session_path(out=tmp_path, plan_name="x" * 300)
+    assert "\n" not in str(err.value)
+    plan = copy.copy(load_plan("hover-check"))
+    object.__setattr__(plan, "name", "y" * 300)
+    uri = sim_uri()
+    with pytest.raises(SessionError, match="file name too long"):
+        fly_plan(plan=plan, out=tmp_path, uri=uri)
+    assert never_connected(uri) and not list(tmp_path.iterdir())
+
+
+def test_recorder_create_error_is_one_line_and_nothing_flies(sim_uri, tmp_path, monkeypatch):
+    """The file cannot be created after connecting (say the folder went away): one line,
+    nothing flown, no traceback logged."""
+    def refuse(path, *a, **kw):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(recorder_mod, "SessionWriter", refuse)
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(tmp_path)])
+    line = one_line_error(res)
+    assert "Permission denied" in line and "nothing flown" in line
+    assert not list(tmp_path.iterdir())  # placeholder and temporary file removed
+    assert gsim.instance(uri).vehicle.stop_count == 0 or not any(gsim.instance(uri)
+                                                                 .vehicle.motors_pwm)
+
+
+def _streams():
+    return standard_streams()
+
+
+def test_recorder_claims_the_name_when_it_creates_the_file(tmp_path):
+    path = session_path(out=tmp_path, plan_name="p")
+    path.write_bytes(b"another flight")  # taken meanwhile (another fly in the same second)
+    first, second = Recorder(path, unique=True), Recorder(path, unique=True)
+    first.begin(streams=_streams(), metadata={})
+    second.begin(streams=_streams(), metadata={})
+    assert path.read_bytes() == b"another flight"
+    assert first.path.name == f"{path.stem}-2.h5" and second.path.name == f"{path.stem}-3.h5"
+    first.end(summary={"duration_s": 0.0})
+    second.end(summary={"duration_s": 0.0})
+    assert open_session(first.path).closed_cleanly and open_session(second.path).closed_cleanly
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [path.name, first.path.name, second.path.name])  # no temporary files left
+    with pytest.raises(SessionError, match="already exists"):
+        Recorder(path).begin(streams=_streams(), metadata={})
+    assert path.read_bytes() == b"another flight"
+
+
+def test_two_flights_into_one_folder_in_the_same_second(sim_uri, tmp_path, monkeypatch):
+    """The name the first choice found free is taken while connecting: the flight records to
+    ``-2`` and flies; the other file is untouched."""
+    taken = []
+
+    def racing_session_path(**kw):
+        path = session_path(**kw)
+        path.write_bytes(b"the other flight")
+        taken.append(path)
+        return path
+
+    monkeypatch.setattr(flight_mod, "session_path", racing_session_path)
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(tmp_path),
+                                    "--json"])
+    assert res.exit_code == 0, res.output
+    assert "Traceback" not in res.output
+    wait_for_stop(uri)
+    assert taken[0].read_bytes() == b"the other flight"
+    file = res.output[res.output.index("{"):]
+    assert f"{taken[0].stem}-2.h5" in file
+    assert open_session(tmp_path / f"{taken[0].stem}-2.h5").closed_cleanly
+
+
+# ------------------------------------------------------------------ links
+def test_unknown_uri_scheme_names_the_supported_ones(tmp_path):
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", "foo://0", "--out",
+                                    str(tmp_path / "s")])
+    line = one_line_error(res)
+    assert "unknown link URI scheme" in line and "Crazyflie is on" not in line
+    assert all(s in line for s in ("radio://", "usb://", "udp://", "sim://"))
+    assert not (tmp_path / "s").exists()
+
+
+def test_sim_speed_is_capped(tmp_path):
+    uri = "sim://777?speed=1e9"
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(tmp_path)])
+    line = one_line_error(res)
+    assert "speed" in line and "100" in line
+    assert gsim.parse_uri("sim://0?speed=inf").speed == math.inf  # flat out stays available
+    assert gsim.parse_uri("sim://0?speed=40").speed == 40
+
+
+@pytest.mark.parametrize("address", ["-1", "E7E7E7E7E7E7E7", "0x", "zz", ""])
+def test_scan_refuses_bad_radio_addresses(address):
+    assert "--address" in one_line_error(CliRunner().invoke(main, ["scan", "--address",
+                                                                   address]))
+
+
+def test_scan_accepts_radio_addresses():
+    from groundstation.commands.scan import _radio_address
+
+    assert _radio_address("E7E7E7E7E7") == 0xE7E7E7E7E7 and _radio_address("0x1") == 1
+
+
+# ------------------------------------------------------------------ demo
+def test_demo_out_existing_file_is_one_line(tmp_path):
+    out = tmp_path / "file"
+    out.write_text("keep me")
+    line = one_line_error(CliRunner().invoke(main, ["demo", "--out", str(out)]))
+    assert "--out" in line and out.read_text() == "keep me"
