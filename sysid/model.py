@@ -177,14 +177,20 @@ class StateSpaceModel:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StateSpaceModel:
         """Inverse of :meth:`to_dict`."""
-        if d.get("format") != FORMAT:
-            raise ModelFileError(f"format is {d.get('format')!r}, not {FORMAT!r}; "
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            got = d.get("format") if isinstance(d, dict) else type(d).__name__
+            raise ModelFileError(f"not a sysid model (format {got!r}, expected {FORMAT!r}); "
                                  "pass a dict made by StateSpaceModel.to_dict")
         if int(d.get("version", 0)) > FORMAT_VERSION:
             raise ModelFileError(f"model format version {d['version']} is newer than "
                                  f"{FORMAT_VERSION}; upgrade sysid to read it")
-        kwargs = {k: d[k] for k in (*_MATRICES, "dt", "input_names", "output_names",
-                                    "input_units", "output_units", "noise_cov", "provenance")}
+        keys = (*_MATRICES, "dt", "input_names", "output_names", "input_units", "output_units",
+                "noise_cov", "provenance")
+        missing = [k for k in keys if k not in d]
+        if missing:
+            raise ModelFileError(f"sysid model dict lacks {', '.join(missing)}; pass a dict "
+                                 "made by StateSpaceModel.to_dict")
+        kwargs = {k: d[k] for k in keys}
         return cls(**kwargs)
 
     def to_json(self) -> str:

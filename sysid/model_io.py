@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.io
 
-from sysid.errors import ModelFileError
+from sysid.errors import ModelFileError, SysIdError
 
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
@@ -38,38 +40,69 @@ def _units(model: StateSpaceModel) -> dict[str, tuple[list[str], list[str]]]:
 
 
 def save(model: StateSpaceModel, path: Path) -> Path:
-    """Write ``model`` to ``path`` in the format its suffix names."""
+    """Write ``model`` to ``path`` in the format its suffix names (one-line
+    :class:`ModelFileError` when it cannot be written)."""
     suffix = path.suffix.lower()
-    if suffix in _H5:
-        _save_h5(model, path)
-    elif suffix == ".json":
-        path.write_text(model.to_json())
-    elif suffix == ".mat":
-        _save_mat(model, path)
-    else:
+    writers = {".h5": _save_h5, ".hdf5": _save_h5, ".mat": _save_mat,
+               ".json": lambda m, p: p.write_text(m.to_json())}
+    if suffix not in writers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
+    if not path.parent.is_dir():
+        raise ModelFileError(f"cannot write model file {str(path)!r}: folder "
+                             f"{str(path.parent)!r} does not exist; create it first")
+    try:
+        writers[suffix](model, path)
+    except OSError as exc:
+        raise ModelFileError(f"cannot write model file {str(path)!r}: "
+                             f"{_os_reason(exc)}") from None
     log.info("saved %d-state model to %s", model.n_states, path)
     return path
 
 
+def _os_reason(exc: OSError) -> str:
+    """A plain reason for an OS error; h5py's text carries internal flags, so its errno or its
+    ``error message = '...'`` part is used."""
+    if exc.errno:
+        return os.strerror(exc.errno)
+    text = str(exc)
+    found = re.search(r"error message = '([^']*)'", text)
+    if found:
+        return found.group(1)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def load(path: Path) -> StateSpaceModel:
     """Read a model file written by :func:`save`."""
-    from sysid.model import StateSpaceModel
+    from sysid.model import FORMAT, StateSpaceModel
 
+    if path.is_dir():
+        raise ModelFileError(f"model file {str(path)!r} is a folder; pass a model file "
+                             "(.h5, .json or .mat)")
     if not path.is_file():
         raise ModelFileError(f"model file {str(path)!r} does not exist; check the path")
     suffix = path.suffix.lower()
+    readers = {".h5": _load_h5, ".hdf5": _load_h5, ".mat": _load_mat,
+               ".json": lambda p: json.loads(p.read_text())}
+    if suffix not in readers:
+        raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
+    not_model = (f"{str(path)!r} is not a sysid model file; pass a file written by "
+                 "`sysid identify --out` or model.save")
     try:
-        if suffix in _H5:
-            return StateSpaceModel.from_dict(_load_h5(path))
-        if suffix == ".json":
-            return StateSpaceModel.from_dict(json.loads(path.read_text()))
-        if suffix == ".mat":
-            return StateSpaceModel.from_dict(_load_mat(path))
-    except (OSError, KeyError, json.JSONDecodeError, scipy.io.matlab.MatReadError) as exc:
-        raise ModelFileError(f"{str(path)!r} is not a readable sysid model ({exc}); "
+        d = readers[suffix](path)
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            fmt = d.get("format") if isinstance(d, dict) else None
+            raise ModelFileError(not_model + ("" if fmt is None else f" (its format is {fmt!r},"
+                                              f" not {FORMAT!r})"))
+        return StateSpaceModel.from_dict(d)
+    except SysIdError:
+        raise
+    except KeyError as exc:
+        raise ModelFileError(f"{not_model} (no {exc})") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError, scipy.io.matlab.MatReadError,
+            TypeError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ModelFileError(f"{str(path)!r} is not a readable sysid model ({reason}); "
                              "pass a file written by model.save") from exc
-    raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
 
 
 def _save_h5(model: StateSpaceModel, path: Path) -> None:
@@ -98,6 +131,8 @@ def _load_h5(path: Path) -> dict:
     import h5py
 
     with h5py.File(path, "r") as f:
+        if "format" not in f.attrs:  # e.g. a session file
+            return {}
         d: dict = {"format": str(f.attrs["format"]), "version": int(f.attrs["version"]),
                    "dt": float(f.attrs["dt"]),
                    "provenance": json.loads(f.attrs["provenance"])}
@@ -122,13 +157,16 @@ def _save_mat(model: StateSpaceModel, path: Path) -> None:
                  InputUnit=np.array(d["input_units"], dtype=object),
                  OutputUnit=np.array(d["output_units"], dtype=object),
                  provenance=json.dumps(d["provenance"]))
-    savemat(path, mdict)
+    with open(path, "wb") as fh:  # opened here so an OS error keeps its errno
+        savemat(fh, mdict)
 
 
 def _load_mat(path: Path) -> dict:
     from scipy.io import loadmat
 
     m = loadmat(path, squeeze_me=False)
+    if "format" not in m:
+        return {}
 
     def strings(key: str) -> list[str]:
         return [str(np.asarray(s).reshape(-1)[0]) if np.asarray(s).size else ""
