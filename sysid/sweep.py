@@ -20,7 +20,10 @@ from __future__ import annotations
 import concurrent.futures
 import inspect
 import logging
+import re
+import signal
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -96,6 +99,18 @@ class SweepResult:
         top = max(r.mean_fit for r in ok)
         close = [r for r in ok if r.mean_fit >= top - tol]
         return min(close, key=lambda r: (r.order, -r.mean_fit))
+
+    def failures(self) -> list[tuple[str, int]]:
+        """Why models failed: ``(message, count)``, most common first. Messages that differ only
+        in their numbers (horizons, orders, ranks) count as one; the first one is shown."""
+        counts: Counter[str] = Counter()
+        example: dict[str, str] = {}
+        for r in self.rows:
+            if r.error is not None:
+                key = re.sub(r"\d+(\.\d+)?(e[-+]?\d+)?", "#", r.error)
+                counts[key] += 1
+                example.setdefault(key, r.error)
+        return [(example[k], n) for k, n in counts.most_common()]
 
     @property
     def fits(self) -> np.ndarray:
@@ -213,18 +228,49 @@ def sweep(
             if progress is not None:
                 progress(done, total)
     else:
-        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
-            futs = {pool.submit(_pair_task, past=p, future=f, **common): (p, f) for p, f in pairs}
-            for fut in concurrent.futures.as_completed(futs):
-                results[futs[fut]] = fut.result()
-                done += len(orders)
-                if progress is not None:
-                    progress(done, total)
+        def finished(pair: tuple[int, int], pair_rows: list[SweepRow]) -> None:
+            nonlocal done
+            results[pair] = pair_rows
+            done += len(orders)
+            if progress is not None:
+                progress(done, total)
+
+        _run_parallel(pairs, common, workers=workers, finished=finished)
     rows = tuple(row for pair in pairs for row in results[pair])
     n_failed = sum(r.error is not None for r in rows)
     log.info("sweep of %d models (%d failed) in %.1f s", len(rows), n_failed,
              time.perf_counter() - t0)
     return SweepResult(rows=rows, method=name, horizon=horizon, window=window)
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (it stops the pool)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_parallel(pairs: list[tuple[int, int]], common: dict[str, Any], *, workers: int,
+                  finished: Callable[[tuple[int, int], list[SweepRow]], None]) -> None:
+    """Run the pairs in worker processes, calling ``finished(pair, rows)`` as each ends.
+
+    On any exception in this process (Ctrl-C included) pending pairs are cancelled and the
+    workers terminated before it propagates, so an interrupted sweep ends at once.
+    """
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=min(workers, len(pairs)),
+                                                  initializer=_ignore_sigint)
+    try:
+        futs = {pool.submit(_pair_task, past=p, future=f, **common): (p, f) for p, f in pairs}
+        for fut in concurrent.futures.as_completed(futs):
+            finished(futs[fut], fut.result())
+    except BaseException:
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in procs:
+            proc.join(timeout=5)
+        raise
+    pool.shutdown(wait=True)
 
 
 def select_order(

@@ -99,3 +99,36 @@ def test_best_needs_a_successful_stable_model() -> None:
     with pytest.raises(DataError, match="method 'n4sid'"):
         sweep(IOData(u=np.ones(10), y=np.ones(10), dt=0.1), pasts=[2], futures=[2],
               orders=[1], method="n4sid")
+
+
+def test_failures_are_grouped_most_common_first(pbsid_data: tuple[IOData, IOData]) -> None:
+    ident, val = pbsid_data
+    result = sweep(ident, pasts=[5, 8], futures=[3, 4], orders=[4, 12, 13], validation=val,
+                   horizon=1)
+    failures = result.failures()
+    # orders 12 and 13 exceed (future - 1) * outputs for every pair: messages differing only in
+    # their numbers are one reason, shown by its first message
+    assert sum(n for _, n in failures) == sum(r.error is not None for r in result.rows) == 8
+    assert len(failures) == 1 and failures[0][1] == 8 and "order=12" in failures[0][0]
+    ok = sweep(ident, pasts=[5], futures=[4], orders=[4], validation=val, horizon=1)
+    assert ok.failures() == []
+
+
+def test_interrupted_parallel_sweep_stops_its_workers(pbsid_data: tuple[IOData, IOData]) -> None:
+    """An exception in the caller's process (Ctrl-C arrives as KeyboardInterrupt) cancels the
+    pending pairs and terminates the workers instead of waiting for the whole grid."""
+    import multiprocessing
+    import time
+
+    ident, _ = pbsid_data
+
+    def interrupt(done: int, total: int) -> None:
+        raise KeyboardInterrupt
+
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        sweep(ident, pasts=range(10, 60), futures=range(10, 40), orders=[4], workers=2,
+              progress=interrupt)
+    assert time.perf_counter() - t0 < 20
+    time.sleep(0.2)
+    assert not [p for p in multiprocessing.active_children() if p.is_alive()]
