@@ -22,19 +22,25 @@ from rich.table import Table
 
 from sysid.cli_support import (
     JSON_OPTION,
+    MODEL_SUFFIXES,
     RRD_OPTION,
     Group,
+    check_rrd,
     console,
     fit_table,
     fits_json,
+    grid_max,
+    grid_min,
     load_flights,
+    parse_grid,
     parse_range,
     parse_window,
     pole_table,
     session_options,
     write_rrd,
 )
-from sysid.errors import ParameterError, SysIdError
+from sysid.cli_types import FiniteFloat, check_output
+from sysid.errors import DataError, HorizonError, SysIdError
 from sysid.iem import iem
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
@@ -50,6 +56,10 @@ _METHODS: dict[str, Callable[..., StateSpaceModel]] = {"iem": iem, "po-moesp": p
 
 
 _IDENTIFY_WINDOW_S = 2.0
+#: Largest sweep grid accepted (models); the thesis' coarse-to-fine search was 756 models.
+MAX_SWEEP_MODELS = 100_000
+FORCE_OPTION = click.option("--force", is_flag=True,
+                            help="Replace --out if it exists (never an input file).")
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -72,17 +82,18 @@ def main(verbose: int) -> None:
 @click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
 @click.option("--order", default=8, show_default=True, type=click.IntRange(min=1))
 @click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
-@click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
+@click.option("--future", default=17, show_default=True, type=click.IntRange(min=2))
 @click.option("--feedthrough/--no-feedthrough", default=None,
               help="Estimate D (default: no for iem, yes for po-moesp).")
 @session_options
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              help="Save the model (.h5, .json or .mat).")
+              help="Save the model (.h5, .json or .mat); an existing file needs --force.")
+@FORCE_OPTION
 @JSON_OPTION
 @RRD_OPTION
 def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, future: int,
-             feedthrough: bool | None, out: Path | None, as_json: bool, rrd: Path | None,
-             **opts: Any) -> None:
+             feedthrough: bool | None, out: Path | None, force: bool, as_json: bool,
+             rrd: Path | None, **opts: Any) -> None:
     """Identify one model from one or more sessions (each its own experiment).
 
     Prints the poles, whether the model and its predictor A - KC are stable, and the fit on
@@ -96,6 +107,10 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
         --inputs controller.cmd_roll,controller.cmd_pitch,controller.cmd_yaw \\
         --outputs controller.r_roll,controller.r_pitch,controller.r_yaw
     """
+    if out is not None:
+        check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
+                     overwrite=force, force_flag="--force")
+    check_rrd(rrd, inputs=sessions)
     flights = load_flights(sessions, opts=opts)
     kwargs = {} if feedthrough is None else {"feedthrough": feedthrough}
     with Console(stderr=True).status(f"identifying ({method}, n={order})"):
@@ -140,7 +155,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
 @click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--horizon", type=click.IntRange(min=1), help="k-step-ahead prediction.")
-@click.option("--window-s", type=click.FloatRange(min=0, min_open=True),
+@click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
               help="Simulate over windows of this many seconds, each from its own x0.")
 @click.option("--window", default="excitation", show_default=True,
               help="Phase name or kind, T0:T1 (session seconds), or 'all'.")
@@ -159,6 +174,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     Example:
       sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
     """
+    check_rrd(rrd, inputs=(model_path, *sessions))
     model = load_model(model_path)
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                     outputs=model.output_names)
@@ -195,7 +211,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
 @click.argument("session", type=click.Path(path_type=Path))
 @click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
 @click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
-@click.option("--future", default=17, show_default=True, type=click.IntRange(min=1))
+@click.option("--future", default=17, show_default=True, type=click.IntRange(min=2))
 @click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
               help="How many singular values to list.")
 @session_options
@@ -233,13 +249,15 @@ def order(session: Path, method: str, past: int, future: int, show: int, as_json
 @click.argument("session", type=click.Path(path_type=Path))
 @click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
 @click.option("--pasts", default="20:80:10", show_default=True, help="START:STOP:STEP or a,b,c.")
-@click.option("--futures", default="5:25:4", show_default=True, help="START:STOP:STEP or a,b,c.")
+@click.option("--futures", default="5:25:4", show_default=True,
+              help="START:STOP:STEP or a,b,c (each >= 2).")
 @click.option("--orders", default="8", show_default=True, help="START:STOP:STEP or a,b,c.")
-@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1))
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Worker processes (Ctrl-C stops them all).")
 @click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
               help="Score on this session (repeatable; default: the identification data).")
 @click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
-@click.option("--window-s", type=click.FloatRange(min=0, min_open=True),
+@click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
               help="Score by simulation over windows of this many seconds.")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1))
 @session_options
@@ -250,17 +268,26 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
               as_json: bool, rrd: Path | None, **opts: Any) -> None:
     """Identify a model for every (past, future, order) and rank them by fit.
 
+    Models that cannot be identified are counted with their reasons; when none can, the
+    command exits with 2.
+
     \b
     Example:
       sysid sweep flight.h5 --pasts 20:80:10 --futures 5:25:4 --orders 6,8,10 \\
         --validate other_flight.h5 --window-s 5 --workers 2
     """
-    grid = {"pasts": parse_range(text=pasts, option="--pasts"),
-            "futures": parse_range(text=futures, option="--futures"),
-            "orders": parse_range(text=orders, option="--orders")}
+    lazy = {"pasts": parse_grid(text=pasts, option="--pasts"),
+            "futures": parse_grid(text=futures, option="--futures", minimum=2),
+            "orders": parse_grid(text=orders, option="--orders")}
+    check_rrd(rrd, inputs=(session, *validate))
     flights = load_flights([session], opts=opts)
+    _check_sweep_horizons(flights[0], pasts=lazy["pasts"], futures=lazy["futures"])
+    total = len(lazy["pasts"]) * len(lazy["futures"]) * len(lazy["orders"])
+    if total > MAX_SWEEP_MODELS:
+        raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
+                        "coarser steps (START:STOP:STEP) and refine around the best")
+    grid = {k: list(v) for k, v in lazy.items()}
     val = load_flights(list(validate), opts=opts) if validate else None
-    total = len(grid["pasts"]) * len(grid["futures"]) * len(grid["orders"])
     with Progress("sweep", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), disable=as_json) as bar:
         task = bar.add_task("sweep", total=total)
@@ -270,31 +297,68 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
                            progress=lambda done, _total: bar.update(task, completed=done))
     ok = sorted((r for r in result.rows if r.error is None and np.isfinite(r.mean_fit)),
                 key=lambda r: -r.mean_fit)
+    failures = result.failures()
+    n_failed = sum(n for _, n in failures)
     try:
         best = result.best()
     except SysIdError:
         best = None
-    if rrd is not None and best is not None and best.model is not None:
+    rrd_written = rrd is not None and best is not None and best.model is not None
+    if rrd_written:
         write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
     if as_json:
         click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
-                               "n_failed": sum(r.error is not None for r in result.rows),
+                               "n_failed": n_failed,
+                               "failures": [{"error": e, "count": n} for e, n in failures],
                                "best": best.to_record() if best else None,
-                               "top": [r.to_record() for r in ok[:top]]}, indent=1))
-        return
-    con = console()
-    table = Table("past", "future", "order", "mean fit [%]", "max |pole|", "stable", "pred. stable",
-                  title=f"best {min(top, len(ok))} of {len(result.rows)} models")
-    for r in ok[:top]:
-        table.add_row(str(r.past), str(r.future), str(r.order), f"{r.mean_fit:.2f}",
-                      f"{np.abs(r.poles).max():.4f}", str(r.stable), str(r.predictor_stable))
-    con.print(table)
-    if best is not None:
-        con.print(f"selected (smallest order within 0.5 points of the best stable fit): "
-                  f"past {best.past}, future {best.future}, order {best.order}, "
-                  f"fit {best.mean_fit:.2f} %")
+                               "top": [r.to_record() for r in ok[:top]],
+                               "rrd": str(rrd) if rrd_written else None}, indent=1))
     else:
-        con.print("[yellow]no stable model in the grid[/]")
+        con = console()
+        if ok:
+            table = Table("past", "future", "order", "mean fit [%]", "max |pole|", "stable",
+                          "pred. stable", title=f"best {min(top, len(ok))} of {len(result.rows)} "
+                          "models")
+            for r in ok[:top]:
+                table.add_row(str(r.past), str(r.future), str(r.order), f"{r.mean_fit:.2f}",
+                              f"{np.abs(r.poles).max():.4f}", str(r.stable),
+                              str(r.predictor_stable))
+            con.print(table)
+        if failures:
+            con.print(f"[yellow]{n_failed} of {len(result.rows)} models failed:[/]")
+            for msg, n in failures[:3]:
+                con.print(f"  {n} x {msg}", markup=False, soft_wrap=True)
+            if len(failures) > 3:
+                con.print(f"  ... and {len(failures) - 3} other reasons (--json lists all)")
+        if best is not None:
+            con.print(f"selected (smallest order within 0.5 points of the best stable fit): "
+                      f"past {best.past}, future {best.future}, order {best.order}, "
+                      f"fit {best.mean_fit:.2f} %")
+        elif ok:
+            con.print("[yellow]no stable model in the grid[/]")
+    if rrd is not None and not rrd_written:
+        click.echo(f"warning: --rrd {rrd} not written: "
+                   f"{'no stable model' if ok else 'no model'} to show", err=True)
+    if not ok:
+        reason = (" (reasons above)" if not as_json else
+                  f"; most often: {failures[0][0]}" if failures else "")
+        raise DataError(f"none of the {len(result.rows)} models could be identified{reason}")
+
+
+def _check_sweep_horizons(data: Any, *, pasts: Any, futures: Any) -> None:
+    """Refuse horizons the data cannot support before the sweep runs (they would only fail,
+    and a huge range would take the memory of every Hankel matrix it tries). One flight of N
+    samples and c channels has room for past + future <= (N + 1) / (c + 1)."""
+    c = data.n_inputs + data.n_outputs
+    room = (data.n_samples + 1) // (c + 1)
+    for name, values, other, other_name in (("past", pasts, futures, "future"),
+                                            ("future", futures, pasts, "past")):
+        largest, shortest = grid_max(values), grid_min(other)
+        if largest + shortest > room:
+            raise HorizonError(
+                f"--{name}s goes up to {largest}, but {data.n_samples} samples with {c} channels "
+                f"allow past + future <= {room}: {name} <= {room - shortest} with {other_name} "
+                f"{shortest}; lower the {name}s or pass a longer --window")
 
 
 @main.command()
@@ -302,7 +366,8 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
 @click.option("--format", "fmt", required=True, type=click.Choice(["json", "mat"]))
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Output file (default: MODEL with the format's suffix).")
-def export(model_path: Path, fmt: str, out: Path | None) -> None:
+@FORCE_OPTION
+def export(model_path: Path, fmt: str, out: Path | None, force: bool) -> None:
     """Write a model file as JSON or MATLAB .mat (A, B, C, D, K, Ts, names, units).
 
     \b
@@ -311,9 +376,7 @@ def export(model_path: Path, fmt: str, out: Path | None) -> None:
     """
     model = load_model(model_path)
     target = out or model_path.with_suffix(f".{fmt}")
-    if target.suffix.lower() != f".{fmt}":
-        raise ParameterError(f"--out {target} does not end in .{fmt}; name it *.{fmt}")
-    if target.exists():
-        raise ParameterError(f"{target} already exists; pass another --out")
+    check_output(target, option="--out", suffixes=(f".{fmt}",), inputs=(model_path,),
+                 overwrite=force, force_flag="--force")
     model.save(target)
     click.echo(f"wrote {target}")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import math
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from sysid.cli_types import FiniteFloat, check_output
 from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import MissingDependencyError, ParameterError, SysIdError
@@ -28,21 +30,30 @@ from sysid.session_io import SessionFileError, Window, load_sessions
 
 __all__ = [
     "JSON_OPTION",
+    "MODEL_SUFFIXES",
     "RRD_OPTION",
     "Group",
+    "check_rrd",
     "console",
     "fit_table",
     "fits_json",
+    "grid_max",
+    "grid_min",
     "load_flights",
+    "parse_grid",
     "parse_range",
     "parse_window",
     "pole_table",
+    "require_viz",
     "session_options",
     "split_names",
     "write_rrd",
 ]
 
 log = logging.getLogger(__name__)
+
+#: Suffixes a model file may have (see :mod:`sysid.model_io`).
+MODEL_SUFFIXES = (".h5", ".hdf5", ".json", ".mat")
 
 
 class Group(click.Group):
@@ -51,6 +62,11 @@ class Group(click.Group):
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
+        except click.UsageError as exc:  # bad option values, refused output files
+            if type(exc).__name__ == "NoArgsIsHelpError":
+                raise
+            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
+            msg = f"{exc.format_message()} (see '{where} -h')"
         except (SysIdError, SessionFileError) as exc:
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
@@ -69,29 +85,52 @@ def parse_window(text: str) -> Window:
     if ":" in text:
         try:
             t0, t1 = (float(x) for x in text.split(":"))
+            if not (math.isfinite(t0) and math.isfinite(t1)):
+                raise ValueError
         except ValueError:
-            raise ParameterError(f"--window {text!r}: use a phase name, T0:T1 seconds or all")\
-                from None
+            raise ParameterError(f"--window {text!r}: use a phase name, T0:T1 (finite seconds) "
+                                 "or all") from None
         return (t0, t1)
     return text
 
 
-def parse_range(*, text: str, option: str) -> list[int]:
-    """``20:80:10`` -> 20, 30, ..., 80 (stop included); ``6,8`` -> 6, 8; ``8`` -> 8."""
+def parse_grid(*, text: str, option: str, minimum: int = 1) -> range | list[int]:
+    """Like :func:`parse_range` but a ``START:STOP:STEP`` stays a lazy :class:`range`, so a huge
+    range can be refused (by its length or largest value) before it takes memory. The values
+    are ascending for a range; a list keeps the order given."""
     try:
         if ":" in text:
             parts = [int(x) for x in text.split(":")]
-            start, stop, step = [*parts, 1][:3] if len(parts) == 2 else parts
-            if step < 1 or stop < start or len(parts) > 3:
+            if len(parts) > 3:
                 raise ValueError
-            return list(range(start, stop + 1, step))
-        values = [int(x) for x in text.split(",") if x.strip()]
+            start, stop, step = [*parts, 1][:3] if len(parts) == 2 else parts
+            if step < 1 or stop < start:
+                raise ValueError
+            values: range | list[int] = range(start, stop + 1, step)
+        else:
+            values = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise ParameterError(f"{option} {text!r}: use START:STOP:STEP, a,b,c or one integer")\
-            from None
-    if not values or min(values) < 1:
-        raise ParameterError(f"{option} {text!r}: give positive integers")
+        raise ParameterError(f"{option} {text!r}: use START:STOP:STEP (STOP >= START, STEP >= 1),"
+                             " a,b,c or one integer") from None
+    if not values or grid_min(values) < minimum:
+        what = "positive integers" if minimum == 1 else f"integers >= {minimum}"
+        raise ParameterError(f"{option} {text!r}: give {what}")
     return values
+
+
+def grid_min(values: range | Sequence[int]) -> int:
+    return values[0] if isinstance(values, range) else min(values)
+
+
+def grid_max(values: range | Sequence[int]) -> int:
+    return values[-1] if isinstance(values, range) else max(values)
+
+
+def parse_range(*, text: str, option: str, minimum: int = 1) -> list[int]:
+    """``20:80:10`` -> 20, 30, ..., 80 (stop included); ``6,8`` -> 6, 8; ``8`` -> 8.
+
+    Every value must be an integer ``>= minimum`` (ranges too)."""
+    return list(parse_grid(text=text, option=option, minimum=minimum))
 
 
 def split_names(text: str) -> list[str]:
@@ -107,7 +146,7 @@ def session_options(func: Callable) -> Callable:
                      help="Output channels, as --inputs."),
         click.option("--window", default="excitation", show_default=True,
                      help="Phase name or kind, T0:T1 (session seconds), or 'all'."),
-        click.option("--dt", default=0.02, show_default=True, type=click.FloatRange(min=1e-4),
+        click.option("--dt", default=0.02, show_default=True, type=FiniteFloat(min=1e-4),
                      help="Grid period in seconds (zero-order hold)."),
         click.option("--detrend", default="mean", show_default=True,
                      type=click.Choice(["mean", "linear", "none"])),
@@ -161,21 +200,42 @@ def fits_json(res: CompareResult) -> dict[str, float | None]:
             for n, f in zip(res.output_names, res.fit, strict=True)}
 
 
-def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
-               comparisons: Sequence[CompareResult] = (), sweep: Any = None) -> None:
-    """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
-    :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing."""
+def require_viz() -> Any:
+    """:mod:`sysid.viz`, or a one-line error naming --rrd when it cannot be imported."""
     try:
-        viz = importlib.import_module("sysid.viz")
+        return importlib.import_module("sysid.viz")
     except ImportError as exc:
         raise MissingDependencyError(f"--rrd needs sysid.viz, which cannot be imported ({exc});"
                                      " drop --rrd") from None
-    rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
+
+
+def check_rrd(rrd: Path | None, *, inputs: Sequence[Path]) -> Path | None:
+    """Refuse a ``--rrd`` path before any work: it must end in .rrd, be no input of the
+    command, and its folder must exist and be writable (an existing .rrd is replaced)."""
+    if rrd is None:
+        return None
+    check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=inputs, overwrite=True)
+    require_viz()
+    return rrd
+
+
+def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
+               comparisons: Sequence[CompareResult] = (), sweep: Any = None) -> None:
+    """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
+    :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing or
+    the file cannot be written."""
+    viz = require_viz()
     try:
-        viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
-                               sweep=sweep)
-    finally:
-        rec.disconnect()
+        rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
+        try:
+            viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
+                                   sweep=sweep)
+        finally:
+            rec.disconnect()
+    except (OSError, RuntimeError) as exc:
+        lines = str(exc).strip().splitlines()
+        reason = getattr(exc, "strerror", None) or (lines[0] if lines else type(exc).__name__)
+        raise ParameterError(f"--rrd {str(path)!r} could not be written: {reason}") from None
     log.info("wrote %s", path)
 
 

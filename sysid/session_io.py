@@ -151,6 +151,10 @@ def _host_window(session: Session, window: Window) -> tuple[float, float] | None
     return t0, t1
 
 
+#: Warn when the grid is this many times finer than the slowest logged stream.
+_UPSAMPLE_WARN = 5.0
+
+
 def load_session(
     path: str | os.PathLike[str],
     *,
@@ -198,6 +202,10 @@ def load_session(
         raise DataError(f"{session.path}: {span} holds less than one {dt} s step where every "
                         f"channel has data; pick another window")
     period = max((session[c.stream].period_s or 0.0) for c in chans)
+    if period > 0 and dt < period / _UPSAMPLE_WARN:
+        log.warning("%s: dt=%g s is %.0fx finer than the logged period %g s: each sample is "
+                    "repeated (zero-order hold) and the horizons count grid steps; pass "
+                    "dt >= %g", session.path, dt, period / dt, period, period)
     data = iodata_from_streams(
         streams=streams, inputs=[c.label for c in ins], outputs=[c.label for c in outs],
         dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, period))

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 import sysid
 from sysid.cli import main, parse_range
+from sysid.errors import ParameterError
 from sysid.validate import fit_percent
 from tests.sysid.systems import pole_error
 from tests.sysid_io.flights import PWM_MID, held, known_system, write_flight
@@ -125,6 +126,11 @@ def test_parse_range() -> None:
     assert parse_range(text="20:80:10", option="--pasts") == [20, 30, 40, 50, 60, 70, 80]
     assert parse_range(text="6,8", option="--orders") == [6, 8]
     assert parse_range(text="3:5", option="--orders") == [3, 4, 5]
+    for text in ("-2:1", "0:1", "0", "1,-3"):  # ranges are checked like single values
+        with pytest.raises(ParameterError, match="positive integers"):
+            parse_range(text=text, option="--pasts")
+    with pytest.raises(ParameterError, match=">= 2"):
+        parse_range(text="1:4", option="--futures", minimum=2)
 
 
 @pytest.mark.parametrize(("args", "words"), [
