@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import inspect
+import itertools
 import logging
 import re
 import signal
@@ -255,12 +256,27 @@ def _run_parallel(pairs: list[tuple[int, int]], common: dict[str, Any], *, worke
     On any exception in this process (Ctrl-C included) pending pairs are cancelled and the
     workers terminated before it propagates, so an interrupted sweep ends at once.
     """
-    pool = concurrent.futures.ProcessPoolExecutor(max_workers=min(workers, len(pairs)),
+    n_workers = min(workers, len(pairs))
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=n_workers,
                                                   initializer=_ignore_sigint)
+    todo = iter(pairs)
+    running: dict[concurrent.futures.Future, tuple[int, int]] = {}
+
+    def top_up() -> None:
+        # At most two pairs per worker in flight: submitting hundreds at once can fill the
+        # executor's wake-up pipe and deadlock it under load (CPython gh-105829), and a short
+        # queue leaves little to cancel.
+        for p, f in itertools.islice(todo, 2 * n_workers - len(running)):
+            running[pool.submit(_pair_task, past=p, future=f, **common)] = (p, f)
+
     try:
-        futs = {pool.submit(_pair_task, past=p, future=f, **common): (p, f) for p, f in pairs}
-        for fut in concurrent.futures.as_completed(futs):
-            finished(futs[fut], fut.result())
+        top_up()
+        while running:
+            done, _ = concurrent.futures.wait(running, timeout=0.5,
+                                              return_when=concurrent.futures.FIRST_COMPLETED)
+            for fut in done:
+                finished(running.pop(fut), fut.result())
+            top_up()
     except BaseException:
         procs = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)

@@ -233,7 +233,7 @@ def test_ctrl_c_stops_a_parallel_sweep(files, whole_group) -> None:
     proc = subprocess.Popen([*cmd, "sweep", str(files["session"]), "--pasts", "20:150:5",
                              "--futures", "5:40:2", "--orders", "4,8", "--workers", "2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_default_sigint)
     try:
         workers = _wait_for_children(proc.pid, n=2, timeout=30)
         assert proc.poll() is None, proc.communicate()
@@ -261,6 +261,15 @@ def _proc_state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except (OSError, IndexError):
         return "Z"
+
+
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT as a terminal gives it. A test run started in the
+    background of a non-interactive shell ignores SIGINT, children inherit that, and Python
+    then never raises KeyboardInterrupt."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for_children(pid: int, *, n: int, timeout: float) -> list[int]:
