@@ -33,7 +33,6 @@ from sysid.cli_support import (
     grid_min,
     load_flights,
     parse_grid,
-    parse_range,
     parse_window,
     pole_table,
     session_options,
@@ -48,7 +47,7 @@ from sysid.order import singular_values
 from sysid.sweep import sweep as run_sweep
 from sysid.validate import compare
 
-__all__ = ["main", "parse_range", "parse_window", "pole_table"]
+__all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
 

@@ -41,7 +41,6 @@ __all__ = [
     "grid_min",
     "load_flights",
     "parse_grid",
-    "parse_range",
     "parse_window",
     "pole_table",
     "require_viz",
@@ -63,7 +62,7 @@ class Group(click.Group):
         try:
             return super().invoke(ctx)
         except click.UsageError as exc:  # bad option values, refused output files
-            if type(exc).__name__ == "NoArgsIsHelpError":
+            if isinstance(exc, click.exceptions.NoArgsIsHelpError):  # `sysid X` alone: help
                 raise
             where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
             msg = f"{exc.format_message()} (see '{where} -h')"
@@ -95,9 +94,11 @@ def parse_window(text: str) -> Window:
 
 
 def parse_grid(*, text: str, option: str, minimum: int = 1) -> range | list[int]:
-    """Like :func:`parse_range` but a ``START:STOP:STEP`` stays a lazy :class:`range`, so a huge
-    range can be refused (by its length or largest value) before it takes memory. The values
-    are ascending for a range; a list keeps the order given."""
+    """``20:80:10`` -> range(20, 81, 10) (stop included); ``6,8`` -> [6, 8]; ``8`` -> [8].
+
+    Every value must be an integer ``>= minimum``. A ``START:STOP:STEP`` stays a lazy
+    :class:`range`, so a huge range can be refused (by its length or largest value) before it
+    takes memory."""
     try:
         if ":" in text:
             parts = [int(x) for x in text.split(":")]
@@ -124,13 +125,6 @@ def grid_min(values: range | Sequence[int]) -> int:
 
 def grid_max(values: range | Sequence[int]) -> int:
     return values[-1] if isinstance(values, range) else max(values)
-
-
-def parse_range(*, text: str, option: str, minimum: int = 1) -> list[int]:
-    """``20:80:10`` -> 20, 30, ..., 80 (stop included); ``6,8`` -> 6, 8; ``8`` -> 8.
-
-    Every value must be an integer ``>= minimum`` (ranges too)."""
-    return list(parse_grid(text=text, option=option, minimum=minimum))
 
 
 def split_names(text: str) -> list[str]:

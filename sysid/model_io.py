@@ -43,7 +43,7 @@ def save(model: StateSpaceModel, path: Path) -> Path:
     """Write ``model`` to ``path`` in the format its suffix names (one-line
     :class:`ModelFileError` when it cannot be written)."""
     suffix = path.suffix.lower()
-    writers = {".h5": _save_h5, ".hdf5": _save_h5, ".mat": _save_mat,
+    writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat,
                ".json": lambda m, p: p.write_text(m.to_json())}
     if suffix not in writers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
@@ -81,7 +81,7 @@ def load(path: Path) -> StateSpaceModel:
     if not path.is_file():
         raise ModelFileError(f"model file {str(path)!r} does not exist; check the path")
     suffix = path.suffix.lower()
-    readers = {".h5": _load_h5, ".hdf5": _load_h5, ".mat": _load_mat,
+    readers = {**dict.fromkeys(_H5, _load_h5), ".mat": _load_mat,
                ".json": lambda p: json.loads(p.read_text())}
     if suffix not in readers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")

@@ -11,7 +11,6 @@ k-step-ahead prediction through the innovation form (see ``docs/sysid.md``).
 from __future__ import annotations
 
 import json
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ from rich.table import Table
 from groundstation.flight import FlightResult, fly_plan
 from groundstation.plan_variants import advance_prbs
 from groundstation.plans import Plan, load_plan
+from groundstation.recorder import check_folder
 from sysid.cli_types import FiniteFloat
 
 __all__ = ["command"]
@@ -59,20 +59,6 @@ def _poles_table(model) -> Table:
     return table
 
 
-def _check_folder(folder: Path) -> None:
-    """Create ``folder`` if missing; a one-line ``--out`` error if it cannot hold the files."""
-    if folder.exists() and not folder.is_dir():
-        raise click.BadParameter(f"{str(folder)!r} is a file; --out takes a folder",
-                                 param_hint="--out")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise click.BadParameter(f"cannot create folder {str(folder)!r} ({exc.strerror})",
-                                 param_hint="--out") from None
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise click.BadParameter(f"folder {str(folder)!r} is not writable", param_hint="--out")
-
-
 @click.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Folder for the session and model files (default: a new temporary folder).")
@@ -104,7 +90,7 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
     from sysid.session_io import load_session
 
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
-    _check_folder(folder)
+    check_folder(folder)  # the recorder's rule: created if missing, must be writable
     console = Console(highlight=False)
     base = load_plan("prbs-3axis")
     flights = [

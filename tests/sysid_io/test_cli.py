@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 import sysid
-from sysid.cli import main, parse_range
+from sysid.cli import main, parse_grid
 from sysid.errors import ParameterError
 from sysid.validate import fit_percent
 from tests.sysid.systems import pole_error
@@ -122,15 +122,17 @@ def test_export_round_trip(flights, tmp_path) -> None:
     assert again.exit_code == 2 and "already exists" in again.stderr
 
 
-def test_parse_range() -> None:
-    assert parse_range(text="20:80:10", option="--pasts") == [20, 30, 40, 50, 60, 70, 80]
-    assert parse_range(text="6,8", option="--orders") == [6, 8]
-    assert parse_range(text="3:5", option="--orders") == [3, 4, 5]
+def test_parse_grid() -> None:
+    assert list(parse_grid(text="20:80:10", option="--pasts")) == [20, 30, 40, 50, 60, 70, 80]
+    assert list(parse_grid(text="6,8", option="--orders")) == [6, 8]
+    assert list(parse_grid(text="3:5", option="--orders")) == [3, 4, 5]
+    huge = parse_grid(text="1:100000000", option="--pasts")  # lazy: no list of 1e8 ints
+    assert isinstance(huge, range) and len(huge) == 100_000_000
     for text in ("-2:1", "0:1", "0", "1,-3"):  # ranges are checked like single values
         with pytest.raises(ParameterError, match="positive integers"):
-            parse_range(text=text, option="--pasts")
+            parse_grid(text=text, option="--pasts")
     with pytest.raises(ParameterError, match=">= 2"):
-        parse_range(text="1:4", option="--futures", minimum=2)
+        parse_grid(text="1:4", option="--futures", minimum=2)
 
 
 @pytest.mark.parametrize(("args", "words"), [
