@@ -12,9 +12,9 @@ stopped the clock carries on as the host clock scaled by ``speed``, so it stays 
 
 Pacing: a scheduler that sleeps on this clock also paces the simulation
 (:meth:`groundstation.sim.simulator.Simulator.pace`): simulated time runs at most a few ms past the
-time the scheduler asked to wake at, and waits (up to half a second of wall time) for it to sleep
-again. A host briefly too busy to wake the runner therefore freezes simulated time, as a faster
-host would, instead of delaying setpoints in simulated time.
+time the scheduler asked to wake at, and waits (up to 3 s of wall time, or until the link
+detaches) for it to sleep again. A host briefly too busy to wake the runner therefore freezes
+simulated time, as a faster host would, instead of delaying setpoints in simulated time.
 """
 
 from __future__ import annotations

@@ -50,7 +50,9 @@ _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
 _PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
-_PACE_HOLD_S = 0.5  # ... and holds there at most this long (wall s) for the scheduler
+_PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler; the
+# hold ends at once when the link detaches, so only a scheduler that stops sleeping mid-link
+# (a stalled or crashed client) ever waits it out
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
 _NEVER_ATTACHED_S = 10.0  # ... or this long if no link ever attached (created by its clock)
 
@@ -166,9 +168,10 @@ class Simulator:
     def pace(self, *, until_s: float) -> None:
         """A scheduler sleeps until ``until_s``: let the simulation run to it and then hold,
         at most ``_PACE_LEAD_MS`` past it, until the scheduler sleeps again (or ``_PACE_HOLD_S``
-        of wall time passes). A host too busy to wake its scheduler on time thus freezes
-        simulation time instead of making setpoints late: at speed 20, 25 ms of GIL contention
-        would otherwise be a 500 ms setpoint gap, which makes the firmware re-lock the thrust.
+        of wall time passes, or the link detaches). A host too busy to wake its scheduler on time
+        thus freezes simulation time instead of making setpoints late: at speed 20, 25 ms of GIL
+        contention would otherwise be a 500 ms setpoint gap, which makes the firmware re-lock the
+        thrust.
         """
         ms = math.ceil(until_s * 1000.0) + _PACE_LEAD_MS
         with self.cond:
@@ -218,6 +221,7 @@ class Simulator:
             if token == self._token:
                 self._token, self._on_lost = 0, None
                 self._out.clear()
+                self._pace_ms = None  # no scheduler on a detached link: time runs freely
                 self._rx.append((-1, 0, b""))  # tells the simulation thread: link down
                 self.cond.notify_all()
 

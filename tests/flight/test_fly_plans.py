@@ -76,3 +76,24 @@ def test_console_text_is_recorded_as_events(sim_uri, tmp_path):
     console = [e for e in open_session(result.path).events() if e.source == "console"]
     assert [e.text for e in console if e.text.startswith("PM: Battery low (")], console
     assert all(not e.text.endswith("\n") for e in console)
+
+
+def test_host_stall_freezes_simulation_time(sim_uri, tmp_path):
+    """A ground-station thread starved for a second of wall time (a busy host: 20 s of flight at
+    speed 20) must not become a setpoint gap on the flight clock: the simulation waits for the
+    scheduler, as a faster host would have kept up. The firmware would re-lock the thrust after
+    500 ms without setpoints, so a gap would also bring the vehicle down."""
+    import time
+
+    plan, uri = load_plan("hover-check"), sim_uri()
+
+    def stall(k: int) -> None:
+        if k == 40:  # hovering
+            time.sleep(1.0)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=stall)
+    assert not result.aborted, result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    check_setpoints(s, plan, complete=True)  # never more than one period (+20 ms) between two
+    check_airborne(s, plan)
