@@ -5,27 +5,37 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean fuzz sitl
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,control]'
+	$(BIN)/python -m pip install --quiet -e '.[test,control,dask]'
 	@touch $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/groundstation demo
 
+# The real Crazyflie firmware (GPL-3.0, CrazySim's SITL build) as a program in .sitl/cf2, from
+# ../shared/sitl (SITL_SRC=... elsewhere); kept out of the Python package. See docs/sitl.md.
+sitl:
+	@./tools/build_sitl.sh
+
 test: $(STAMP)
-	$(BIN)/ruff check groundstation sysid tests hw_tests bench
+	@$(MAKE) --no-print-directory sitl || echo "make test: no SITL firmware; its tests are skipped"
+	$(BIN)/ruff check cfsession cfcommon groundstation sysid tests hw_tests bench
 	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[test,control,bench]'
+	$(BIN)/python -m pip install --quiet -e '.[test,control,dask,bench]'
 	$(BIN)/python -m bench
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache *.egg-info
+
+FUZZ_CASES ?= 2000
+fuzz: $(STAMP)  ## bigger fuzz campaign: every target, FUZZ_CASES cases each, seed from the date
+	$(BIN)/python -m tests.fuzz.harness --cases $(FUZZ_CASES)

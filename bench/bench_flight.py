@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.clock import MonotonicClock
+from cfsession import open_session
 from groundstation.flight import fly_plan
-from groundstation.link import BATTERY_BLOCK, BLOCK_PERIOD_S, FLIGHT_BLOCKS, open_link
-from groundstation.session import open_session
+from groundstation.flight.clock import MonotonicClock
+from groundstation.flight.link import BATTERY_BLOCK, BLOCK_PERIOD_S, FLIGHT_BLOCKS, open_link
 
 JITTER_P99_MS = 2.0
 CPU_SHARE = 0.10

@@ -13,9 +13,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from cfsession import SessionWriter, open_session
 from groundstation.commands.replay import replay_session
 from groundstation.live import open_view
-from groundstation.session import SessionWriter, open_session
 from tests.viz.sessions import flight_specs
 
 _SECONDS = 60

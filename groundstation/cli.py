@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import importlib
 import logging
-import sys
 
 import click
 
+from cfcommon.cli import OneLineErrorGroup
 from groundstation import __version__
-from groundstation.errors import GroundStationError
+from groundstation.errors import GroundStationError, SessionError
 
 __all__ = ["main"]
 
@@ -25,6 +25,7 @@ _COMMANDS: dict[str, tuple[str, str]] = {
     "scan": ("scan", "List Crazyradios and Crazyflies."),
     "info": ("info", "Show what a session file holds: streams, rates, dropped packets, phases."),
     "replay": ("replay", "Show a recorded session in Rerun, or write it to .rrd."),
+    "export": ("export", "Write a session as CSV files, a MATLAB .mat or Parquet."),
     "import": ("importer",
                'Import uSD-card deck logs and cfclient "log to file" CSVs as session files.'),
     "sim": ("sim", "Serve simulated Crazyflie 2.1s over UDP, in real time, until Ctrl-C."),
@@ -34,8 +35,10 @@ _COMMANDS: dict[str, tuple[str, str]] = {
 """Sub-commands, loaded on use: ``--help`` need not import cflib, scipy and rerun."""
 
 
-class _Group(click.Group):
+class _Group(OneLineErrorGroup):
     """Lazily loaded sub-commands; user errors print one line and exit 2, never a traceback."""
+
+    user_errors = (GroundStationError, SessionError)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(_COMMANDS)
@@ -49,16 +52,6 @@ class _Group(click.Group):
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         with formatter.section("Commands"):
             formatter.write_dl([(name, helptext) for name, (_, helptext) in _COMMANDS.items()])
-
-    def invoke(self, ctx: click.Context):
-        try:
-            return super().invoke(ctx)
-        except GroundStationError as exc:
-            click.echo(f"error: {exc}", err=True)
-            sys.exit(2)
-        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-            click.echo(f"error: {exc.strerror}: {exc.filename}", err=True)
-            sys.exit(2)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

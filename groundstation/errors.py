@@ -1,11 +1,14 @@
 """Exception tree of the ground station.
 
-Every error a user can cause derives from :class:`GroundStationError`; the command line turns
-these into one-line messages and exit code 2. Each also inherits the closest built-in so that
+Every error a user can cause derives from :class:`GroundStationError`, except the session
+format's own :class:`~cfsession.errors.SessionError` (re-exported here); the command line turns
+both into one-line messages and exit code 2. Each also inherits the closest built-in so that
 callers can catch ``ValueError`` / ``OSError`` as usual.
 """
 
 from __future__ import annotations
+
+from cfsession.errors import SessionError
 
 __all__ = [
     "FlightAborted",
@@ -18,10 +21,6 @@ __all__ = [
 
 class GroundStationError(Exception):
     """Base class of every ground-station error that is meant for the user."""
-
-
-class SessionError(GroundStationError, ValueError):
-    """A session file is missing, damaged, not a session, or of a newer schema."""
 
 
 class PlanError(GroundStationError, ValueError):

@@ -9,7 +9,7 @@ Entities (one scalar series per entity; labels carry the unit, e.g. ``x [deg/s]`
 
 ==============================  ============================================================
 ``/<log stream>/<field>``       every logged variable: ``/motors/m1`` (PWM), ``/acc/x`` (g),
-                                ``/gyro/z`` (deg/s), ``/stabilizer/roll`` (deg), ...
+                                ``/gyro/z`` (deg/s), ``/attitude/roll`` (deg), ...
 ``/setpoints/<axis>``           ``roll``, ``pitch`` (deg), ``yaw_rate`` (deg/s), ``thrust`` (PWM)
 ``/link/quality``, ``latency``  link quality (%) and round-trip latency (ms); NaN samples skipped
 ``/phase``                      state (``name (kind)``) and a text line at each phase start
@@ -21,6 +21,9 @@ Timelines: ``host_time`` (the flight clock, s, every stream) and, for log stream
 (the Crazyflie tick, s, 24-bit wraps undone). The default layout (blueprint) plots each log
 stream in its own panel; roll/pitch setpoints (deg) share a panel with ``stabilizer.roll/pitch``
 when those are logged, and the yaw-rate setpoint shares one with ``gyro.z`` (both deg/s).
+Panels have short titles and no legend (a legend covers a small panel): channel colours are
+fixed, 1st red, 2nd green, 3rd blue, 4th orange, and a setpoint is the lighter colour of the
+axis it commands; hovering a line names it.
 
 Cost: ``rows`` only appends to a queue (about a microsecond, never blocks); a worker thread
 converts queued rows to arrays every ``flush_interval`` seconds and sends one
@@ -36,18 +39,17 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from cfcommon.rerun import MODES, WEB_PORT, ViewModeError, open_recording
+from cfsession.schema import StreamSpec, phases_spec, setpoints_spec
 from groundstation.errors import GroundStationError
-from groundstation.flight import FlightListener  # the runner's listener protocol
-from groundstation.schedule import Schedule
-from groundstation.session_schema import StreamSpec, phases_spec, setpoints_spec
-from sysid.errors import ParameterError
-from sysid.viz import MODES, open_recording
+from groundstation.flight.runner import FlightListener  # the runner's listener protocol
+from groundstation.plan.schedule import Schedule
 
 __all__ = [
     "MODES",
@@ -64,7 +66,11 @@ log = logging.getLogger(__name__)
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 _LEVELS = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
 _SKIP = {"host_time", "fw_time_ms", "phase_id", "tick"}
-_META_KEYS = ("plan_name", "uri", "firmware", "protocol_version", "start_time_iso",
+_PALETTE = ((228, 26, 28), (77, 175, 74), (55, 126, 184), (255, 127, 0), (152, 78, 163),
+            (0, 190, 190))
+_SETPOINT_COLORS = {"roll": (251, 154, 153), "pitch": (178, 223, 138),
+                    "yaw_rate": (166, 206, 227), "thrust": (253, 191, 111)}
+_META_KEYS = ("plan_name", "tag", "uri", "firmware", "protocol_version", "start_time_iso",
               "software_version", "closed_cleanly", "duration_s")
 
 
@@ -102,6 +108,24 @@ def _entity_of(specs: Sequence[StreamSpec], source: str) -> str | None:
     return None
 
 
+def _short_unit(unit: str) -> str:
+    """``PWM (0-65535)`` -> ``PWM``: panel titles stay short enough for small panels."""
+    return unit.split(" (", 1)[0]
+
+
+def _series_color(spec: StreamSpec, field: str, index: int) -> tuple[int, int, int]:
+    """A fixed colour per channel: 1st red, 2nd green, 3rd blue, 4th orange ...; a setpoint
+    takes the lighter colour of the axis it commands (roll red, pitch green, yaw rate blue)."""
+    if spec.kind == "setpoints":
+        return _SETPOINT_COLORS.get(field, _PALETTE[3])
+    return _PALETTE[index % len(_PALETTE)]
+
+
+def _plot(*, name: str, contents: str | list[str], origin: str = "/") -> rrb.TimeSeriesView:
+    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name,
+                              plot_legend=rrb.PlotLegend(visible=False))
+
+
 def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
     """The default layout for these streams (module docstring)."""
     by_kind: dict[str, list[StreamSpec]] = {}
@@ -112,33 +136,29 @@ def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
         by_unit: dict[str, list[str]] = {}
         for f in s.fields:
             if f.name not in _SKIP:
-                by_unit.setdefault(f.unit, []).append(f"/{s.name}/{f.name}")
+                by_unit.setdefault(_short_unit(f.unit), []).append(f"/{s.name}/{f.name}")
         for unit, entities in by_unit.items():
-            name = f"{s.name} [{unit}]" if unit else s.name
-            plots.append(rrb.TimeSeriesView(origin=f"/{s.name}", name=name,
-                                            contents="$origin/**" if len(by_unit) == 1
-                                            else entities))
+            plots.append(_plot(origin=f"/{s.name}", name=f"{s.name} [{unit}]" if unit else s.name,
+                               contents="$origin/**" if len(by_unit) == 1 else entities))
     if "setpoints" in by_kind:
         measured = [e for e in (_entity_of(streams, "stabilizer.roll"),
                                 _entity_of(streams, "stabilizer.pitch")) if e]
-        plots.append(rrb.TimeSeriesView(
-            origin="/", contents=["/setpoints/roll", "/setpoints/pitch", *measured],
-            name="roll, pitch: setpoint" + (" vs stabilizer" if measured else "") + " [deg]"))
+        plots.append(_plot(contents=["/setpoints/roll", "/setpoints/pitch", *measured],
+                           name="roll, pitch [deg]"))
         gyro_z = _entity_of(streams, "gyro.z")
-        plots.append(rrb.TimeSeriesView(
-            origin="/", contents=["/setpoints/yaw_rate", *([gyro_z] if gyro_z else [])],
-            name="yaw rate: setpoint" + (" vs gyro.z" if gyro_z else "") + " [deg/s]"))
-        plots.append(rrb.TimeSeriesView(origin="/", contents="/setpoints/thrust",
-                                        name="thrust setpoint [PWM]"))
+        plots.append(_plot(contents=["/setpoints/yaw_rate", *([gyro_z] if gyro_z else [])],
+                           name="yaw rate [deg/s]"))
+        plots.append(_plot(contents="/setpoints/thrust", name="thrust [PWM]"))
     if "link" in by_kind:
-        plots.append(rrb.TimeSeriesView(origin="/", contents="/link/quality",
-                                        name="link quality [%]"))
-        plots.append(rrb.TimeSeriesView(origin="/", contents="/link/latency_ms",
-                                        name="link latency [ms]"))
-    side = [rrb.StateTimelineView(origin="/phase", name="phase"),
-            rrb.TextLogView(origin="/events", name="events"),
-            rrb.TextLogView(origin="/phase", name="phases"),
-            rrb.TextDocumentView(origin="/session", name="session")]
+        plots.append(_plot(contents="/link/quality", name="link quality [%]"))
+        plots.append(_plot(contents="/link/latency_ms", name="latency [ms]"))
+    side: list[rrb.View] = []  # only for streams there are: no "No data available" panel
+    if "phases" in by_kind:
+        side += [rrb.StateTimelineView(origin="/phase", name="phase"),
+                 rrb.TextLogView(origin="/phase", name="phases")]
+    if "events" in by_kind:
+        side.insert(1 if side else 0, rrb.TextLogView(origin="/events", name="events"))
+    side.append(rrb.TextDocumentView(origin="/session", name="session"))
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Grid(*plots), rrb.Vertical(*side), column_shares=[3, 1]),
         rrb.TimePanel(timeline="host_time"),
@@ -185,8 +205,9 @@ class RerunView:
         self._metadata = dict(metadata)
         for ch in self._streams.values():
             units = {f.name: f.unit for f in ch.spec.fields}
-            for field, entity in ch.channels:
-                self.rec.log(entity, rr.SeriesLines(names=_label(field, units[field])),
+            for i, (field, entity) in enumerate(ch.channels):
+                self.rec.log(entity, rr.SeriesLines(names=_label(field, units[field]),
+                                                    colors=_series_color(ch.spec, field, i)),
                              static=True)
         self._log_session_text(summary=None)
         self.rec.send_blueprint(flight_blueprint(streams))
@@ -350,17 +371,19 @@ class RerunView:
             log.warning(message)
 
 
-def open_view(*, mode: str, name: str, rrd_path: Path | None = None) -> RerunView:
+def open_view(*, mode: Literal["rerun", "serve", "save"], name: str,
+              rrd_path: Path | None = None, web_port: int = WEB_PORT) -> RerunView:
     """A flight view (a :class:`FlightListener`).
 
     ``mode``: ``rerun`` (native viewer, or the web viewer without a display), ``serve`` (web
-    viewer on localhost; the URL is logged and in ``view.url``) or ``save`` (``rrd_path``,
-    complete once ``end`` returns).
+    viewer on 127.0.0.1:``web_port``, 0 for any free port; its URL is in ``view.url`` for the
+    caller to print) or ``save`` (``rrd_path``, complete once ``end`` returns). A busy port is a
+    one-line :class:`ViewError`, raised before anything flies.
     """
     try:
         rec, url = open_recording(name=name, mode=mode, rrd_path=rrd_path,
-                                  application_id="crazyflie-groundstation")
-    except ParameterError as exc:
+                                  application_id="crazyflie-groundstation", web_port=web_port)
+    except ViewModeError as exc:
         raise ViewError(str(exc)) from None
     return RerunView(rec=rec, url=url, close_on_end=mode == "save")
 

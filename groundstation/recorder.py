@@ -1,7 +1,7 @@
 """The flight listener that records a session file (``docs/session-format.md``).
 
 :class:`Recorder` implements :class:`groundstation.flight.FlightListener` on top of
-:class:`groundstation.session.SessionWriter`: ``begin`` creates the file with every stream,
+:class:`cfsession.writer.SessionWriter`: ``begin`` creates the file with every stream,
 ``rows`` queues rows (the writer appends them at most ``flush_interval`` s apart, crash-safe),
 ``end`` stores the summary, marks the file closed cleanly and compresses it.
 
@@ -16,17 +16,18 @@ import contextlib
 import errno
 import logging
 import os
+import re
 import secrets
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from cfsession.schema import StreamSpec
+from cfsession.writer import SessionWriter
 from groundstation.errors import SessionError
-from groundstation.session import SessionWriter
-from groundstation.session_schema import StreamSpec
 
-__all__ = ["Recorder", "check_folder", "session_path"]
+__all__ = ["Recorder", "check_folder", "check_tag", "session_path"]
 
 log = logging.getLogger(__name__)
 
@@ -82,15 +83,28 @@ def check_folder(out: str | Path) -> Path:
     return folder
 
 
-def session_path(*, out: str | Path, plan_name: str) -> Path:
-    """The first choice of file name, ``OUT/PLAN-YYYYmmddTHHMMSSZ.h5`` (UTC), checked before
+_TAG = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,39}")
+
+
+def check_tag(tag: str) -> str:
+    """``tag`` if it can be part of a file name (letters, digits, ``.``, ``_``, ``-``, at most
+    40, not starting with a punctuation mark); one-line :class:`SessionError` otherwise."""
+    if tag and not _TAG.fullmatch(tag):
+        raise SessionError(f"--name {tag!r}: use at most 40 letters, digits, '.', '_' or '-' "
+                           "(starting with a letter or digit), e.g. --name validation")
+    return tag
+
+
+def session_path(*, out: str | Path, plan_name: str, tag: str = "") -> Path:
+    """The first choice of file name, ``OUT/PLAN[-TAG]-YYYYmmddTHHMMSSZ.h5`` (UTC), checked before
     anything connects: the folder is created if missing, and a file of that name (or the next
     free ``-N``) is created and removed again, so a read-only folder, a pseudo file system or an
     over-long name is a one-line :class:`SessionError` now rather than after take-off. The
     name itself is claimed when :meth:`Recorder.begin` creates the file."""
+    check_tag(tag)
     folder = check_folder(out)
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())  # UTC, as start_time_iso
-    path = folder / f"{plan_name}-{stamp}.h5"
+    path = folder / "-".join([plan_name, *([tag] if tag else []), f"{stamp}.h5"])
     probe = _claim(path, unique=True)
     try:
         os.unlink(probe)
@@ -115,6 +129,8 @@ class Recorder:
         self._compress = compress_on_close
         self._unique = unique
         self._writer: SessionWriter | None = None
+        self._flushed_at_s: float | None = None  # flight time of the last flight-time flush
+        self._flushed_wall = 0.0
 
     def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
         """Create the file: claim its name exclusively, write it under a temporary name in the
@@ -147,6 +163,24 @@ class Recorder:
         if self._writer is None:
             raise RuntimeError("Recorder.rows() before begin()")
         self._writer.extend(stream, rows)
+        self._flush_on_flight_time(rows)
+
+    def _flush_on_flight_time(self, rows: Sequence[tuple]) -> None:
+        """Flush every ``flush_interval`` of *flight* time too (the writer flushes on wall
+        time): a simulated flight at 20x fits a whole hover in one wall second, and a crash
+        then must not lose it. At most every 0.1 s of wall time."""
+        if not rows:
+            return
+        try:
+            t0, t = float(rows[0][0]), float(rows[-1][0])
+        except (TypeError, ValueError, IndexError):
+            return
+        if self._flushed_at_s is None:
+            self._flushed_at_s = t0  # the flight's first row
+        now = time.monotonic()
+        if t - self._flushed_at_s >= self._flush_interval and now - self._flushed_wall >= 0.1:
+            self._writer.flush()
+            self._flushed_at_s, self._flushed_wall = t, now
 
     def counts(self) -> dict[str, int]:
         """Rows per stream so far (written plus buffered)."""

@@ -14,7 +14,7 @@ import signal
 import numpy as np
 
 from groundstation.flight import fly_plan
-from groundstation.plans import load_plan
+from groundstation.plan import load_plan
 from tests.flight.checks import check_closed_with_stop, check_log_blocks, check_setpoints
 
 

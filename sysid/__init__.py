@@ -20,8 +20,9 @@ from sysid.errors import (
 from sysid.iem import iem
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
-from sysid.order import singular_values
+from sysid.order import InformationCriteria, information_criteria, singular_values
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
+from sysid.residuals import ResidualResult, residuals
 from sysid.sweep import SweepResult, select_order, sweep
 from sysid.validate import compare, fit_percent, stable_predictor
 
@@ -31,10 +32,12 @@ __all__ = [
     "DimensionError",
     "HorizonError",
     "IOData",
+    "InformationCriteria",
     "MissingDependencyError",
     "ModelFileError",
     "OrderError",
     "ParameterError",
+    "ResidualResult",
     "StateSpaceModel",
     "Stream",
     "SweepResult",
@@ -43,9 +46,11 @@ __all__ = [
     "detrend_data",
     "fit_percent",
     "iem",
+    "information_criteria",
     "iodata_from_streams",
     "load_model",
     "po_moesp",
+    "residuals",
     "select_order",
     "singular_values",
     "stable_predictor",

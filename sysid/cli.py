@@ -8,9 +8,12 @@ and progress are for people (progress goes to stderr).
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import logging
-from collections.abc import Callable
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,32 +21,52 @@ import click
 import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-from rich.table import Table
 
+from cfcommon.cli import FiniteFloat, check_output, output_table
+from sysid.auto import (
+    Selection,
+    default_grid,
+    finish,
+    focus_order,
+    holdout,
+    max_blocks,
+    pick_focus,
+    plan,
+)
+from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
+from sysid.cli_progress import progress
 from sysid.cli_support import (
+    DEFAULT_WINDOW_S,
     JSON_OPTION,
     MODEL_SUFFIXES,
     RRD_OPTION,
+    WINDOW_HELP,
     Group,
     check_rrd,
     console,
+    default_compare_mode,
+    experiment_label,
     fit_table,
     fits_json,
     grid_max,
     grid_min,
     load_flights,
+    load_groups,
     parse_grid,
     parse_window,
     pole_table,
+    poles_rich_table,
     session_options,
     write_rrd,
 )
-from sysid.cli_types import FiniteFloat, check_output
-from sysid.errors import DataError, HorizonError, SysIdError
-from sysid.iem import iem
-from sysid.model import StateSpaceModel, load_model
-from sysid.moesp import po_moesp
-from sysid.order import singular_values
+from sysid.errors import DataError, HorizonError, ParameterError, SysIdError
+from sysid.finish import FOCUS_MODES
+from sysid.methods import METHODS, Method, get_method
+from sysid.model import load_model
+from sysid.order import information_criteria, singular_values
+from sysid.residuals import residuals
+from sysid.session_io import read_metadata
+from sysid.stability import STABILITY_MODES
 from sysid.sweep import sweep as run_sweep
 from sysid.validate import compare
 
@@ -51,14 +74,31 @@ __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
 
-_METHODS: dict[str, Callable[..., StateSpaceModel]] = {"iem": iem, "po-moesp": po_moesp}
-
-
-_IDENTIFY_WINDOW_S = 2.0
+#: Largest order `sysid order` scores by information criteria (one model per order).
+_IC_MAX_ORDER = 12
 #: Largest sweep grid accepted (models); the thesis' coarse-to-fine search was 756 models.
 MAX_SWEEP_MODELS = 100_000
+FOCUS_OPTION = click.option(
+    "--focus", type=click.Choice(list(FOCUS_MODES)), default=None,
+    help="prediction: closed-loop-consistent one-step predictor (default for iem); "
+         "simulation: B, D, x0 by output error (default for po-moesp; biased in closed loop).")
+STABILITY_OPTION = click.option(
+    "--stability", type=click.Choice(list(STABILITY_MODES)), default="auto", show_default=True,
+    help="auto: poles just outside the unit circle (|z| <= 1.1) moved to 0.999; enforce: all "
+         "strictly inside; free: as estimated.")
 FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
+
+
+def _option_values(*, feedthrough: bool | None, focus: str | None, stability: str
+                   ) -> dict[str, Any]:
+    """Method options given on the command line (the method's defaults for the others)."""
+    values: dict[str, Any] = {"stability": stability}
+    if feedthrough is not None:
+        values["feedthrough"] = feedthrough
+    if focus is not None:
+        values["focus"] = focus
+    return values
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -78,76 +118,226 @@ def main(verbose: int) -> None:
 
 @main.command()
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
-@click.option("--order", default=8, show_default=True, type=click.IntRange(min=1))
-@click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
-@click.option("--future", default=17, show_default=True, type=click.IntRange(min=2))
+@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@click.option("--order", type=click.IntRange(min=1),
+              help="Model order (default: chosen by validation).")
+@click.option("--past", type=click.IntRange(min=1),
+              help="Past horizon, samples (default: chosen by validation).")
+@click.option("--future", type=click.IntRange(min=2),
+              help="Future horizon, samples (default: chosen by validation).")
 @click.option("--feedthrough/--no-feedthrough", default=None,
               help="Estimate D (default: no for iem, yes for po-moesp).")
+@click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
+              help="Score the model on this session (1-step and windowed simulation); "
+                   "repeatable.")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Worker processes for the choice of horizons and order.")
+@FOCUS_OPTION
+@STABILITY_OPTION
 @session_options
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Save the model (.h5, .json or .mat); an existing file needs --force.")
 @FORCE_OPTION
 @JSON_OPTION
 @RRD_OPTION
-def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, future: int,
-             feedthrough: bool | None, out: Path | None, force: bool, as_json: bool,
-             rrd: Path | None, **opts: Any) -> None:
+def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: int | None,
+             future: int | None, feedthrough: bool | None, validate: tuple[Path, ...],
+             workers: int, focus: str | None, stability: str, out: Path | None, force: bool,
+             as_json: bool, rrd: Path | None, **opts: Any) -> None:
     """Identify one model from one or more sessions (each its own experiment).
 
-    Prints the poles, whether the model and its predictor A - KC are stable, and the fit on
-    the identification data (simulation from a least-squares initial state, and one-step
-    prediction).
+    Without --past/--future/--order they are chosen by validation on held-out data (the
+    last session when several are given, else the last 30 % of each experiment; see
+    docs/sysid.md): the best candidates are listed with their fits, and a choice at the edge
+    of the grid is flagged. Then prints the poles, whether the model and its predictor
+    A - KC are stable, and the fit on the identification data (windowed simulation and
+    one-step prediction), and on each --validate session.
 
     \b
     Examples:
-      sysid identify flight.h5 --order 8 --past 60 --future 17 --out model.h5
-      sysid identify imported.h5 --window all --dt 0.01 \\
+      sysid identify flight.h5 --out model.h5
+      sysid identify flight.h5 --order 8 --past 60 --future 17
+      sysid identify log00.h5 --validate log01.h5 \\
         --inputs controller.cmd_roll,controller.cmd_pitch,controller.cmd_yaw \\
         --outputs controller.r_roll,controller.r_pitch,controller.r_yaw
     """
     if out is not None:
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
                      overwrite=force, force_flag="--force")
-    check_rrd(rrd, inputs=sessions)
-    flights = load_flights(sessions, opts=opts)
-    kwargs = {} if feedthrough is None else {"feedthrough": feedthrough}
-    with Console(stderr=True).status(f"identifying ({method}, n={order})"):
-        model = _METHODS[method](flights, order=order, past=past, future=future, **kwargs)
+    check_rrd(rrd, inputs=(*sessions, *validate))
+    meth = get_method(method)
+    options = meth.options(**_option_values(feedthrough=feedthrough, focus=focus,
+                                            stability=stability))
+    groups = load_groups(sessions, opts=opts)
+    flights = [e for g in groups for e in g]
+    selection = None
+    if order is not None and past is not None and future is not None:
+        with Console(stderr=True).status(f"identifying ({method}, n={order})"):
+            model = meth.identify(flights, order=order, past=past, future=future,
+                                  options=options)
+    else:
+        selection = _choose(groups, meth=meth, options=options, past=past, future=future,
+                            order=order, workers=workers, quiet=as_json,
+                            choose_focus=focus is None)
+        model = selection.model
+        order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
     # model, so the fit is over short windows (initial state estimated per window).
-    window_s = min(_IDENTIFY_WINDOW_S, min(d.n_samples for d in flights) * model.dt)
+    window_s = min(DEFAULT_WINDOW_S, min(d.n_samples for d in flights) * model.dt)
     sim = compare(model, flights, window=window_s, warn=False)
     pred = compare(model, flights, horizon=1, warn=False)
+    checks = []
+    if validate:
+        val = load_flights(list(validate), opts={**opts, "dt": model.dt},
+                           inputs=model.input_names, outputs=model.output_names)
+        v_win = min(DEFAULT_WINDOW_S, min(d.n_samples for d in val) * model.dt)
+        checks = [(f"validation: simulation, {v_win:g} s windows",
+                   compare(model, val, window=v_win, warn=False)),
+                  ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]
     if out is not None:
         model.save(out)
     if rrd is not None:
         write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
-                   comparisons=[sim, pred])
+                  comparisons=[sim, pred, *(r for _, r in checks)],
+                  sweep=selection.result if selection else None)
     poles = pole_table(model)
     if as_json:
         click.echo(json.dumps({
             "sessions": [str(p) for p in sessions], "method": method, "order": order,
             "past": past, "future": future, "n_samples": [d.n_samples for d in flights],
+            "experiments": [d.source for d in flights],
             "dt_s": model.dt, "poles": poles, "stable": model.is_stable,
             "predictor_stable": model.predictor_is_stable,
             "fit_percent": {"simulation": fits_json(sim), "1-step": fits_json(pred)},
             "simulation_window_s": window_s,
+            "selection": _selection_json(selection) if selection else None,
+            "validation": [{"mode": label, "fit_percent": fits_json(r)} for label, r in checks],
+            "focus": model.provenance.get("focus"),
+            "stability": model.provenance.get("stability"),
             "model": str(out) if out else None}, indent=1))
         return
     con = console()
-    table = Table("pole", "re", "im", "|z|", "f [Hz]", "damping", title=f"{method} order {order}")
-    for i, p in enumerate(poles):
-        table.add_row(str(i), f"{p['re']:.4f}", f"{p['im']:.4f}", f"{p['abs']:.4f}",
-                      f"{p['freq_hz']:.2f}", f"{p['damping']:.3f}")
-    con.print(table)
+    if selection is not None:
+        _print_selection(con, selection)
+    con.print(poles_rich_table(
+        model, title=f"{method} order {order}, past {past}, future {future}: poles", console=con))
     con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
               f"predictor A - KC stable: {model.predictor_is_stable}")
-    con.print(fit_table(title="fit on the identification data [%]", names=model.output_names,
-                         rows=[(f"simulation, {window_s:g} s windows", sim.fit),
-                               ("1-step prediction", pred.fit)]))
+    report = model.provenance.get("stability")
+    if isinstance(report, dict) and report.get("moved"):
+        radii = ", ".join(f"{m['radius_from']:.4f} -> {m['radius_to']:.4f}"
+                          for m in report["moved"])
+        cost = report.get("cost_points")
+        con.print(f"stability={report['mode']}: pole(s) moved {radii}; "
+                  f"{report['measure']} fit on these data "
+                  + ("unchanged" if cost is None else f"{-cost:+.2f} points"))
+    con.print(fit_table(console=con, title="fit on the identification data [%]",
+                        names=model.output_names,
+                        rows=[(f"simulation, {window_s:g} s windows", sim.fit),
+                              ("1-step prediction", pred.fit)]))
+    if checks:
+        con.print(fit_table(console=con,
+                            title=f"fit on {', '.join(p.name for p in validate)} [%]",
+                            names=model.output_names, rows=[(k, r.fit) for k, r in checks]))
     if out is not None:
         con.print(f"model saved to {out}")
+
+
+SCHEDULER_OPTION = click.option(
+    "--scheduler", metavar="tcp://HOST:PORT",
+    help="Run on this Dask distributed scheduler (pip install 'cf-sysid[dask]'); the data are "
+         "sent once per worker. --workers is then ignored.")
+
+
+@contextlib.contextmanager
+def scheduler_client(address: str | None) -> Iterator[Any]:
+    """A Dask client of ``address`` (None: no cluster), its dashboard printed on stderr."""
+    if address is None:
+        yield None
+        return
+    from sysid.cluster import connect, dashboard_link
+
+    client = connect(address)
+    try:
+        link = dashboard_link(client)
+        n = len(client.scheduler_info().get("workers", {}))
+        click.echo(f"dask: {address}, {n} worker(s)"
+                   + (f", dashboard {link}" if link else ", no dashboard"), err=True)
+        yield client
+    finally:
+        client.close()
+
+
+def _choose(groups: list[list[Any]], *, meth: Method, options: Any, past: int | None,
+            future: int | None, order: int | None, workers: int, quiet: bool,
+            keep_models: bool = False, validation: list[Any] | None = None,
+            grid: dict[str, Any] | None = None, choose_focus: bool = False) -> Selection:
+    """Horizons and order by validation (:mod:`sysid.auto`), with a progress bar; with
+    ``choose_focus`` the grid runs for each focus and the focus is chosen the same way
+    (:func:`sysid.auto.pick_focus`)."""
+    given = dict(grid or {})
+    for key, value in (("pasts", past), ("futures", future), ("orders", order)):
+        if value is not None:
+            given[key] = [value]
+    p = plan(groups, validation=validation, **given)
+    variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
+                if choose_focus else [options])
+    total = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
+    selections = []
+    with Progress("choosing horizons, order" + (" and focus" if choose_focus else ""),
+                  BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=Console(stderr=True), disable=quiet) as bar:
+        task = bar.add_task("choose", total=total * len(variants))
+        for i, opts in enumerate(variants):
+            result = run_sweep(
+                p.ident, **p.grid, method=meth, options=opts, validation=p.val,
+                window=p.window_s, workers=workers, keep_models=keep_models,
+                progress=lambda done, _total, i=i: bar.update(task, completed=i * total + done))
+            try:
+                selections.append(finish(p, result, method=meth, options=opts))
+            except DataError:
+                continue
+    if not selections:
+        raise DataError(f"none of the {total * len(variants)} models of the grid is stable; "
+                        "give --past/--future/--order, other channels or a longer window")
+    return pick_focus(selections) if choose_focus else selections[0]
+
+
+def _selection_json(sel: Selection) -> dict[str, Any]:
+    return {"rule": sel.rule, "score": "mean of per-channel fits floored at 0 %, simulation "
+            f"over {sel.window_s:g} s windows of the validation data",
+            "grid": sel.grid, "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
+            "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
+            "focus_scores": sel.focus_scores,
+            "candidates": [r.to_record() for r in sel.top(8)]}
+
+
+def _print_selection(con: Console, sel: Selection) -> None:
+    names = sel.model.output_names
+    table = output_table("past", "future", "order", "score [%]", *names, "stable", console=con,
+                         title=f"best candidates of {len(sel.result.rows)} (fit [%], "
+                               f"simulation over {sel.window_s:g} s windows of held-out data)")
+    for r in sel.top(8):
+        style = "bold" if r is sel.best else None
+        table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.1f}",
+                      *[f"{f:.1f}" if abs(f) < 1e4 else "diverged" for f in r.fit],
+                      str(r.stable), style=style)
+    con.print(table)
+    dt = sel.model.dt
+    con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
+              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}")
+    con.print(f"chosen: past {sel.best.past} ({sel.best.past * dt:.2f} s), future "
+              f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}: the "
+              "smallest order within 0.5 points of the best stable score (score = mean fit "
+              "with each channel floored at 0 %)")
+    if sel.focus_note:
+        con.print(sel.focus_note)
+    for w in sel.warnings:
+        con.print(f"[yellow]warning: {w}[/]")
+    bad = [n for i, n in enumerate(names) if max(r.fit[i] for r in sel.top(8)) <= 0]
+    if bad:
+        con.print(f"[yellow]no candidate predicts {', '.join(bad)} (fit <= 0 %): consider "
+                  "dropping it from --outputs[/]")
 
 
 @main.command("compare")
@@ -156,18 +346,25 @@ def identify(sessions: tuple[Path, ...], method: str, order: int, past: int, fut
 @click.option("--horizon", type=click.IntRange(min=1), help="k-step-ahead prediction.")
 @click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
               help="Simulate over windows of this many seconds, each from its own x0.")
-@click.option("--window", default="excitation", show_default=True,
-              help="Phase name or kind, T0:T1 (session seconds), or 'all'.")
+@click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
+              help=WINDOW_HELP)
 @click.option("--detrend", default="mean", show_default=True,
               type=click.Choice(["mean", "linear", "none"]))
+@click.option("--residuals", "with_residuals", is_flag=True,
+              help="Also print the residual analysis (as `sysid resid`).")
 @JSON_OPTION
 @RRD_OPTION
 def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | None,
-                window_s: float | None, as_json: bool, rrd: Path | None, **opts: Any) -> None:
+                window_s: float | None, with_residuals: bool, as_json: bool, rrd: Path | None,
+                **opts: Any) -> None:
     """Fit of a model on sessions: per channel and per session, in percent (NRMSE).
 
     The model's channel names select the session channels and its dt sets the grid. Without
-    --horizon/--window-s the whole window is simulated from a least-squares initial state.
+    --horizon/--window-s the whole window is simulated from a least-squares initial state,
+    unless the model integrates (a pole at |z| >= 0.995): whole-flight simulation of an
+    integrator only measures its drift, so it is then simulated over 2 s windows. A fit that
+    diverged is "diverged" in tables and null in --json.
+    Each experiment of a session (e.g. its airborne-N phases) is its own row.
 
     \b
     Example:
@@ -182,7 +379,14 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
         modes.append((f"simulation, {window_s:g} s windows", {"window": window_s}))
     if horizon is not None:
         modes.append((f"{horizon}-step prediction", {"horizon": horizon}))
-    modes = modes or [("simulation", {})]
+    if not modes:
+        modes = [default_compare_mode(model)]
+        if "windows" in modes[0][0]:
+            radius = float(np.max(np.abs(model.poles())))
+            Console(stderr=True).print(
+                f"model has a pole at |z| = {radius:.4f} (integrating or nearly): "
+                f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
+                "another mode", style="dim")
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
     if rrd is not None:
         write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
@@ -190,139 +394,231 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     if as_json:
         click.echo(json.dumps({"model": str(model_path), "modes": [{
             "mode": label, "overall": fits_json(res), "sessions": [
-                {"path": str(p), "fit_percent": dict(zip(res.output_names,
-                                                         [float(f) for f in fits], strict=True))}
-                for p, fits in zip(sessions, res.fits, strict=True)]}
+                {"path": d.source, "fit_percent": fits_json(res, fits)}
+                for d, fits in zip(flights, res.fits, strict=True)]}
             for label, res in results],
             "stable": model.is_stable, "predictor_stable": model.predictor_is_stable},
             indent=1))
         return
     con = console()
     for label, res in results:
-        rows = [(p.name, f) for p, f in zip(sessions, res.fits, strict=True)]
-        con.print(fit_table(title=f"{label}: fit [%]", names=res.output_names,
+        rows = [(experiment_label(d.source), f) for d, f in zip(flights, res.fits, strict=True)]
+        con.print(fit_table(console=con, title=f"{label}: fit [%]", names=res.output_names,
                              rows=[*rows, ("all", res.fit)] if len(rows) > 1 else rows))
     if not model.predictor_is_stable:
         con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
+    if with_residuals:
+        click.echo(residuals(model, flights).summary())
+
+
+@main.command("resid")
+@click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--max-lag", default=25, show_default=True, type=click.IntRange(min=1),
+              help="Largest correlation lag, samples.")
+@click.option("--confidence", default=0.99, show_default=True,
+              type=FiniteFloat(min=0.5, max=0.9999, min_open=True),
+              help="Confidence of the bounds and verdicts.")
+@click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
+              help=WINDOW_HELP)
+@click.option("--detrend", default="mean", show_default=True,
+              type=click.Choice(["mean", "linear", "none"]))
+@JSON_OPTION
+@RRD_OPTION
+def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence: float,
+          as_json: bool, rrd: Path | None, **opts: Any) -> None:
+    """Residual analysis: whiteness of the one-step errors and their correlation with inputs.
+
+    Per output: the autocorrelation at lags 1..--max-lag against +-z/sqrt(N) and a Ljung-Box
+    test (white?), and the cross-correlation with each input at positive lags (past inputs)
+    with a portmanteau test (independent?). Flights are analysed separately and pooled.
+    See docs/sysid.md, "Residual analysis".
+
+    \b
+    Example:
+      sysid resid model.h5 val1.h5 val2.h5 --max-lag 30
+    """
+    check_rrd(rrd, inputs=(model_path, *sessions))
+    model = load_model(model_path)
+    flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
+                           outputs=model.output_names)
+    res = residuals(model, flights, max_lag=max_lag, confidence=confidence)
+    if rrd is not None:
+        write_rrd(path=rrd, name=f"resid {model_path.name}", model=model, residuals=res)
+    if as_json:
+        click.echo(json.dumps({"model": str(model_path), **res.to_json()}, indent=1))
+        return
+    click.echo(res.summary())
 
 
 @main.command()
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
-@click.option("--past", default=60, show_default=True, type=click.IntRange(min=1))
-@click.option("--future", default=17, show_default=True, type=click.IntRange(min=2))
+@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@click.option("--past", type=click.IntRange(min=1),
+              help="Past horizon, samples (default: the largest of the scaled default grid).")
+@click.option("--future", type=click.IntRange(min=2),
+              help="Future horizon, samples (default: as --past).")
 @click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
               help="How many singular values to list.")
 @session_options
 @JSON_OPTION
-def order(session: Path, method: str, past: int, future: int, show: int, as_json: bool,
-          **opts: Any) -> None:
-    """Singular values of the order-selection SVD and a suggested order (largest gap).
+def order(session: Path, method: str, past: int | None, future: int | None, show: int,
+          as_json: bool, **opts: Any) -> None:
+    """Singular values of the order-selection SVD and a suggested order (largest gap), and
+    AIC/AICc/BIC of the models of orders 1..min(--show, 12) (docs/sysid.md).
 
     The suggestion is the n maximising log10(s_n / s_n+1) among the first --show values.
+    Without --past/--future the horizons are the largest of the default grid (1.2 s and
+    0.4 s, or what the data allow; docs/sysid.md).
 
     \b
     Example:
       sysid order flight.h5 --past 60 --future 17
     """
     flights = load_flights([session], opts=opts)
+    grid = default_grid(flights)
+    past = grid["pasts"][-1] if past is None else past
+    future = grid["futures"][-1] if future is None else future
     sv = singular_values(flights, past=past, future=future, method=method)
     head = sv[: min(show, sv.size)]
     with np.errstate(divide="ignore"):
         gaps = np.log10(head[:-1] / np.maximum(head[1:], 1e-300))
     suggested = int(np.argmax(gaps)) + 1
+    ic = information_criteria(flights, orders=range(1, min(show, _IC_MAX_ORDER) + 1), past=past,
+                              future=future, method=method)
     if as_json:
         click.echo(json.dumps({"session": str(session), "singular_values": sv.tolist(),
-                               "suggested_order": suggested}, indent=1))
+                               "suggested_order": suggested, "information_criteria": {
+                                   "orders": ic.orders.tolist(), "n_params": ic.n_params.tolist(),
+                                   "aic": ic.aic.tolist(), "aicc": ic.aicc.tolist(),
+                                   "bic": ic.bic.tolist(), "chosen": ic.chosen}}, indent=1))
         return
     con = console()
-    table = Table("n", "singular value", "log10 gap to next", title=f"{method} p={past} f={future}")
+    table = output_table("n", "singular value", "log10 gap to next", console=con,
+                         title=f"{method} p={past} f={future}")
     for i, s in enumerate(head):
         gap = f"{gaps[i]:.2f}" if i < gaps.size else ""
         table.add_row(str(i + 1), f"{s:.4g}", gap, style="bold" if i + 1 == suggested else None)
     con.print(table)
     con.print(f"suggested order: {suggested}")
+    table = output_table("n", "params", "AIC", "AICc", "BIC", console=con,
+                         title="information criteria (one-step errors; * = smallest)")
+    for i, n in enumerate(ic.orders):
+        cells = [f"{v[i]:.1f}" + (" *" if ic.chosen[k] == n else "")
+                 for k, v in (("aic", ic.aic), ("aicc", ic.aicc), ("bic", ic.bic))]
+        table.add_row(str(n), str(ic.n_params[i]), *cells)
+    con.print(table)
+    con.print(f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
 
 
 @main.command("sweep")
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(list(_METHODS)), default="iem", show_default=True)
-@click.option("--pasts", default="20:80:10", show_default=True, help="START:STOP:STEP or a,b,c.")
-@click.option("--futures", default="5:25:4", show_default=True,
-              help="START:STOP:STEP or a,b,c (each >= 2).")
-@click.option("--orders", default="8", show_default=True, help="START:STOP:STEP or a,b,c.")
+@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@click.option("--pasts", help="START:STOP:STEP or a,b,c (default: scaled to the data rate "
+                              "and length, see docs/sysid.md).")
+@click.option("--futures", help="START:STOP:STEP or a,b,c, each >= 2 (default: scaled).")
+@click.option("--orders", help="START:STOP:STEP or a,b,c (default: 2 to 12).")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes (Ctrl-C stops them all).")
+@SCHEDULER_OPTION
 @click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
-              help="Score on this session (repeatable; default: the identification data).")
+              help="Score on this session (repeatable; default: the last 30 % of each "
+                   "experiment, identified on the rest).")
 @click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
 @click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
-              help="Score by simulation over windows of this many seconds.")
+              help="Score by simulation over windows of this many seconds (default: 2 s).")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1))
+@FOCUS_OPTION
+@STABILITY_OPTION
 @session_options
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Save the selected model, identified again on all the session's data.")
+@FORCE_OPTION
 @JSON_OPTION
 @RRD_OPTION
-def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str, workers: int,
-              validate: tuple[Path, ...], horizon: int | None, window_s: float | None, top: int,
+def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None,
+              orders: str | None, workers: int, scheduler: str | None,
+              validate: tuple[Path, ...], horizon: int | None, window_s: float | None,
+              top: int, focus: str | None, stability: str, out: Path | None, force: bool,
               as_json: bool, rrd: Path | None, **opts: Any) -> None:
-    """Identify a model for every (past, future, order) and rank them by fit.
+    """Identify a model for every (past, future, order) and rank them by score.
 
-    Models that cannot be identified are counted with their reasons; when none can, the
-    command exits with 2.
+    The score is the mean of the per-channel fits floored at 0 % (one channel no model can
+    predict cannot decide the ranking). Models that cannot be identified are counted with
+    their reasons; when none can, or none is stable, the command exits with 2.
 
     \b
     Example:
       sysid sweep flight.h5 --pasts 20:80:10 --futures 5:25:4 --orders 6,8,10 \\
-        --validate other_flight.h5 --window-s 5 --workers 2
+        --validate other_flight.h5 --window-s 5 --workers 2 --out model.h5
+      sysid sweep flight.h5 --scheduler tcp://10.0.0.5:8786   # on a Dask cluster
     """
-    lazy = {"pasts": parse_grid(text=pasts, option="--pasts"),
-            "futures": parse_grid(text=futures, option="--futures", minimum=2),
-            "orders": parse_grid(text=orders, option="--orders")}
+    lazy = {k: parse_grid(text=v, option=f"--{k}", minimum=2 if k == "futures" else 1)
+            for k, v in (("pasts", pasts), ("futures", futures), ("orders", orders))
+            if v is not None}
+    if out is not None:
+        check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=(session, *validate),
+                     overwrite=force, force_flag="--force")
     check_rrd(rrd, inputs=(session, *validate))
-    flights = load_flights([session], opts=opts)
-    _check_sweep_horizons(flights[0], pasts=lazy["pasts"], futures=lazy["futures"])
-    total = len(lazy["pasts"]) * len(lazy["futures"]) * len(lazy["orders"])
+    groups = load_groups([session], opts=opts)
+    meth = get_method(method)
+    options = meth.options(**_option_values(feedthrough=None, focus=focus, stability=stability))
+    val = load_flights(list(validate), opts=opts) if validate else None
+    ident = groups[0] if val else holdout(groups)[0]
+    if "pasts" in lazy or "futures" in lazy:
+        default = default_grid(ident)
+        _check_sweep_horizons(ident, pasts=lazy.get("pasts", default["pasts"]),
+                              futures=lazy.get("futures", default["futures"]))
+    total = int(np.prod([len(v) for v in lazy.values()], dtype=float))
     if total > MAX_SWEEP_MODELS:
         raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
                         "coarser steps (START:STOP:STEP) and refine around the best")
-    grid = {k: list(v) for k, v in lazy.items()}
-    val = load_flights(list(validate), opts=opts) if validate else None
-    with Progress("sweep", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=Console(stderr=True), disable=as_json) as bar:
-        task = bar.add_task("sweep", total=total)
-        result = run_sweep(flights, **grid, method=method.replace("-", "_"), validation=val,
-                           horizon=horizon, window=window_s, workers=workers,
-                           keep_models=rrd is not None,
-                           progress=lambda done, _total: bar.update(task, completed=done))
-    ok = sorted((r for r in result.rows if r.error is None and np.isfinite(r.mean_fit)),
-                key=lambda r: -r.mean_fit)
+    p = plan(groups, validation=val, **{k: list(v) for k, v in lazy.items()})
+    total = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
+    if total > MAX_SWEEP_MODELS:
+        raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
+                        "coarser steps (START:STOP:STEP) and refine around the best")
+    window = window_s if window_s is not None or horizon is not None else p.window_s
+    with scheduler_client(scheduler) as client, \
+            progress("sweep", total=total, quiet=as_json) as update:
+        result = run_sweep(p.ident, **p.grid, method=meth, options=options, validation=p.val,
+                           horizon=horizon, window=None if horizon else window,
+                           workers=workers, keep_models=rrd is not None, client=client,
+                           progress=lambda done, _total: update(done))
+    ok = result.ranked()
     failures = result.failures()
     n_failed = sum(n for _, n in failures)
     try:
         best = result.best()
     except SysIdError:
         best = None
+    selection = finish(p, result, method=meth, options=options) if best is not None else None
+    if out is not None and selection is not None:
+        selection.model.save(out)
     rrd_written = rrd is not None and best is not None and best.model is not None
     if rrd_written:
         write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
     if as_json:
         click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
-                               "n_failed": n_failed,
+                               "n_failed": n_failed, "rule": p.rule, "grid": p.grid,
                                "failures": [{"error": e, "count": n} for e, n in failures],
                                "best": best.to_record() if best else None,
+                               "warnings": list(selection.warnings) if selection else [],
                                "top": [r.to_record() for r in ok[:top]],
+                               "model": str(out) if out and selection else None,
                                "rrd": str(rrd) if rrd_written else None}, indent=1))
     else:
         con = console()
         if ok:
-            table = Table("past", "future", "order", "mean fit [%]", "max |pole|", "stable",
-                          "pred. stable", title=f"best {min(top, len(ok))} of {len(result.rows)} "
-                          "models")
+            table = output_table("past", "future", "order", "score [%]", "mean fit [%]",
+                                 "max |pole|", "stable", "pred. stable", console=con,
+                                 title=f"best {min(top, len(ok))} of {len(result.rows)} models")
             for r in ok[:top]:
-                table.add_row(str(r.past), str(r.future), str(r.order), f"{r.mean_fit:.2f}",
-                              f"{np.abs(r.poles).max():.4f}", str(r.stable),
-                              str(r.predictor_stable))
+                table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.2f}",
+                              f"{r.mean_fit:.2f}", f"{np.abs(r.poles).max():.4f}",
+                              str(r.stable), str(r.predictor_stable))
             con.print(table)
+        con.print(p.rule)
         if failures:
             con.print(f"[yellow]{n_failed} of {len(result.rows)} models failed:[/]")
             for msg, n in failures[:3]:
@@ -330,11 +626,13 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
             if len(failures) > 3:
                 con.print(f"  ... and {len(failures) - 3} other reasons (--json lists all)")
         if best is not None:
-            con.print(f"selected (smallest order within 0.5 points of the best stable fit): "
+            con.print(f"selected (smallest order within 0.5 points of the best stable score): "
                       f"past {best.past}, future {best.future}, order {best.order}, "
-                      f"fit {best.mean_fit:.2f} %")
-        elif ok:
-            con.print("[yellow]no stable model in the grid[/]")
+                      f"score {best.score:.2f} %")
+            for w in selection.warnings if selection else ():
+                con.print(f"[yellow]warning: {w}[/]")
+            if out is not None:
+                con.print(f"model saved to {out} (identified again on all the data)")
     if rrd is not None and not rrd_written:
         click.echo(f"warning: --rrd {rrd} not written: "
                    f"{'no stable model' if ok else 'no model'} to show", err=True)
@@ -342,22 +640,112 @@ def sweep_cmd(session: Path, method: str, pasts: str, futures: str, orders: str,
         reason = (" (reasons above)" if not as_json else
                   f"; most often: {failures[0][0]}" if failures else "")
         raise DataError(f"none of the {len(result.rows)} models could be identified{reason}")
+    if best is None:
+        raise DataError(f"none of the {len(ok)} identified models is stable; widen the grid "
+                        "or pick other channels")
 
 
-def _check_sweep_horizons(data: Any, *, pasts: Any, futures: Any) -> None:
-    """Refuse horizons the data cannot support before the sweep runs (they would only fail,
-    and a huge range would take the memory of every Hankel matrix it tries). One flight of N
-    samples and c channels has room for past + future <= (N + 1) / (c + 1)."""
-    c = data.n_inputs + data.n_outputs
-    room = (data.n_samples + 1) // (c + 1)
+def _check_sweep_horizons(flights: list[Any], *, pasts: Any, futures: Any) -> None:
+    """Refuse horizons the data cannot support before the sweep runs: every pair shares the
+    Hankel columns of the largest, which needs ``B c`` columns for ``B = past + future``
+    block rows and c channels, so the largest past + future must fit the data."""
+    c = flights[0].n_inputs + flights[0].n_outputs
+    room = max_blocks(flights, columns_per_row=1.0)
+    n = max(d.n_samples for d in flights)
     for name, values, other, other_name in (("past", pasts, futures, "future"),
                                             ("future", futures, pasts, "past")):
         largest, shortest = grid_max(values), grid_min(other)
         if largest + shortest > room:
             raise HorizonError(
-                f"--{name}s goes up to {largest}, but {data.n_samples} samples with {c} channels "
-                f"allow past + future <= {room}: {name} <= {room - shortest} with {other_name} "
-                f"{shortest}; lower the {name}s or pass a longer --window")
+                f"--{name}s goes up to {largest}, but {n} identification samples with {c} "
+                f"channels allow past + future <= {room}: {name} <= "
+                f"{max(room - shortest, 0)} with {other_name} {shortest}; "
+                f"lower the {name}s or pass a longer --window")
+    if grid_max(pasts) + grid_max(futures) > room:
+        raise HorizonError(
+            f"--pasts up to {grid_max(pasts)} with --futures up to {grid_max(futures)}: every "
+            f"pair shares the columns of the largest, but {n} identification samples with {c} "
+            f"channels allow past + future <= {room}; lower the largest past or future")
+
+
+@main.command()
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", required=True,
+              type=click.Path(file_okay=False, path_type=Path),
+              help="Folder for one model per group (GROUP.h5) and summary.csv/summary.json.")
+@click.option("--group-by", type=click.Choice(GROUP_BY), default="session", show_default=True,
+              help="One model per session, vehicle (uri), UTC day, plan name, or of all.")
+@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@click.option("--order", type=click.IntRange(min=1), help="Fix the order (default: chosen).")
+@click.option("--past", type=click.IntRange(min=1), help="Fix the past horizon, samples.")
+@click.option("--future", type=click.IntRange(min=2), help="Fix the future horizon, samples.")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Worker processes for each group's choice of horizons and order.")
+@SCHEDULER_OPTION
+@FOCUS_OPTION
+@STABILITY_OPTION
+@session_options
+@FORCE_OPTION
+@JSON_OPTION
+def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: str,
+          order: int | None, past: int | None, future: int | None, workers: int,
+          scheduler: str | None, focus: str | None, stability: str, force: bool,
+          as_json: bool, **opts: Any) -> None:
+    """Identify one model per group of sessions, all with one configuration.
+
+    Groups come from the sessions' metadata (--group-by; docs/sysid.md names them). Each
+    group's horizons and order are chosen by validation on held-out data, as `identify` does,
+    unless fixed. A group that fails is a row with its reason; the batch goes on. The summary
+    is rewritten as each group finishes: Ctrl-C keeps the finished groups.
+
+    \b
+    Examples:
+      sysid batch logs/*.h5 --out models --group-by vehicle
+      sysid batch logs/*.h5 --out models --scheduler tcp://10.0.0.5:8786
+    """
+    summary = out_dir / "summary.json"
+    if summary.exists() and not force:
+        raise ParameterError(f"--out {out_dir}: holds a batch summary already; "
+                             "pass --force to replace it or choose another folder")
+    meth = get_method(method)
+    options = meth.options(**_option_values(feedthrough=None, focus=focus, stability=stability))
+    grid = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
+            if v is not None}
+    groups, bad = group_sessions(list(sessions), by=group_by,
+                                 read_meta=read_metadata)
+    rows: list[Any] = []
+    try:
+        with scheduler_client(scheduler) as client, \
+                progress("batch", total=len(groups), quiet=as_json) as update:
+            rows = run_batch(groups, out_dir=out_dir, rows=bad,
+                             load=lambda paths: load_groups(paths, opts=opts),
+                             method=meth, options=options, grid=grid, workers=workers,
+                             client=client, progress=lambda done, _total: update(done))
+    except KeyboardInterrupt:
+        n = len(json.loads(summary.read_text())) if summary.exists() else 0
+        click.echo(f"interrupted: {n} finished group(s) kept in {summary} and "
+                   f"{out_dir / 'summary.csv'}", err=True)
+        sys.exit(130)
+    failed = [r for r in rows if r.error is not None]
+    if as_json:
+        click.echo(json.dumps({"out": str(out_dir), "group_by": group_by,
+                               "groups": [r.record() for r in rows]}, indent=1))
+    else:
+        con = console()
+        table = output_table("group", "flights", "past", "future", "order", "score [%]",
+                             "stable", "model / reason", console=con,
+                             title=f"{len(rows)} group(s), {len(failed)} failed")
+        for r in rows:
+            table.add_row(r.group, str(r.flights), *(str(v) if v is not None else "-"
+                                                     for v in (r.past, r.future, r.order)),
+                          "-" if r.score is None else f"{r.score:.1f}",
+                          "-" if r.stable is None else str(r.stable),
+                          r.error or r.model or "")
+        con.print(table)
+        con.print(f"summary: {out_dir / 'summary.csv'}, {summary}")
+    if rows and len(failed) == len(rows):
+        raise DataError(f"every one of the {len(rows)} group(s) failed; first: "
+                        f"{failed[0].group}: {failed[0].error}")
 
 
 @main.command()

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import importlib
 import logging
-import math
-import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -21,12 +19,20 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from sysid.cli_types import FiniteFloat, check_output
+from cfcommon.cli import (
+    FiniteFloat,
+    OneLineErrorGroup,
+    check_output,
+    output_console,
+    output_table,
+)
+from sysid.auto import SCORE_WINDOW_S
 from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import MissingDependencyError, ParameterError, SysIdError
 from sysid.model import StateSpaceModel
-from sysid.session_io import SessionFileError, Window, load_sessions
+from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
+from sysid.session_io import AUTO, SessionFileError, Window, load_sessions, parse_window
 
 __all__ = [
     "JSON_OPTION",
@@ -35,14 +41,18 @@ __all__ = [
     "Group",
     "check_rrd",
     "console",
+    "experiment_label",
     "fit_table",
     "fits_json",
     "grid_max",
     "grid_min",
     "load_flights",
+    "load_groups",
     "parse_grid",
     "parse_window",
+    "parse_windows",
     "pole_table",
+    "poles_rich_table",
     "require_viz",
     "session_options",
     "split_names",
@@ -55,44 +65,18 @@ log = logging.getLogger(__name__)
 MODEL_SUFFIXES = (".h5", ".hdf5", ".json", ".mat")
 
 
-class Group(click.Group):
-    """A click group whose user errors print one line and exit 2, never a traceback."""
+class Group(OneLineErrorGroup):
+    """The ``sysid`` group: :class:`cfcommon.cli.OneLineErrorGroup` with sysid's errors."""
 
-    def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except click.UsageError as exc:  # bad option values, refused output files
-            if isinstance(exc, click.exceptions.NoArgsIsHelpError):  # `sysid X` alone: help
-                raise
-            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
-            msg = f"{exc.format_message()} (see '{where} -h')"
-        except (SysIdError, SessionFileError) as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-            msg = f"{exc.strerror}: {exc.filename}"
-        except np.linalg.LinAlgError as exc:
-            msg = f"numerical failure ({exc}); try another order or horizons"
-        click.echo(f"error: {msg}", err=True)
-        sys.exit(2)
+    user_errors = (SysIdError, SessionFileError)
+
+    def user_error_message(self, exc: Exception, *, ctx: click.Context) -> str | None:
+        if isinstance(exc, np.linalg.LinAlgError):
+            return f"numerical failure ({exc}); try another order or horizons"
+        return super().user_error_message(exc, ctx=ctx)
 
 
 # ------------------------------------------------------------------------------- parsing
-def parse_window(text: str) -> Window:
-    """``all`` -> None, ``T0:T1`` -> host-time seconds, anything else a phase name or kind."""
-    if text.lower() in ("all", "none", ""):
-        return None
-    if ":" in text:
-        try:
-            t0, t1 = (float(x) for x in text.split(":"))
-            if not (math.isfinite(t0) and math.isfinite(t1)):
-                raise ValueError
-        except ValueError:
-            raise ParameterError(f"--window {text!r}: use a phase name, T0:T1 (finite seconds) "
-                                 "or all") from None
-        return (t0, t1)
-    return text
-
-
 def parse_grid(*, text: str, option: str, minimum: int = 1) -> range | list[int]:
     """``20:80:10`` -> range(20, 81, 10) (stop included); ``6,8`` -> [6, 8]; ``8`` -> [8].
 
@@ -131,17 +115,25 @@ def split_names(text: str) -> list[str]:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
+WINDOW_HELP = ("Window: auto (the excitation phase, else the airborne-N phases, each its own "
+               "experiment), a phase name or kind, T0:T1 (session seconds), PHASE@T0:T1 "
+               "(seconds from the phase start; PHASE@T0: to its end) or all. "
+               "SESSION=WINDOW applies to that session only (file name or path); repeatable.")
+
+
 def session_options(func: Callable) -> Callable:
     """Options shared by every command that reads sessions."""
     opts = [
         click.option("--inputs", default="motors", show_default=True, help=(
                      "Input channels: STREAM, STREAM.FIELD or group.variable, comma-separated.")),
-        click.option("--outputs", default="acc,gyro", show_default=True,
-                     help="Output channels, as --inputs."),
-        click.option("--window", default="excitation", show_default=True,
-                     help="Phase name or kind, T0:T1 (session seconds), or 'all'."),
-        click.option("--dt", default=0.02, show_default=True, type=FiniteFloat(min=1e-4),
-                     help="Grid period in seconds (zero-order hold)."),
+        click.option("--outputs", default="acc.z,gyro", show_default=True,
+                     help="Output channels, as --inputs (default: what the motors drive "
+                          "directly; see docs/sysid.md)."),
+        click.option("--window", "windows", multiple=True, default=("auto",),
+                     show_default=True, help=WINDOW_HELP),
+        click.option("--dt", default=None, type=FiniteFloat(min=1e-4),
+                     help="Grid period in seconds (default: the logged period; faster streams "
+                          "are low-passed before the hold)."),
         click.option("--detrend", default="mean", show_default=True,
                      type=click.Choice(["mean", "linear", "none"])),
     ]
@@ -150,48 +142,95 @@ def session_options(func: Callable) -> Callable:
     return func
 
 
+def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
+    """``--window`` values: ``(window for every session, {session: its own window})``."""
+    common: Window = AUTO
+    own: dict[str, Window] = {}
+    for text in texts:
+        session, eq, spec = text.partition("=")
+        try:
+            if eq:
+                own[session.strip()] = parse_window(spec)
+            else:
+                common = parse_window(text)
+        except ParameterError as exc:
+            raise ParameterError(f"--{exc}") from None
+    return common, own
+
+
+def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
+                inputs: Sequence[str] | None = None,
+                outputs: Sequence[str] | None = None) -> list[list[IOData]]:
+    """The experiments of each session, as the session options select them."""
+    common, own = parse_windows(opts["windows"])
+    return load_sessions(
+        list(paths), inputs=inputs or split_names(opts["inputs"]),
+        outputs=outputs or split_names(opts["outputs"]), window=common, windows=own,
+        dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+
+
 def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],
                  inputs: Sequence[str] | None = None,
                  outputs: Sequence[str] | None = None) -> list[IOData]:
-    return load_sessions(
-        list(paths), inputs=inputs or split_names(opts["inputs"]),
-        outputs=outputs or split_names(opts["outputs"]), window=parse_window(opts["window"]),
-        dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+    """Every experiment of the sessions, in order (:func:`load_groups` flattened)."""
+    return [e for g in load_groups(paths, opts=opts, inputs=inputs, outputs=outputs) for e in g]
 
 
 # ------------------------------------------------------------------------------- output
 def pole_table(model: StateSpaceModel) -> list[dict[str, float]]:
-    """Poles with modulus, frequency (Hz) and damping ratio of the equivalent s-plane pole.
+    """The model's poles as :func:`sysid.pole_format.pole_rows` describes them (MATLAB's
+    ``damp``: modulus, angle, natural frequency, damping ratio, time constant)."""
+    return pole_rows(model.poles(), dt=model.dt)
 
-    :math:`s = \\ln z / \\Delta t`, :math:`f = |\\operatorname{Im} s| / 2\\pi`,
-    :math:`\\zeta = -\\operatorname{Re} s / |s|`.
-    """
-    rows = []
-    for z in sorted(model.poles(), key=lambda p: (-abs(p), p.imag)):
-        s = np.log(complex(z)) / model.dt if z != 0 else complex(-np.inf)
-        rows.append({"re": float(z.real), "im": float(z.imag), "abs": float(abs(z)),
-                     "freq_hz": float(abs(s.imag) / (2 * np.pi)) if np.isfinite(s.real) else 0.0,
-                     "damping": float(-s.real / abs(s)) if np.isfinite(s.real) and s else 1.0})
-    return rows
+
+def poles_rich_table(model: StateSpaceModel, *, title: str,
+                     console: Console | None = None) -> Table:
+    """The one pole table every command prints (:mod:`sysid.pole_format`); plain when
+    ``console`` is not a terminal."""
+    table = output_table(*POLE_COLUMNS, title=title, console=console or Console())
+    for cells in pole_cells(pole_table(model)):
+        table.add_row(*cells)
+    return table
+
+
+def experiment_label(source: str) -> str:
+    """``f0.h5`` or ``f0.h5#airborne-2`` for an experiment's ``source``."""
+    path, hash_, label = source.partition("#")
+    return Path(path).name + hash_ + label
 
 
 def console() -> Console:
-    return Console(highlight=False, width=max(Console().width, 100))
+    """Output console: on a terminal at least 100 columns; piped, plain and never wrapped."""
+    out = output_console()
+    return Console(highlight=False, width=max(out.width, 100)) if out.is_terminal else out
 
 
+#: A fit below this (the model's error 100 times the signal's spread) is reported as diverged.
+DIVERGED_FIT = -1e4
 
 
-def fit_table(*, title: str, names: Sequence[str], rows: list[tuple[str, np.ndarray]]) -> Table:
-    table = Table("", *names, title=title)
+def fit_or_none(fit: float) -> float | None:
+    """The fit in percent, or None when the model output diverged (non-finite or below
+    :data:`DIVERGED_FIT`): "diverged" in tables, ``null`` in JSON."""
+    return float(fit) if np.isfinite(fit) and fit >= DIVERGED_FIT else None
+
+
+def fit_table(*, title: str, names: Sequence[str], rows: list[tuple[str, np.ndarray]],
+              console: Console | None = None) -> Table:
+    table = output_table("", *names, title=title, console=console or Console())
+    first = table.columns[0]  # row labels never wrap
+    first.no_wrap = True
+    first.min_width = max((len(label) for label, _ in rows), default=1)
     for label, fit in rows:
-        table.add_row(label, *[f"{f:.1f}" if np.isfinite(f) and abs(f) < 1e4 else "diverged"
+        table.add_row(label, *["diverged" if fit_or_none(f) is None else f"{f:.1f}"
                                for f in fit])
     return table
 
 
-def fits_json(res: CompareResult) -> dict[str, float | None]:
-    return {n: (float(f) if np.isfinite(f) else None)
-            for n, f in zip(res.output_names, res.fit, strict=True)}
+def fits_json(res: CompareResult, fits: np.ndarray | None = None) -> dict[str, float | None]:
+    """``{channel: fit or None}`` of ``fits`` (default: the overall fit of ``res``)."""
+    values = res.fit if fits is None else fits
+    return {n: fit_or_none(f) for n, f in zip(res.output_names, values, strict=True)}
 
 
 def require_viz() -> Any:
@@ -214,7 +253,8 @@ def check_rrd(rrd: Path | None, *, inputs: Sequence[Path]) -> Path | None:
 
 
 def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
-               comparisons: Sequence[CompareResult] = (), sweep: Any = None) -> None:
+               comparisons: Sequence[CompareResult] = (), sweep: Any = None,
+               residuals: Any = None) -> None:
     """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
     :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing or
     the file cannot be written."""
@@ -224,6 +264,8 @@ def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
         try:
             viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
                                    sweep=sweep)
+            if residuals is not None:
+                viz.log_residuals(rec=rec, result=residuals)
         finally:
             rec.disconnect()
     except (OSError, RuntimeError) as exc:
@@ -239,3 +281,20 @@ JSON_OPTION = click.option("--json", "as_json", is_flag=True, help="Print the re
 
 
 # ------------------------------------------------------------------------------- commands
+
+
+#: A model with a pole at least this far out integrates over any validation window.
+INTEGRATING_RADIUS = 0.995
+#: Window of the default comparison of an integrating model (seconds): the same 2 s window
+#: the no-knobs selection scores with.
+DEFAULT_WINDOW_S = SCORE_WINDOW_S
+
+
+def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
+    """``(label, compare keywords)`` when the user chose no mode: whole-record simulation,
+    or 2 s windowed simulation for a model with a pole at ``|z| >= INTEGRATING_RADIUS``
+    (simulating a whole flight through an integrator measures only its drift)."""
+    radius = float(np.max(np.abs(model.poles()), initial=0.0))
+    if radius >= INTEGRATING_RADIUS:
+        return (f"simulation, {DEFAULT_WINDOW_S:g} s windows", {"window": DEFAULT_WINDOW_S})
+    return ("simulation", {})

@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -39,7 +40,8 @@ import scipy.linalg
 from sysid.data import IOData, as_flights, block_hankel, check_excited, hankel_columns
 from sysid.errors import DataError, HorizonError
 
-__all__ = ["DataProducts", "build_products", "min_samples", "triangular_factor"]
+__all__ = ["DataProducts", "build_products", "given_products", "min_samples",
+           "triangular_factor"]
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +68,9 @@ class DataProducts:
         n_columns: total Hankel columns M over all flights.
         u_scale, y_scale: ``(m,)``, ``(l,)`` channel scales (the data were divided by them).
         flights: the data (kept for the QR fallback).
+        cache: factors a caller already has for these products, keyed by method (e.g.
+            ``("iem", feedthrough)``: the IEM-ordered LQ factor and its Γ_f L_p), so a horizon
+            grid (:mod:`sysid.grid`) shares one factorization among its pairs.
     """
 
     gram: np.ndarray
@@ -77,6 +82,7 @@ class DataProducts:
     u_scale: np.ndarray
     y_scale: np.ndarray
     flights: tuple[IOData, ...]
+    cache: dict[Any, Any] = field(default_factory=dict, repr=False)
 
     @property
     def n_channels(self) -> int:
@@ -181,6 +187,18 @@ def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,
         if hankel_columns(d.n_samples, block_rows=blocks) > 0:
             gram += _gram_one(products.scaled_w(d), blocks)
     log.debug("Gram %dx%d from %d columns of %d flight(s)", rows, rows, cols, len(flights))
+    return products
+
+
+def given_products(data: IOData | Sequence[IOData], *, products: DataProducts | None,
+                   past: int, future: int, scale: bool) -> DataProducts:
+    """``products`` when given (checked against the horizons), else :func:`build_products`."""
+    if products is None:
+        return build_products(data, past=past, future=future, scale=scale)
+    if (products.past, products.future) != (past, future):
+        raise HorizonError(f"products were built for past={products.past}, "
+                           f"future={products.future}, not past={past}, future={future}; "
+                           "build them for these horizons")
     return products
 
 

@@ -33,29 +33,30 @@ is biased under feedback and K then comes from the state regression with B, D fi
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.linalg
 
 from sysid.data import IOData, block_hankel
 from sysid.errors import ParameterError
-from sysid.factor import DataProducts, build_products, triangular_factor
+from sysid.factor import DataProducts, given_products, triangular_factor
+from sysid.finish import Finished, Focus, check_focus, finish, stability_report
 from sysid.model import StateSpaceModel
 from sysid.pem import pem_refine
 from sysid.realize import (
     Signals,
-    ac_from_gamma,
     bd_thesis,
-    bdk_from_states,
     build_model,
     check_order,
     gamma_from_svd,
-    kalman_gain_from_residuals,
     lstsq_coords,
     refine_predictor,
 )
+from sysid.stability import Stability, check_stability, stabilize
 
 __all__ = ["iem", "iem_direct", "iem_order", "iem_signals", "realize_iem"]
 
@@ -63,7 +64,7 @@ log = logging.getLogger(__name__)
 
 _BK = ("state", "thesis")
 _VARIANTS = {
-    "consistent": {"bk_method": "state", "weighting": "data", "refine": True},
+    "consistent": {"bk_method": "state", "weighting": "data", "refine": False},
     "thesis": {"bk_method": "thesis", "weighting": "none", "refine": False},
 }
 _WEIGHTING = ("data", "none")
@@ -82,9 +83,17 @@ def iem_order(products: DataProducts, *, feedthrough: bool) -> np.ndarray:
 
 def iem_signals(products: DataProducts, *, feedthrough: bool, factorization: str = "auto"
                 ) -> tuple[np.ndarray, Signals]:
-    """:math:`\\widehat{\\Gamma_f L_p}` ``(f l, p c)`` and the signals, from one LQ factor."""
+    """:math:`\\widehat{\\Gamma_f L_p}` ``(f l, p c)`` and the signals, from one LQ factor.
+
+    The factor and :math:`\\widehat{\\Gamma_f L_p}` are taken from, or stored in,
+    ``products.cache[("iem", feedthrough)]`` (with ``factorization="auto"``), so a horizon
+    grid (:mod:`sysid.grid`) can hand every pair its share of one factorization.
+    """
     order = iem_order(products, feedthrough=feedthrough)
-    low = triangular_factor(products, order, method=factorization)
+    key = ("iem", bool(feedthrough))
+    cached = products.cache.get(key) if factorization == "auto" else None
+    low, cached_gamma = cached if cached is not None else (
+        triangular_factor(products, order, method=factorization), None)
     pos = np.empty_like(order)
     pos[order] = np.arange(order.size)
     p, f, ell = products.past, products.future, products.n_outputs
@@ -95,12 +104,16 @@ def iem_signals(products: DataProducts, *, feedthrough: bool, factorization: str
         diag = low[np.ix_(yp, yp)]
         coords[yp] = 0.0
         coords[np.ix_(yp, yp)] = diag
-    gamma_lp = np.empty((f * ell, pc))
-    for i, yp in enumerate(y_pos):
-        s = yp[0]
-        theta = scipy.linalg.solve_triangular(coords[:s, :s], low[yp, :s].T, lower=True,
-                                              trans="T", check_finite=False).T
-        gamma_lp[i * ell:(i + 1) * ell] = theta[:, :pc]
+    gamma_lp = cached_gamma
+    if gamma_lp is None:
+        gamma_lp = np.empty((f * ell, pc))
+        for i, yp in enumerate(y_pos):
+            s = yp[0]
+            theta = scipy.linalg.solve_triangular(coords[:s, :s], low[yp, :s].T, lower=True,
+                                                  trans="T", check_finite=False).T
+            gamma_lp[i * ell:(i + 1) * ell] = theta[:, :pc]
+        if factorization == "auto":
+            products.cache[key] = (low, gamma_lp)
 
     def rows(idx: np.ndarray) -> np.ndarray:
         return low[pos[idx]]
@@ -143,62 +156,55 @@ def iem_direct(products: DataProducts, *, feedthrough: bool) -> tuple[np.ndarray
     return gamma_lp, sig
 
 
-def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_inputs: int,
-                n_outputs: int, feedthrough: bool, bk_method: str, weighting: str,
-                refine_on: list[tuple[np.ndarray, np.ndarray]] | None = None
-                ) -> tuple[tuple[np.ndarray, ...], np.ndarray, str]:
-    """``(A, B, C, D, K, noise_cov)`` in scaled units, the singular values of step 3, and
-    what the predictor refinement did ("done", "off", or why it was skipped) and where K
-    came from. If the regression K leaves ``A - K C`` unstable, K is replaced by the Kalman
-    gain of the state residuals (:func:`sysid.realize.kalman_gain_from_residuals`).
+def realize_iem(gamma_lp: np.ndarray, sig: Signals, *, order: int, n_outputs: int,
+                feedthrough: bool, bk_method: str, weighting: str,
+                flights: list[tuple[np.ndarray, np.ndarray]], focus: Focus = "prediction",
+                stability: Stability = "auto", refine: bool = False,
+                svd_cache: dict[Any, Any] | None = None) -> tuple[Finished, np.ndarray, str]:
+    """The model in scaled units (:class:`sysid.finish.Finished`), the singular values of
+    step 3, and what the predictor refinement did ("off", "done" or why it was skipped).
 
-    ``refine_on``: the scaled ``(u, y)`` of each flight, to refine ``(A, B, D, K)`` with
-    :func:`sysid.realize.refine_predictor` (A = A_K + K C, B = B_K + K D; C and A_K kept).
+    ``flights``: the scaled ``(u, y)`` of each flight (output error, refinement). With
+    ``refine`` (prediction focus only) ``(A, B, D, K)`` are refitted with
+    :func:`sysid.realize.refine_predictor` (A = A_K + K C, B = B_K + K D; C and A_K kept); the
+    refinement is dropped when it would leave A with poles the stability mode moves.
+    ``svd_cache`` (the products' cache) keeps the SVD for the other orders of the pair.
     """
-    o = gamma_lp @ sig.zp / np.sqrt(sig.n_columns) if weighting == "data" else gamma_lp
-    gamma, sv = gamma_from_svd(o, order=order)
-    a, c = ac_from_gamma(gamma, n_outputs=n_outputs)
-    lp = np.linalg.pinv(gamma) @ gamma_lp  # L_p estimate, eq. 3.23
-    x, x_next = lp @ sig.zp, lp @ sig.zp_next
+    key = ("iem-svd", weighting, feedthrough)
+    o = None if svd_cache is not None and key in svd_cache else (
+        gamma_lp @ sig.zp / np.sqrt(sig.n_columns) if weighting == "data" else gamma_lp)
+    gamma, sv = gamma_from_svd(o, order=order, cache=svd_cache, key=key)
+    bd = None
     if bk_method == "thesis":
-        yf_uf = lstsq_coords(sig.yf, sig.uf)  # Y_f U_f^dagger
-        b, d = bd_thesis(gamma=gamma, yf_uf_pinv=yf_uf, n_inputs=n_inputs,
-                         n_outputs=n_outputs, feedthrough=feedthrough)
-        b, d, k = bdk_from_states(a=a, c=c, x=x, x_next=x_next, sig=sig,
-                                  feedthrough=feedthrough, b=b, d=d)
-    else:
-        b, d, k = bdk_from_states(a=a, c=c, x=x, x_next=x_next, sig=sig,
-                                  feedthrough=feedthrough)
-    noise_cov = sig.e0 @ sig.e0.T / sig.n_columns
-    k_source = "state regression"
-    if np.max(np.abs(np.linalg.eigvals(a - k @ c))) >= 1.0:
-        kalman = kalman_gain_from_residuals(a=a, b=b, c=c, d=d, x=x, x_next=x_next, sig=sig)
-        if kalman is not None:
-            k, noise_cov = kalman
-            k_source = "Kalman gain (DARE) of the state residuals"
-            log.info("IEM: A - K C of the regression K is unstable; using the Kalman gain")
-    status = "off"
-    if refine_on is not None:
-        a_k = a - k @ c
-        refined = None
-        if np.max(np.abs(np.linalg.eigvals(a_k))) < 0.999:
-            refined = refine_predictor(a_k=a_k, c=c, flights=refine_on,
-                                       feedthrough=feedthrough)
-            status = "skipped: A - K C not diagonalisable"
-        if refined is not None:
-            b_k, d, k = refined
-            a, b, status = a_k + k @ c, b_k + k @ d, "done"
-        elif status == "off":
-            status = "skipped: predictor A - K C unstable"
-            log.warning("IEM refinement skipped: the predictor A - K C is unstable")
-    return (a, b, c, d, k, noise_cov), sv, f"{status}; K from {k_source}"
+        bd = bd_thesis(gamma=gamma, yf_uf_pinv=lstsq_coords(sig.yf, sig.uf),
+                       n_inputs=sig.u0.shape[0], n_outputs=n_outputs, feedthrough=feedthrough)
+    fin = finish(gamma=gamma, gamma_lp=gamma_lp, sig=sig, feedthrough=feedthrough, focus=focus,
+                 stability=stability, flights=flights, bd=bd)
+    if not refine:
+        return fin, sv, "off"
+    if focus != "prediction":
+        return fin, sv, "skipped: refinement fits the predictor (focus='prediction')"
+    a_k = fin.a - fin.k @ fin.c
+    if np.max(np.abs(np.linalg.eigvals(a_k))) >= 0.999:
+        log.warning("IEM refinement skipped: the predictor A - K C is unstable")
+        return fin, sv, "skipped: predictor A - K C unstable"
+    refined = refine_predictor(a_k=a_k, c=fin.c, flights=flights, feedthrough=feedthrough)
+    if refined is None:
+        return fin, sv, "skipped: A - K C not diagonalisable"
+    b_k, d, k = refined
+    a_new = a_k + k @ fin.c
+    if stabilize(a_new, mode=stability)[1]:
+        log.info("IEM refinement dropped: it moves poles outside the unit circle")
+        return fin, sv, "dropped: the refined A has poles outside the unit circle"
+    return dataclasses.replace(fin, a=a_new, b=b_k + k @ d, d=d, k=k), sv, "done"
 
 
 def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
-        feedthrough: bool = False, variant: str = "consistent", bk_method: str | None = None,
+        feedthrough: bool = False, variant: str = "consistent", focus: Focus = "prediction",
+        stability: Stability = "auto", bk_method: str | None = None,
         weighting: str | None = None, scale: bool = True, factorization: str = "auto",
-        direct: bool = False, refine: bool | None = None, pem: bool = False
-        ) -> StateSpaceModel:
+        direct: bool = False, refine: bool | None = None, pem: bool = False,
+        products: DataProducts | None = None) -> StateSpaceModel:
     """Identify an innovation-form model with IEM from one flight or a list of flights.
 
     Args:
@@ -206,37 +212,56 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         order: model order n. past, future: horizons p, f in samples.
         feedthrough: estimate D (and use the current input in the row regressions); False
             means D = 0, right for a loop without delay (u(k) already reacts to y(k)).
-        variant: a preset for the three choices below. "consistent" (default): state
-            regression for B, D, K, data weighting, predictor refinement. "thesis": Table 4.3
-            exactly (thesis B/D from eq. 3.15, no weighting, no refinement), for reproducing
-            the thesis; biased in closed loop. Arguments given explicitly override the preset.
+        variant: a preset for the choices below. "consistent" (default): state regression
+            for B, D, K, data weighting, no refinement. "thesis": Table 4.3 exactly (thesis
+            B/D from eq. 3.15, no weighting), for reproducing the thesis; biased in closed
+            loop. Arguments given explicitly override the preset.
+        focus: "prediction" (default): B, D, K from the closed-loop-consistent state
+            regression, the right choice for flight data and k-step prediction.
+            "simulation": B, D and x0 re-estimated by output error with A, C (and K) from the
+            subspace step; for open-loop data with colored inputs; biased under feedback
+            (:mod:`sysid.finish`, ``docs/sysid.md``).
+        stability: "auto" (default), "enforce" or "free" (:mod:`sysid.stability`): "auto"
+            moves poles just outside the unit circle (|z| <= 1.1, noise around an integrator)
+            to 0.999; "enforce" puts every pole strictly inside (MATLAB's EnforceStability);
+            B, D, K are estimated for the final A and the fit it cost is in
+            ``provenance["stability"]``.
         bk_method: "state" (closed-loop consistent) or "thesis" (eq. 3.15).
         weighting: "data" (SVD of Γ_f L_p Z_p) or "none" (thesis eq. 3.32).
         scale: divide channels by their std inside the identification (undone in the model).
         factorization: "auto", "cholesky" or "qr" (see :func:`sysid.factor.triangular_factor`).
         direct: use the per-row ``lstsq`` reference path instead of the fast one.
         refine: one linear least-squares fit of the one-step predictor over all samples
-            after step 5 (:func:`sysid.realize.refine_predictor`; it re-estimates A as
-            A_K + K C, so A is then no longer the shift-invariance estimate). Off by default
-            with ``bk_method="thesis"``, which it would otherwise turn into a hybrid.
-        pem: then refine ``A_K``, C and the rest by prediction error (:mod:`sysid.pem`); the
-            IEM model is kept (and provenance["pem"] says why) if the cost does not decrease.
+            (:func:`sysid.realize.refine_predictor`; it re-estimates A as A_K + K C). Off by
+            default: on the project's closed-loop flights it raises the one-step fit a little
+            and costs windowed-simulation fit and stability (``docs/sysid.md``).
+        pem: then refine by prediction error (:mod:`sysid.pem`) with the criterion of
+            ``focus``: one-step prediction errors over ``A_K``, C, or simulation errors over A,
+            C (an output-error model, K = 0); the IEM model is kept (and provenance["pem"]
+            says why) if the cost does not decrease.
+        products: the data products of ``data`` for these horizons, already built
+            (:func:`sysid.factor.build_products`, or a pair of :mod:`sysid.grid`, whose cache
+            holds a shared factor); ``data`` is then not read again.
 
     Returns:
         ``StateSpaceModel`` in physical units with K and the innovation covariance.
     """
     if variant not in _VARIANTS:
         raise ParameterError(f"variant={variant!r}; use one of {tuple(_VARIANTS)}")
+    check_focus(focus)
+    check_stability(stability)
     preset = _VARIANTS[variant]
     bk_method = preset["bk_method"] if bk_method is None else bk_method
     weighting = preset["weighting"] if weighting is None else weighting
-    if refine is None:
-        refine = preset["refine"] and bk_method != "thesis"
+    refine = bool(preset["refine"] if refine is None else refine)
     if bk_method not in _BK:
         raise ParameterError(f"bk_method={bk_method!r}; use one of {_BK}")
     if weighting not in _WEIGHTING:
         raise ParameterError(f"weighting={weighting!r}; use one of {_WEIGHTING}")
-    products = build_products(data, past=past, future=future, scale=scale)
+    if bk_method == "thesis" and focus == "simulation":
+        raise ParameterError("focus='simulation' re-estimates B, D by output error; the "
+                             "thesis' B, D (eq. 3.15) go with focus='prediction'")
+    products = given_products(data, products=products, past=past, future=future, scale=scale)
     m, ell = products.n_inputs, products.n_outputs
     check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)
     if direct:
@@ -245,22 +270,29 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         gamma_lp, sig = iem_signals(products, feedthrough=feedthrough,
                                     factorization=factorization)
     flights = [(fl.u / products.u_scale, fl.y / products.y_scale) for fl in products.flights]
-    refine_on = flights if refine else None
-    (a, b, c, d, k, cov), sv, status = realize_iem(
-        gamma_lp, sig, order=order, n_inputs=m, n_outputs=ell, feedthrough=feedthrough,
-        bk_method=bk_method, weighting=weighting, refine_on=refine_on)
+    common = {"order": order, "n_outputs": ell, "feedthrough": feedthrough,
+              "bk_method": bk_method, "weighting": weighting, "flights": flights,
+              "focus": focus, "refine": refine,
+              "svd_cache": None if direct else products.cache}
+    fin, sv, status = realize_iem(gamma_lp, sig, stability=stability, **common)
     pem_status = "off"
+    mats = (fin.a, fin.b, fin.c, fin.d, fin.k, fin.noise_cov)
     if pem:
-        (a, b, c, d, k, cov), pem_status = pem_refine(matrices=(a, b, c, d, k, cov),
-                                                      flights=flights, feedthrough=feedthrough)
+        mats, pem_status = pem_refine(matrices=mats, flights=flights, feedthrough=feedthrough,
+                                      criterion=focus)
     prov = {"method": "iem", "order": order, "past": past, "future": future,
-            "feedthrough": feedthrough, "variant": variant, "bk_method": bk_method,
-            "weighting": weighting,
+            "feedthrough": feedthrough, "variant": variant, "focus": focus,
+            "stability": stability, "bk_method": bk_method, "weighting": weighting,
             "n_flights": len(products.flights), "n_columns": products.n_columns,
             "n_samples": [fl.n_samples for fl in products.flights],
             "sources": [fl.source for fl in products.flights],
             "singular_values": sv.tolist(), "path": "direct" if direct else "fast",
-            "refine": status, "pem": pem_status}
-    return build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
-                       y_scale=products.y_scale, template=products.flights[0],
-                       provenance=prov)
+            "refine": status, "pem": pem_status, "estimates": fin.notes}
+    a, b, c, d, k, cov = mats
+    model = build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
+                        y_scale=products.y_scale, template=products.flights[0],
+                        provenance=prov)
+    if fin.moved:
+        free, _, _ = realize_iem(gamma_lp, sig, stability="free", **common)
+        model = stability_report(model=model, fin=fin, free=free, products=products)
+    return model

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -198,7 +199,11 @@ class StateSpaceModel:
         return json.dumps(self.to_dict(), indent=1)
 
     def to_control(self) -> Any:
-        """A python-control ``StateSpace`` (discrete, ``dt`` seconds) of ``(A, B, C, D)``."""
+        """A python-control ``StateSpace`` (discrete, ``dt`` seconds) of ``(A, B, C, D)``.
+
+        python-control allows no ``.`` in signal names, so session channel names such as
+        ``motor.m1`` become ``motor_m1`` (and a name repeated after that gets ``_2``, ...).
+        """
         try:
             import control
         except ImportError as exc:
@@ -206,13 +211,27 @@ class StateSpaceModel:
                 "to_control needs python-control; install it with `pip install control`"
             ) from exc
         return control.ss(self.A, self.B, self.C, self.D, self.dt,
-                          inputs=list(self.input_names), outputs=list(self.output_names))
+                          inputs=_control_names(self.input_names),
+                          outputs=_control_names(self.output_names))
 
     def save(self, path: str | Path) -> Path:
         """Write the model; the suffix picks the format: ``.h5``/``.hdf5``, ``.json``, ``.mat``."""
         from sysid import model_io
 
         return model_io.save(self, Path(path))
+
+
+def _control_names(names: tuple[str, ...]) -> list[str]:
+    """Signal names python-control accepts: ``.`` (and other non-identifier characters)
+    replaced by ``_``, duplicates made unique."""
+    out: list[str] = []
+    for name in names:
+        base = re.sub(r"\W", "_", name) or "signal"
+        cand, i = base, 2
+        while cand in out:
+            cand, i = f"{base}_{i}", i + 1
+        out.append(cand)
+    return out
 
 
 def load_model(path: str | Path) -> StateSpaceModel:

@@ -99,7 +99,7 @@ def load(path: Path) -> StateSpaceModel:
     except KeyError as exc:
         raise ModelFileError(f"{not_model} (no {exc})") from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError, scipy.io.matlab.MatReadError,
-            TypeError, ValueError) as exc:
+            IndexError, TypeError, ValueError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ModelFileError(f"{str(path)!r} is not a readable sysid model ({reason}); "
                              "pass a file written by model.save") from exc

@@ -33,10 +33,12 @@ returned with the reason. Cost per evaluation is one :func:`~sysid.realize.predi
 from __future__ import annotations
 
 import logging
+from typing import Literal
 
 import numpy as np
 import scipy.optimize
 
+from sysid.output_error import output_error_bd
 from sysid.realize import predictor_fit
 
 __all__ = ["modal_form", "pem_refine"]
@@ -51,10 +53,10 @@ def modal_form(*, a_k: np.ndarray, c: np.ndarray
     """``(eig_params, block_sizes, C_modal (l, n), fixed (l, n) bool)`` of a stable ``A_K``.
 
     ``C_modal = C T`` with ``T^{-1} A_K T`` block diagonal and the C normalisation of the
-    module docstring. None if ``A_K`` is not safely diagonalisable or not inside 0.999.
+    module docstring. None if ``A_K`` is not safely diagonalisable or not stable.
     """
     lam, vec = np.linalg.eig(a_k)
-    if np.max(np.abs(lam)) >= 0.999 or np.linalg.cond(vec) > 1e8:
+    if np.max(np.abs(lam)) >= 1.0 or np.linalg.cond(vec) > 1e8:
         return None
     cols, sizes, par = [], [], []
     fixed = np.zeros((c.shape[0], a_k.shape[0]), dtype=bool)
@@ -106,35 +108,53 @@ def _a_k(par: np.ndarray, sizes: list[int]) -> np.ndarray:
 
 
 def pem_refine(*, matrices: Matrices, flights: list[tuple[np.ndarray, np.ndarray]],
-               feedthrough: bool, max_iterations: int = 5) -> tuple[Matrices, str]:
+               feedthrough: bool, max_iterations: int = 5,
+               criterion: Literal["prediction", "simulation"] = "prediction"
+               ) -> tuple[Matrices, str]:
     """Refine ``(A, B, C, D, K, noise_cov)`` by prediction error; returns them and a status.
 
-    ``flights``: ``(u (N, m), y (N, l))`` per flight, in the units of the matrices. On
-    success the model is in the modal basis with ``A = A_K + K C``, ``B = B_K + K D`` and
-    ``noise_cov`` the covariance of the prediction errors; otherwise the input is returned
-    unchanged and the status says why ("kept input model: ...").
+    ``flights``: ``(u (N, m), y (N, l))`` per flight, in the units of the matrices.
+    ``criterion="prediction"`` minimises the one-step prediction errors over ``(A_K, C)`` with
+    ``(B_K, K, D, x_0)`` solved inside; on success the model is in the modal basis with
+    ``A = A_K + K C``, ``B = B_K + K D`` and ``noise_cov`` the covariance of the prediction
+    errors. ``criterion="simulation"`` minimises the simulation (output) errors over
+    ``(A, C)`` with ``(B, D, x_0)`` solved inside (:func:`sysid.output_error.output_error_bd`;
+    MATLAB ``ssest`` with ``Focus="simulation"``); K is then re-fitted as the Kalman gain of
+    the model's noise description when the predictor ``A - K C`` would be unstable. A stays
+    stable at every iterate in both. Otherwise the input is returned unchanged and the
+    status says why ("kept input model: ...").
     """
     a, _, c, _, k, _ = matrices
-    modal = modal_form(a_k=a - k @ c, c=c)
+    sim = criterion == "simulation"
+    modal = modal_form(a_k=a if sim else a - k @ c, c=c)
     if modal is None:
-        log.warning("PEM refinement skipped: A - K C unstable or not diagonalisable")
-        return matrices, "kept input model: A - K C unstable or not diagonalisable"
+        what = "A" if sim else "A - K C"
+        log.warning("PEM refinement skipped: %s unstable or not diagonalisable", what)
+        return matrices, f"kept input model: {what} unstable or not diagonalisable"
     par0, sizes, c0, fixed = modal
     free = ~fixed
     n_eig = par0.size
+    n_res = sum(y.size for _, y in flights)
 
     def unpack(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cm = c0.copy()
         cm[free] = theta[n_eig:]
         return _a_k(theta[:n_eig], sizes), cm
 
+    def inner(theta: np.ndarray) -> tuple | None:
+        a_m, cm = unpack(theta)
+        if sim:
+            return output_error_bd(a=a_m, c=cm, flights=flights, feedthrough=feedthrough,
+                                   residuals=True)
+        return predictor_fit(a_k=a_m, c=cm, flights=flights, feedthrough=feedthrough,
+                             residuals=True)
+
     def residual(theta: np.ndarray) -> np.ndarray:
-        a_k, cm = unpack(theta)
-        fit = predictor_fit(a_k=a_k, c=cm, flights=flights, feedthrough=feedthrough,
-                            residuals=True)
+        fit = inner(theta)
         if fit is None:  # a pair collapsed onto a defective real pole: make it unattractive
-            return np.full(sum(y.size for _, y in flights), 1e3)
-        return np.concatenate([e.ravel() for e in fit[3]])
+            return np.full(n_res, 1e3)
+        errs = np.concatenate([e.ravel() for e in fit[-1]])
+        return errs if errs.size == n_res else np.full(n_res, 1e3)
 
     theta0 = np.concatenate([par0, c0[free]])
     cost0 = 0.5 * float(np.sum(residual(theta0) ** 2))
@@ -143,14 +163,17 @@ def pem_refine(*, matrices: Matrices, flights: list[tuple[np.ndarray, np.ndarray
     if not sol.cost < cost0:
         log.info("PEM refinement kept the input model: the cost did not decrease")
         return matrices, "kept input model: the prediction-error cost did not decrease"
-    a_k, cm = unpack(sol.x)
-    fit = predictor_fit(a_k=a_k, c=cm, flights=flights, feedthrough=feedthrough,
-                        residuals=True)
-    if fit is None or np.max(np.abs(np.linalg.eigvals(a_k))) >= 1.0:
+    a_m, cm = unpack(sol.x)
+    fit = inner(sol.x)
+    if fit is None or np.max(np.abs(np.linalg.eigvals(a_m))) >= 1.0:
         return matrices, "kept input model: the refined predictor is unusable"
-    b_k, d, k_new, errs = fit
-    e = np.vstack(errs)
-    cov = e.T @ e / e.shape[0]
-    out = (a_k + k_new @ cm, b_k + k_new @ d, cm, d, k_new, cov)
     drop = 100.0 * (1.0 - sol.cost / cost0)
-    return out, f"done: cost -{drop:.2f} % in {sol.nfev} evaluations ({sol.njev} Jacobians)"
+    status = f"done: cost -{drop:.2f} % in {sol.nfev} evaluations ({sol.njev} Jacobians)"
+    e = np.vstack(fit[-1])
+    cov = e.T @ e / e.shape[0]
+    if sim:
+        # an output-error model (MATLAB ssest, DisturbanceModel="none"): K = 0 and the
+        # covariance of the simulation errors
+        return (a_m, fit[0], cm, fit[1], np.zeros_like(k), cov), status + "; output error, K = 0"
+    b_k, d, k_new, _ = fit
+    return (a_m + k_new @ cm, b_k + k_new @ d, cm, d, k_new, cov), status

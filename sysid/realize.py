@@ -30,6 +30,7 @@ the direct paths.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import logging
 from dataclasses import dataclass
@@ -102,9 +103,19 @@ def lstsq_coords(target: np.ndarray, regressors: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(regressors.T, target.T, rcond=None)[0].T
 
 
-def gamma_from_svd(o: np.ndarray, *, order: int) -> tuple[np.ndarray, np.ndarray]:
-    """:math:`\\hat\\Gamma_f = U_1 S_1^{1/2}` ``(f l, n)`` and all singular values of ``o``."""
-    u, s, _ = np.linalg.svd(o, full_matrices=False)
+def gamma_from_svd(o: np.ndarray | None, *, order: int,
+                   cache: dict[Any, Any] | None = None, key: Any = "svd"
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """:math:`\\hat\\Gamma_f = U_1 S_1^{1/2}` ``(f l, n)`` and all singular values of ``o``.
+
+    With ``cache`` (e.g. ``DataProducts.cache``) the SVD is taken once under ``key`` and every
+    later order reuses it (``o`` may then be None)."""
+    if cache is not None and key in cache:
+        u, s = cache[key]
+    else:
+        u, s, _ = np.linalg.svd(o, full_matrices=False)
+        if cache is not None:
+            cache[key] = (u, s)
     if s[order - 1] <= 1e-12 * s[0]:
         raise OrderError(f"order={order} exceeds the numerical rank of the data "
                          f"({int(np.sum(s > 1e-12 * s[0]))}); lower the order")
@@ -333,7 +344,18 @@ def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
         provenance=prov)
 
 
+@functools.cache
+def _software_versions() -> tuple[tuple[str, str], ...]:
+    return tuple(_software_uncached().items())
+
+
 def _software() -> dict[str, str]:
+    """Versions for the provenance (looked up once: a metadata lookup costs milliseconds,
+    which a grid of hundreds of models would pay every time)."""
+    return dict(_software_versions())
+
+
+def _software_uncached() -> dict[str, str]:
     try:
         version = importlib.metadata.version("cf-sysid")
     except importlib.metadata.PackageNotFoundError:  # pragma: no cover - source checkout

@@ -1,7 +1,7 @@
-"""The one bridge from ground-station session files to :class:`~sysid.data.IOData`.
+"""The one bridge from session files (:mod:`cfsession`) to :class:`~sysid.data.IOData`.
 
-No other ``sysid`` module imports :mod:`groundstation`. :func:`load_session` turns one flight
-into one uniformly sampled experiment (thesis section 4.3.1):
+No other ``sysid`` module imports :mod:`cfsession`; none imports :mod:`groundstation`.
+:func:`load_session` turns one flight into one uniformly sampled experiment (thesis section 4.3.1):
 
 1. **Channels.** Each name in ``inputs``/``outputs`` selects log variables: a log stream
    (``"motors"``: all its fields), ``"stream.field"`` (``"gyro.x"``), the firmware variable it
@@ -13,9 +13,21 @@ into one uniformly sampled experiment (thesis section 4.3.1):
    :math:`\\hat c = \\operatorname{median}_i (t^{host}_i - \\tau_i)` over every selected log row is
    robust to latency spikes; a host-time window :math:`[t_0, t_1)` becomes the firmware window
    :math:`[t_0 - \\hat c,\\ t_1 - \\hat c)`.
-4. **Zero-order hold** of every channel onto one grid :math:`g_j = \\tau_s + j\\,\\Delta t`
+4. **Grid.** The grid period ``dt`` defaults to the logged period of the selected streams
+   (the slowest one when they differ). A stream logged faster than the grid is first
+   low-passed by the anti-alias filter of ``scipy.signal.decimate`` (Chebyshev I, order 8,
+   0.05 dB ripple, cut-off 0.8 of the grid's Nyquist frequency, zero phase) on its own
+   samples, and a warning says so; a zero-order hold of a raw 100 Hz signal onto a 50 Hz grid
+   would alias everything above 25 Hz into the band.
+5. **Zero-order hold** of every channel onto one grid :math:`g_j = \\tau_s + j\\,\\Delta t`
    (:func:`sysid.preprocess.resample_streams`) starting where every channel has a sample,
-   then optional mean/linear detrending. The result has ``u (N, m)``, ``y (N, l)``, the channel
+   then optional mean/linear detrending.
+
+**Windows** (:data:`Window`, :func:`parse_window`): ``"auto"`` is the excitation phase when
+the session has one, else every phase named ``airborne-1``, ``airborne-2``, ... (imported logs:
+motors on and airborne), each its own experiment (:func:`load_experiments`); a phase name or
+kind; ``T0:T1`` host seconds; ``PHASE@T0:T1`` seconds from the start of PHASE (``PHASE@T0:``
+to its end); ``"all"``. The result has ``u (N, m)``, ``y (N, l)``, the channel
    names (``"motor.m1"``, ``"gyro.x"``) and units of the session.
 
 Several flights (:func:`load_sessions`) stay separate experiments: never joined end to end.
@@ -25,31 +37,50 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import scipy.signal
 
-from groundstation.errors import SessionError
-from groundstation.session import Session, open_session
+from cfsession import Session, open_session
+from cfsession.errors import SessionError
 from sysid.data import IOData
 from sysid.errors import DataError, ParameterError
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams
 
-__all__ = ["Channel", "SessionFileError", "Window", "clock_offset", "load_session",
-           "load_sessions", "resolve_channels"]
+__all__ = ["AUTO", "Channel", "PhaseRelative", "SessionFileError", "Window", "clock_offset",
+           "load_experiments", "load_session", "load_sessions", "parse_window",
+           "read_metadata", "resolve_channels"]
 
 log = logging.getLogger(__name__)
 
-Window = str | tuple[float, float] | None
-"""A phase name or kind, a host-time ``(t0, t1)`` in seconds, or None for the whole log."""
+@dataclass(frozen=True)
+class PhaseRelative:
+    """Seconds ``[t0, t1)`` from the start of the first phase named (or of kind) ``phase``;
+    ``t1=None`` runs to that phase's end."""
+
+    phase: str
+    t0: float
+    t1: float | None = None
+
+
+Window = str | tuple[float, float] | PhaseRelative | None
+"""``"auto"``, a phase name or kind, a host-time ``(t0, t1)`` in seconds, a
+:class:`PhaseRelative`, or None for the whole log (module docstring)."""
+
+AUTO = "auto"
+_AIRBORNE = re.compile(r"airborne-(\d+)")
 
 _DETREND = ("mean", "linear", None)
 
 SessionFileError = SessionError
-"""Re-exported: callers of this bridge catch session-file errors without importing groundstation."""
+"""Re-exported: callers of this bridge catch session-file errors without importing cfsession."""
 
 
 @dataclass(frozen=True)
@@ -132,54 +163,131 @@ def _stream(session: Session, ch: Channel) -> Stream:
     return Stream(name=ch.label, t=t, values=v, unit=ch.unit)
 
 
-def _host_window(session: Session, window: Window) -> tuple[float, float] | None:
-    if window is None:
+def parse_window(text: str) -> Window:
+    """The command-line form of a window (module docstring): ``auto``, ``all``, a phase,
+    ``T0:T1`` or ``PHASE@T0:T1`` (``PHASE@T0:`` to the phase's end)."""
+    text = text.strip()
+    if text.lower() in ("all", "none", ""):
         return None
+    if text.lower() == AUTO:
+        return AUTO
+    phase, at, span = text.rpartition("@") if "@" in text else ("", "", text)
+    if ":" not in span:
+        if at:
+            raise ParameterError(f"window {text!r}: after '@' give T0:T1 seconds from the "
+                                 "phase start")
+        return text
+    try:
+        a, b = span.split(":")
+        t0, t1 = float(a), (float(b) if b.strip() or not at else None)
+        if not math.isfinite(t0) or (t1 is not None and not math.isfinite(t1)):
+            raise ValueError
+    except ValueError:
+        raise ParameterError(f"window {text!r}: use auto, all, a phase name, T0:T1 (finite "
+                             "seconds) or PHASE@T0:T1 (seconds from the phase start)") from None
+    if t1 is not None and not t1 > t0:
+        raise ParameterError(f"window {text!r} is empty; give T1 > T0")
+    if at:
+        if not phase:
+            raise ParameterError(f"window {text!r}: name the phase before '@'")
+        return PhaseRelative(phase=phase, t0=t0, t1=t1)
+    return (t0, t1)  # type: ignore[return-value]
+
+
+def _phase(session: Session, name: str, *, hint: str = "") -> tuple[float, float]:
+    try:
+        return session.phase_window(name)
+    except SessionError as exc:  # names the file and the phases; add what to do
+        raise SessionError(f"{exc}; choose one of them, or a time window "
+                           f"(CLI: --window NAME | T0:T1 | NAME@T0:T1 seconds | all){hint}"
+                           ) from None
+
+
+def host_windows(session: Session, window: Window) -> list[tuple[str, tuple[float, float] | None]]:
+    """The experiments a window selects: ``(label, host-time (t0, t1) or None)`` each."""
+    if window is None:
+        return [("all", None)]
+    if isinstance(window, PhaseRelative):
+        start, end = _phase(session, window.phase)
+        t1 = end if window.t1 is None else start + window.t1
+        return [(f"{window.phase}@{window.t0:g}:{'' if window.t1 is None else f'{window.t1:g}'}",
+                 (start + window.t0, t1))]
     if isinstance(window, str):
-        try:
-            return session.phase_window(window)
-        except SessionError as exc:  # names the file and the phases; add what to do
-            raise SessionError(f"{exc}; choose one of them, or a time window "
-                               "(CLI: --window NAME | T0:T1 seconds | all)") from None
+        if window != AUTO:
+            return [(window, _phase(session, window))]
+        phases = session.phases()
+        if any("excitation" in (p.name, p.kind) for p in phases):
+            return [("excitation", session.phase_window("excitation"))]
+        airborne = [(p.name, (p.start_s, p.end_s)) for p in phases
+                    if _AIRBORNE.fullmatch(p.name)]
+        if airborne:
+            return airborne
+        names = sorted({p.name for p in phases})
+        raise DataError(f"{session.path}: no excitation or airborne-N phase to identify from "
+                        f"(phases are {names}); pass a window: a phase, T0:T1, NAME@T0:T1 "
+                        "seconds or all")
     try:
         t0, t1 = (float(x) for x in window)
     except (TypeError, ValueError):
-        raise ParameterError(f"window={window!r}; pass a phase name, (t0, t1) seconds or None")\
-            from None
+        raise ParameterError(f"window={window!r}; pass a phase name, (t0, t1) seconds, "
+                             "PhaseRelative or None") from None
     if not t1 > t0:
         raise ParameterError(f"window ({t0}, {t1}) s is empty; pass t1 > t0")
-    return t0, t1
+    return [(f"{t0:g}:{t1:g}", (t0, t1))]
 
 
 #: Warn when the grid is this many times finer than the slowest logged stream.
 _UPSAMPLE_WARN = 5.0
+#: A stream is low-passed before the hold when the grid is this much coarser than its period.
+_DECIMATE_FROM = 1.25
 
 
-def load_session(
+def _stream_period(session: Session, name: str) -> float:
+    """Logged period of a stream: its declared period, else the median firmware-time step."""
+    st = session[name]
+    if st.period_s:
+        return float(st.period_s)
+    steps = np.diff(st.fw_time_s)
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else 0.0
+
+
+def _anti_alias(stream: Stream, *, period: float, dt: float) -> Stream:
+    """``stream`` low-passed by scipy.signal.decimate's IIR filter for a ``dt / period`` step."""
+    sos = scipy.signal.cheby1(8, 0.05, 0.8 * period / dt, output="sos")
+    if stream.values.shape[0] <= 3 * (2 * sos.shape[0] + 1):
+        log.warning("stream %s: %d samples are too few for the anti-alias filter; held as is",
+                    stream.name, stream.values.shape[0])
+        return stream
+    vals = scipy.signal.sosfiltfilt(sos, stream.values, axis=0)
+    return Stream(name=stream.name, t=stream.t, values=vals, unit=stream.unit)
+
+
+def load_experiments(
     path: str | os.PathLike[str],
     *,
     inputs: Sequence[str] = ("motors",),
     outputs: Sequence[str] = ("acc", "gyro"),
-    window: Window = "excitation",
-    dt: float = 0.02,
+    window: Window = AUTO,
+    dt: float | None = None,
     detrend: str | None = "mean",
-) -> IOData:
-    """One flight as an :class:`IOData` on a uniform ``dt`` grid (module docstring).
+) -> list[IOData]:
+    """Every experiment ``window`` selects in one session, each an :class:`IOData` on a
+    uniform ``dt`` grid (module docstring). ``source`` is the path, with ``#label`` (the
+    phase) when the window selects several experiments.
 
     Args:
         path: the session file.
         inputs, outputs: channel selections (streams, ``stream.field`` or ``group.variable``).
-        window: phase name or kind (first to last matching phase), host-time ``(t0, t1)`` in
-            seconds (the clock of the phases), or None for all samples.
-        dt: grid period in seconds (50 Hz by default, as the thesis).
-        detrend: ``"mean"``, ``"linear"`` or None.
-
-    Returns:
-        ``IOData`` with ``u (N, m)``, ``y (N, l)``, names, units and ``source`` = the path.
+        window: see :data:`Window`; ``"auto"`` (default) is the excitation phase, else the
+            airborne segments.
+        dt: grid period in seconds; None (default) is the logged period of the selected
+            streams (the slowest when they differ).
+        detrend: ``"mean"``, ``"linear"`` or None, per experiment.
     """
     if detrend not in _DETREND:
         raise ParameterError(f"detrend={detrend!r}; use 'mean', 'linear' or None")
-    if not dt > 0:
+    if dt is not None and not dt > 0:
         raise ParameterError(f"dt={dt}; pass the grid period in seconds (> 0)")
     session = open_session(path)
     ins = resolve_channels(session, inputs, role="input")
@@ -188,38 +296,98 @@ def load_session(
     clash = {c.label for c in ins} & {c.label for c in outs}
     if clash:
         raise DataError(f"{session.path}: {sorted(clash)} is both input and output; pick one")
+    periods = {c.stream: _stream_period(session, c.stream) for c in chans}
+    slowest = max(periods.values())
+    if dt is None:
+        if not slowest > 0:
+            raise DataError(f"{session.path}: the logged period of {sorted(periods)} is "
+                            "unknown; pass dt")
+        dt = slowest
+        log.info("%s: grid dt = %g s, the logged period", session.path, dt)
     offset = clock_offset(session, [c.stream for c in chans])
     streams = [_stream(session, c) for c in chans]
-    first = max(s.t[0] for s in streams)
-    last = min(s.t[-1] for s in streams)
-    host = _host_window(session, window)
-    start, stop = first, last
-    if host is not None:
-        start = max(first, host[0] - offset)
-        stop = min(last, host[1] - offset - 1e-6)  # phases are [start, end)
-    if stop < start + dt:
-        span = "all samples" if host is None else f"host window [{host[0]:.3f}, {host[1]:.3f}) s"
-        raise DataError(f"{session.path}: {span} holds less than one {dt} s step where every "
-                        f"channel has data; pick another window")
-    period = max((session[c.stream].period_s or 0.0) for c in chans)
-    if period > 0 and dt < period / _UPSAMPLE_WARN:
+    fast = sorted({c.stream for c in chans if 0 < periods[c.stream] * _DECIMATE_FROM < dt})
+    if fast:
+        log.warning("%s: %s logged at %s Hz, decimated to the %g Hz grid with an anti-alias "
+                    "filter (as scipy.signal.decimate: Chebyshev I order 8, zero phase)",
+                    session.path, ", ".join(fast),
+                    "/".join(f"{1 / periods[n]:g}" for n in fast), 1 / dt)
+        streams = [_anti_alias(st, period=periods[c.stream], dt=dt) if c.stream in fast else st
+                   for st, c in zip(streams, chans, strict=True)]
+    if slowest > 0 and dt < slowest / _UPSAMPLE_WARN:
         log.warning("%s: dt=%g s is %.0fx finer than the logged period %g s: each sample is "
                     "repeated (zero-order hold) and the horizons count grid steps; pass "
-                    "dt >= %g", session.path, dt, period / dt, period, period)
-    data = iodata_from_streams(
-        streams=streams, inputs=[c.label for c in ins], outputs=[c.label for c in outs],
-        dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, period))
-    if detrend is not None:
-        data, _ = detrend_data(data, kind=detrend)
-    log.info("%s: %d samples, firmware window [%.3f, %.3f] s, host - firmware %.4f s",
-             session.path, data.n_samples, start, stop, offset)
-    return dataclasses.replace(data, source=str(Path(path)))
+                    "dt >= %g", session.path, dt, slowest / dt, slowest, slowest)
+    first = max(s.t[0] for s in streams)
+    last = min(s.t[-1] for s in streams)
+    spans = host_windows(session, window)
+    out = []
+    for label, host in spans:
+        start, stop = first, last
+        if host is not None:
+            start = max(first, host[0] - offset)
+            stop = min(last, host[1] - offset - 1e-6)  # phases are [start, end)
+        if stop < start + dt:
+            span = ("all samples" if host is None else
+                    f"window {label} (host [{host[0]:.3f}, {host[1]:.3f}) s)")
+            raise DataError(f"{session.path}: {span} holds less than one {dt:g} s step where "
+                            "every channel has data; pick another window")
+        data = iodata_from_streams(
+            streams=streams, inputs=[c.label for c in ins], outputs=[c.label for c in outs],
+            dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, slowest))
+        if detrend is not None:
+            data, _ = detrend_data(data, kind=detrend)
+        log.info("%s [%s]: %d samples, firmware window [%.3f, %.3f] s, host - firmware %.4f s",
+                 session.path, label, data.n_samples, start, stop, offset)
+        source = str(Path(path)) if len(spans) == 1 else f"{Path(path)}#{label}"
+        out.append(dataclasses.replace(data, source=source))
+    return out
 
 
-def load_sessions(paths: Sequence[str | os.PathLike[str]], **kwargs: object) -> list[IOData]:
-    """Each session as its own experiment (never joined end to end); ``kwargs`` as
-    :func:`load_session`."""
+def load_session(
+    path: str | os.PathLike[str],
+    *,
+    inputs: Sequence[str] = ("motors",),
+    outputs: Sequence[str] = ("acc", "gyro"),
+    window: Window = "excitation",
+    dt: float | None = 0.02,
+    detrend: str | None = "mean",
+) -> IOData:
+    """One flight as one :class:`IOData` (:func:`load_experiments` with a window that selects
+    a single experiment; ``dt=None`` is the logged period).
+
+    Returns:
+        ``IOData`` with ``u (N, m)``, ``y (N, l)``, names, units and ``source`` = the path.
+    """
+    exps = load_experiments(path, inputs=inputs, outputs=outputs, window=window, dt=dt,
+                            detrend=detrend)
+    if len(exps) > 1:
+        raise DataError(f"{path}: window {window!r} selects {len(exps)} experiments "
+                        f"({[e.source for e in exps]}); use load_experiments")
+    return exps[0]
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A session's root attributes (``uri``, ``plan_name``, ``start_time_iso``, ...)."""
+    return dict(open_session(path).meta)
+
+
+def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
+                  windows: dict[str, Window] | None = None, **kwargs: Any) -> list[list[IOData]]:
+    """The experiments of each session (:func:`load_experiments`; never joined end to end),
+    one list per session. ``windows`` maps a session (its path as given, or its file name)
+    to its own window; the others use ``window``; other ``kwargs`` as
+    :func:`load_experiments`."""
     if not paths:
         raise DataError("no session files given; pass at least one")
-    return [load_session(p, **kwargs) for p in paths]
+    windows = dict(windows or {})
+    unknown = sorted(set(windows) - {str(p) for p in paths} - {Path(p).name for p in paths})
+    if unknown:
+        raise ParameterError(f"window for {unknown}: no such session among "
+                             f"{[str(p) for p in paths]}")
+    out = []
+    for p in paths:
+        own = windows.get(str(p), windows.get(Path(p).name, kwargs.get("window", AUTO)))
+        out.append(load_experiments(p, **{**kwargs, "window": own}))
+    return out
 

@@ -3,14 +3,22 @@
 The thesis chose past/future horizons by identifying "a number of system models with varying
 past and future horizons, first in coarse increments and later in finer increments" (756
 models) and the order from the singular values plus trials of orders 3-12. :func:`sweep` runs
-such a grid: for each ``(past, future)`` pair the data products are built once (when the
-method accepts ``products=``) and every order is realised from them; each model is scored
-with :func:`sysid.validate.compare` on validation data (simulation, windowed simulation or
-k-step prediction). Pairs run in parallel worker processes with ``workers > 1``.
+such a grid with one factorization (:mod:`sysid.grid`): the Gram matrix of the largest Hankel
+matrix is formed once, every pair ``(p, f)`` is its time-aligned sub-block (the same common
+columns for every pair), IEM shares one Cholesky factor among the futures of a past, and every
+order is realised from the pair's products. Each model is scored with
+:func:`sysid.validate.compare` on validation data (simulation, windowed simulation or k-step
+prediction). Pasts run in parallel worker processes with ``workers > 1``, or on a Dask
+cluster with ``client=`` (:mod:`sysid.cluster`: the grid is scattered once per worker).
+
+**Score.** A model is ranked by its *score*: the mean over the output channels of the fit
+floored at 0 %, :math:`S = \\frac1l \\sum_i \\max(F_i, 0)`. A channel no model can predict
+(fits of -200 % or -600 %) then counts as 0 for every model and cannot decide the ranking,
+while the mean fit would be dominated by it.
 
 Selection (:meth:`SweepResult.best`) is parsimonious: among successful (by default stable)
-models, take the best mean fit :math:`F^*`, keep those within ``tol`` percentage points,
-:math:`\\bar F \\ge F^* - \\text{tol}`, and return the one of smallest order (then best fit).
+models, take the best score :math:`S^*`, keep those within ``tol`` percentage points,
+:math:`S \\ge S^* - \\text{tol}`, and return the one of smallest order (then best score).
 Orders above the true one fit the same data about as well, so "highest fit" alone would pick
 an over-parameterised model at random.
 """
@@ -18,21 +26,24 @@ an over-parameterised model at random.
 from __future__ import annotations
 
 import concurrent.futures
-import inspect
+import contextlib
 import itertools
 import logging
 import re
 import signal
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import threadpoolctl
 
 from sysid.data import IOData, as_flights
-from sysid.errors import DataError, SysIdError
+from sysid.errors import DataError, ParameterError, SysIdError
+from sysid.grid import HorizonGrid, build_grid, grid_products
+from sysid.methods import Method, Options, get_method
 from sysid.model import StateSpaceModel
 from sysid.validate import compare
 
@@ -40,7 +51,6 @@ __all__ = ["SweepResult", "SweepRow", "select_order", "sweep"]
 
 log = logging.getLogger(__name__)
 
-Identifier = Callable[..., StateSpaceModel]
 Progress = Callable[[int, int], None]
 
 
@@ -69,11 +79,20 @@ class SweepRow:
         """Mean of the per-channel fits, percent (NaN for failed rows)."""
         return float(np.mean(self.fit)) if self.error is None and self.fit.size else np.nan
 
+    @property
+    def score(self) -> float:
+        """Mean of the per-channel fits floored at 0 %, percent (module docstring; NaN for
+        failed rows and models whose output diverged)."""
+        if self.error is not None or not self.fit.size or np.isnan(self.fit).any():
+            return np.nan
+        return float(np.mean(np.clip(self.fit, 0.0, None)))
+
     def to_record(self) -> dict[str, Any]:
         """JSON-able dict (poles as [re, im] pairs, fits in percent, time in seconds)."""
         return {
             "past": self.past, "future": self.future, "order": self.order,
             "fit_percent": [float(f) for f in self.fit], "mean_fit_percent": self.mean_fit,
+            "score_percent": self.score,
             "poles": [[float(p.real), float(p.imag)] for p in self.poles],
             "stable": self.stable, "predictor_stable": self.predictor_stable,
             "seconds": self.seconds, "error": self.error,
@@ -91,15 +110,20 @@ class SweepResult:
 
     def best(self, *, tol: float = 0.5, require_stable: bool = True) -> SweepRow:
         """The parsimonious best row (module docstring): smallest order within ``tol`` points."""
-        ok = [r for r in self.rows if r.error is None and np.isfinite(r.mean_fit)
-              and (r.stable or not require_stable)]
+        ok = self.ranked(require_stable=require_stable)
         if not ok:
             raise DataError("no model of the sweep succeeded" +
                             (" and is stable" if require_stable else "") +
                             "; widen the grid or pass require_stable=False")
-        top = max(r.mean_fit for r in ok)
-        close = [r for r in ok if r.mean_fit >= top - tol]
-        return min(close, key=lambda r: (r.order, -r.mean_fit))
+        top = ok[0].score
+        close = [r for r in ok if r.score >= top - tol]
+        return min(close, key=lambda r: (r.order, -r.score))
+
+    def ranked(self, *, require_stable: bool = False) -> list[SweepRow]:
+        """Successful rows (and stable ones only, with ``require_stable``), best score first."""
+        ok = [r for r in self.rows if r.error is None and np.isfinite(r.score)
+              and (r.stable or not require_stable)]
+        return sorted(ok, key=lambda r: -r.score)
 
     def failures(self) -> list[tuple[str, int]]:
         """Why models failed: ``(message, count)``, most common first. Messages that differ only
@@ -120,60 +144,87 @@ class SweepResult:
 
     def table(self) -> str:
         """A plain-text table: horizons, order, mean fit, spectral radius, flags."""
-        lines = [" past future order  fit[%]  max|pole|  stable  pred.stable"]
+        lines = [" past future order score[%] fit[%]  max|pole|  stable  pred.stable"]
         for r in self.rows:
             if r.error is not None:
                 lines.append(f"{r.past:5d} {r.future:6d} {r.order:5d}  failed: {r.error}")
                 continue
             rad = float(np.max(np.abs(r.poles))) if r.poles.size else 0.0
-            lines.append(f"{r.past:5d} {r.future:6d} {r.order:5d} {r.mean_fit:7.2f} "
+            lines.append(f"{r.past:5d} {r.future:6d} {r.order:5d} {r.score:8.2f} "
+                         f"{r.mean_fit:7.2f} "
                          f"{rad:10.4f}  {r.stable!s:6}  {r.predictor_stable!s}")
         return "\n".join(lines)
 
 
-def _identifier(method: str | Identifier) -> tuple[str, Identifier]:
-    if callable(method):
-        return getattr(method, "__name__", "custom"), method
-    import importlib
-
-    known = {"iem": ("sysid.iem", "iem"), "po_moesp": ("sysid.moesp", "po_moesp")}
-    if method not in known:
-        raise DataError(f"method {method!r} is unknown; use 'iem', 'po_moesp' or a function")
-    module, name = known[method]
-    return method, getattr(importlib.import_module(module), name)
-
-
-def _pair_task(
-    *, data: tuple[IOData, ...], validation: tuple[IOData, ...], method: str | Identifier,
-    past: int, future: int, orders: Sequence[int], options: dict[str, Any],
-    horizon: int | None, window: float | None, keep_models: bool,
+def _past_task(
+    *, grid: HorizonGrid, validation: tuple[IOData, ...], method: Method, options: Options,
+    past: int, futures: Sequence[int], orders: Sequence[int], horizon: int | None,
+    window: float | None, keep_models: bool,
 ) -> list[SweepRow]:
-    """Identify and score every order for one (past, future) pair (runs in a worker)."""
-    _, fn = _identifier(method)
-    ell = data[0].n_outputs
-    kwargs = dict(options)
-    params = inspect.signature(fn).parameters
-    if "products" in params:  # one factorization of the data for all orders
-        from sysid.factor import build_products
+    """Identify and score every (future, order) for one past (runs in a worker): the pairs
+    share the grid's Gram matrix and, for IEM, one factor (:mod:`sysid.grid`).
 
-        try:
-            kwargs["products"] = build_products(list(data), past=past, future=future)
-        except SysIdError as exc:
-            return [_failed(past, future, n, exc, 0.0, ell) for n in orders]
+    BLAS runs on one thread here (:func:`one_blas_thread`): a multi-threaded BLAS sums in an
+    order that depends on its thread count, so a row would differ in its last bits between
+    this process, a worker process and a Dask worker (which runs one BLAS thread)."""
+    with one_blas_thread(), _quiet("sysid.iem", "sysid.moesp", "sysid.realize", "sysid.factor",
+                                   "sysid.pem", "sysid.finish", "sysid.stability"):
+        return _past_rows(grid=grid, validation=validation, method=method, options=options,
+                          past=past, futures=futures, orders=orders, horizon=horizon,
+                          window=window, keep_models=keep_models)
+
+
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Limit BLAS/OpenMP to one thread inside the block (restored after)."""
+    with threadpoolctl.threadpool_limits(limits=1):
+        yield
+
+
+@contextlib.contextmanager
+def _quiet(*names: str) -> Iterator[None]:
+    """Per-model warnings (a skipped refinement, ...) of hundreds of grid models would flood
+    the log; the sweep reports failures in its rows. Only errors pass while a grid runs."""
+    loggers = [logging.getLogger(n) for n in names]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(max(lg.getEffectiveLevel(), logging.ERROR))
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+
+
+def _past_rows(
+    *, grid: HorizonGrid, validation: tuple[IOData, ...], method: Method, options: Options,
+    past: int, futures: Sequence[int], orders: Sequence[int], horizon: int | None,
+    window: float | None, keep_models: bool,
+) -> list[SweepRow]:
+    ell = grid.n_outputs
+    products = grid_products(grid, past=past, futures=futures,
+                             shared_iem=method.shares_futures,
+                             feedthrough=bool(getattr(options, "feedthrough", False)))
     rows = []
-    for order in orders:
-        t0 = time.perf_counter()
-        try:
-            model = fn(list(data), order=order, past=past, future=future, **kwargs)
-            res = compare(model, list(validation), horizon=horizon, window=window,
-                          warn=False)
-        except (SysIdError, np.linalg.LinAlgError) as exc:
-            rows.append(_failed(past, future, order, exc, time.perf_counter() - t0, ell))
-            continue
-        rows.append(SweepRow(
-            past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
-            stable=model.is_stable, predictor_stable=model.predictor_is_stable,
-            seconds=time.perf_counter() - t0, model=model if keep_models else None))
+    for future in futures:
+        pair = products[future]
+        for order in orders:
+            t0 = time.perf_counter()
+            if isinstance(pair, SysIdError):
+                rows.append(_failed(past, future, order, pair, 0.0, ell))
+                continue
+            try:
+                model = method.identify(None, order=order, past=past, future=future,
+                                        options=options, products=pair)
+                res = compare(model, list(validation), horizon=horizon, window=window,
+                              warn=False)
+            except (SysIdError, np.linalg.LinAlgError) as exc:
+                rows.append(_failed(past, future, order, exc, time.perf_counter() - t0, ell))
+                continue
+            rows.append(SweepRow(
+                past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
+                stable=model.is_stable, predictor_stable=model.predictor_is_stable,
+                seconds=time.perf_counter() - t0, model=model if keep_models else None))
     return rows
 
 
@@ -191,57 +242,72 @@ def sweep(
     pasts: Sequence[int],
     futures: Sequence[int],
     orders: Sequence[int],
-    method: str | Identifier = "iem",
+    method: str | Method = "iem",
+    options: Options | None = None,
     validation: IOData | Sequence[IOData] | None = None,
     horizon: int | None = None,
     window: float | None = None,
     workers: int = 1,
     progress: Progress | None = None,
     keep_models: bool = False,
-    **options: Any,
+    client: Any | None = None,
+    **option_values: Any,
 ) -> SweepResult:
     """Identify a model for every (past, future, order) and score it on validation data.
 
-    ``method`` is ``"iem"``, ``"po_moesp"`` or a function with the signature of
-    :func:`sysid.iem`; ``options`` go to it (e.g. ``feedthrough=False``). ``validation``
+    ``method`` is a name or a :class:`~sysid.methods.Method` of :mod:`sysid.methods`;
+    ``options`` its options object, or give them as keywords (``feedthrough=False``).
+    Every pair uses the common Hankel columns of the grid (:mod:`sysid.grid`): the model of
+    ``(p, f)`` is the one identified on ``sysid.grid.pair_flights(...)``. ``validation``
     defaults to the identification data; ``horizon``/``window`` choose how models are compared
-    (see :func:`sysid.compare`). ``workers > 1`` runs (past, future) pairs in that many
-    processes. ``progress(done, total)`` is called in this process after each pair, with
-    counts of models. ``keep_models`` keeps every model in its row (memory!).
+    (see :func:`sysid.compare`). ``workers > 1`` runs the pasts in that many processes.
+    ``client`` (a :class:`distributed.Client`) runs the pasts on that Dask cluster instead,
+    the grid and validation data scattered once per worker (:mod:`sysid.cluster`); the rows
+    are the same as locally. ``progress(done, total)`` is called in this process after each
+    past, with counts of models. ``keep_models`` keeps every model in its row (memory!).
     """
+    meth = get_method(method)
+    if options is not None and option_values:
+        raise ParameterError("give the options either as an options object or as keywords")
+    opts = options if options is not None else meth.options(**option_values)
     flights = as_flights(data)
     val = flights if validation is None else as_flights(validation)
-    name, _ = _identifier(method)
-    pairs = [(int(p), int(f)) for p in pasts for f in futures]
+    pasts = sorted({int(p) for p in pasts})
+    futures = sorted({int(f) for f in futures})
     orders = [int(n) for n in orders]
-    if not pairs or not orders:
+    if not pasts or not futures or not orders:
         raise DataError("empty sweep grid; give at least one past, future and order")
-    total, done = len(pairs) * len(orders), 0
-    common = {"data": flights, "validation": val, "method": method, "orders": orders,
-              "options": options, "horizon": horizon, "window": window,
+    grid = build_grid(flights, past_max=pasts[-1], future_max=futures[-1])
+    total, done = len(pasts) * len(futures) * len(orders), 0
+    common = {"grid": grid, "validation": val, "method": meth, "options": opts,
+              "futures": futures, "orders": orders, "horizon": horizon, "window": window,
               "keep_models": keep_models}
-    results: dict[tuple[int, int], list[SweepRow]] = {}
+    results: dict[int, list[SweepRow]] = {}
     t0 = time.perf_counter()
-    if workers <= 1:
-        for p, f in pairs:
-            results[(p, f)] = _pair_task(past=p, future=f, **common)
-            done += len(orders)
-            if progress is not None:
-                progress(done, total)
-    else:
-        def finished(pair: tuple[int, int], pair_rows: list[SweepRow]) -> None:
-            nonlocal done
-            results[pair] = pair_rows
-            done += len(orders)
-            if progress is not None:
-                progress(done, total)
 
-        _run_parallel(pairs, common, workers=workers, finished=finished)
-    rows = tuple(row for pair in pairs for row in results[pair])
+    def finished(past: int, past_rows: list[SweepRow]) -> None:
+        nonlocal done
+        results[past] = past_rows
+        done += len(past_rows)
+        if progress is not None:
+            progress(done, total)
+
+    if client is not None:
+        from sysid.cluster import run_pasts
+
+        shared = {k: common.pop(k) for k in ("grid", "validation")}
+        run_pasts(client, task=_past_task, shared=shared, common=common, pasts=pasts,
+                  finished=finished)
+    elif workers <= 1:
+        for p in pasts:
+            finished(p, _past_task(past=p, **common))
+    else:
+        _run_parallel(pasts, common, workers=workers, finished=finished)
+    rows = tuple(row for p in pasts for row in results[p])
     n_failed = sum(r.error is not None for r in rows)
     log.info("sweep of %d models (%d failed) in %.1f s", len(rows), n_failed,
              time.perf_counter() - t0)
-    return SweepResult(rows=rows, method=name, horizon=horizon, window=window)
+    return SweepResult(rows=rows, method=meth.name, horizon=horizon, window=window)
 
 
 def _ignore_sigint() -> None:
@@ -249,25 +315,25 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run_parallel(pairs: list[tuple[int, int]], common: dict[str, Any], *, workers: int,
-                  finished: Callable[[tuple[int, int], list[SweepRow]], None]) -> None:
-    """Run the pairs in worker processes, calling ``finished(pair, rows)`` as each ends.
+def _run_parallel(pasts: list[int], common: dict[str, Any], *, workers: int,
+                  finished: Callable[[int, list[SweepRow]], None]) -> None:
+    """Run the pasts in worker processes, calling ``finished(past, rows)`` as each ends.
 
-    On any exception in this process (Ctrl-C included) pending pairs are cancelled and the
+    On any exception in this process (Ctrl-C included) pending pasts are cancelled and the
     workers terminated before it propagates, so an interrupted sweep ends at once.
     """
-    n_workers = min(workers, len(pairs))
+    n_workers = min(workers, len(pasts))
     pool = concurrent.futures.ProcessPoolExecutor(max_workers=n_workers,
                                                   initializer=_ignore_sigint)
-    todo = iter(pairs)
-    running: dict[concurrent.futures.Future, tuple[int, int]] = {}
+    todo = iter(pasts)
+    running: dict[concurrent.futures.Future, int] = {}
 
     def top_up() -> None:
-        # At most two pairs per worker in flight: submitting hundreds at once can fill the
+        # At most two pasts per worker in flight: submitting hundreds at once can fill the
         # executor's wake-up pipe and deadlock it under load (CPython gh-105829), and a short
         # queue leaves little to cancel.
-        for p, f in itertools.islice(todo, 2 * n_workers - len(running)):
-            running[pool.submit(_pair_task, past=p, future=f, **common)] = (p, f)
+        for p in itertools.islice(todo, 2 * n_workers - len(running)):
+            running[pool.submit(_past_task, past=p, **common)] = p
 
     try:
         top_up()

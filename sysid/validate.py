@@ -37,6 +37,7 @@ import logging
 from collections.abc import Sequence
 
 import numpy as np
+import scipy.signal
 
 from sysid.comparison import CompareResult
 from sysid.data import IOData, as_flights
@@ -97,12 +98,22 @@ def observability_matrix(*, A: np.ndarray, C: np.ndarray, length: int) -> np.nda
     return C[None] @ powers[:length]
 
 
+#: Runs at least this long go through the modal filters (:func:`_run_states_modal`).
+_MODAL_MIN_LENGTH = 64
+
+
 def _run_states(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """States x(0..L-1) of ``x(k+1) = A x(k) + Bu[..., k, :]`` for a batch.
 
-    ``Bu`` is (W, L, n) (already multiplied input), ``x0`` (W, n); returns (W, L, n).
+    ``Bu`` is (W, L, n) (already multiplied input), ``x0`` (W, n); returns (W, L, n). Long
+    runs use :func:`_run_states_modal` (no Python loop over the samples) when A is safely
+    diagonalisable.
     """
     w, length, n = Bu.shape
+    if length >= _MODAL_MIN_LENGTH and n:
+        x = _run_states_modal(A=A, Bu=Bu, x0=x0)
+        if x is not None:
+            return x
     x = np.empty((w, length, n))
     cur = np.array(x0, dtype=float)
     at = A.T
@@ -110,6 +121,24 @@ def _run_states(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.ndarray:
         x[:, k] = cur
         cur = cur @ at + Bu[:, k]
     return x
+
+
+def _run_states_modal(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.ndarray | None:
+    """:func:`_run_states` in the modal basis ``A = V diag(lambda) V^{-1}``: each mode is a
+    first-order recursion ``z(k+1) = lambda z(k) + b(k)``, run by ``scipy.signal.lfilter``
+    over the whole batch at once. None when ``cond(V) > 1e8`` (defective or nearly so)."""
+    lam, vec = np.linalg.eig(A)
+    if not np.all(np.isfinite(lam)) or np.linalg.cond(vec) > 1e8:
+        return None
+    vinv = np.linalg.inv(vec)
+    # z(0) = V^-1 x0, z(k) = lambda z(k-1) + b(k-1): one filter over [z(0), b(0..L-2)]
+    src = np.concatenate([(np.asarray(x0, dtype=float) @ vinv.T)[:, None, :],
+                          Bu[:, :-1] @ vinv.T], axis=1)  # (W, L, n)
+    z = np.empty(src.shape, dtype=complex)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i, li in enumerate(lam):
+            z[:, :, i] = scipy.signal.lfilter([1.0], [1.0, -li], src[:, :, i], axis=1)
+        return (z @ vec.T).real
 
 
 def _split_windows(n_samples: int, window: int) -> list[slice]:

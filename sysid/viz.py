@@ -7,11 +7,15 @@ The only module of :mod:`sysid` that talks to Rerun. Every ``log_*`` function wr
 entity                               content
 ===================================  ===========================================================
 ``<p>/order/singular_values``        bar chart of :math:`\\sigma_1 \\ge \\dots \\ge \\sigma_r`
-                                     (abscissa 1..r); ``.../log10`` the same as
-                                     :math:`\\log_{10}\\sigma_i` (the thesis' Figure 5.1 is
-                                     semi-log); ``.../order`` the chosen order as text
-``<p>/poles/A``                      eigenvalues of A as 2-D points :math:`(\\Re p, \\Im p)`
-``<p>/poles/A_minus_KC``             one-step predictor poles, eig(A - K C)
+                                     (abscissa 1..r, grey); ``.../chosen`` the first n again in
+                                     red (the chosen order); ``.../log10`` (and its ``chosen``)
+                                     :math:`\\log_{10}(\\sigma_i / \\sigma_{min})`, the thesis'
+                                     semi-log Figure 5.1 with every bar rising from 0;
+                                     ``.../order`` the chosen order as text
+``<p>/poles/A``                      eigenvalues of A as 2-D points :math:`(\\Re p, \\Im p)`,
+                                     labelled ``A1``, ``A2``, ... (rows of the pole table)
+``<p>/poles/A_minus_KC``             one-step predictor poles, eig(A - K C), ``K1``, ...
+``<p>/poles/table``                  both pole tables (:mod:`sysid.pole_format`), Markdown
 ``<p>/poles/unit_circle``            :math:`|z| = 1`
 ``<p>/<mode>/exp<e>/<y>/measured``   measured output channel ``y`` of experiment ``e``
 ``<p>/<mode>/exp<e>/<y>/model``      simulated or k-step predicted output; the series name
@@ -32,19 +36,21 @@ The fit is the NRMSE fit of :func:`sysid.fit_percent`:
 from __future__ import annotations
 
 import logging
-import os
-import sys
 from collections.abc import Sequence
 from pathlib import Path
-from urllib.parse import quote
+from typing import Literal
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+import cfcommon.rerun as rerun_io
+from cfcommon.rerun import MODES, WEB_PORT, has_display
 from sysid.comparison import CompareResult
 from sysid.errors import ParameterError
 from sysid.model import StateSpaceModel
+from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows, sorted_poles
+from sysid.residuals import ResidualResult
 from sysid.sweep import SweepResult
 
 __all__ = [
@@ -54,6 +60,7 @@ __all__ = [
     "log_compare",
     "log_identification",
     "log_poles",
+    "log_residuals",
     "log_singular_values",
     "log_sweep_poles",
     "mode_slug",
@@ -62,59 +69,30 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-MODES = ("rerun", "serve", "save")
-"""``rerun``: native viewer (web viewer without a display); ``serve``: web viewer on
-localhost; ``save``: write an ``.rrd`` file."""
-
-WEB_PORT = 9090
 _ANGLE = np.linspace(0.0, 2.0 * np.pi, 181)
 _CIRCLE = np.column_stack([np.cos(_ANGLE), np.sin(_ANGLE)])
 _FLIP_Y = rr.Transform3D(scale=[1.0, -1.0, 1.0])
-
-
-def has_display() -> bool:
-    """True when a native viewer can open a window (Linux: ``DISPLAY``/``WAYLAND_DISPLAY``)."""
-    if sys.platform.startswith("linux"):
-        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    return True
+_NO_LEGEND = rrb.PlotLegend(visible=False)
+_GREY, _RED, _BLUE = (150, 150, 150), (230, 80, 40), (40, 120, 230)
+ZOOM = ((0.7, 1.1), (-0.2, 0.2))
+"""Re and Im ranges of the zoomed pole view: a quadrotor's poles crowd near z = 1."""
 
 
 def open_recording(
     *,
     name: str,
-    mode: str,
+    mode: Literal["rerun", "serve", "save"],
     rrd_path: Path | None = None,
     application_id: str = "cf-sysid",
+    web_port: int = WEB_PORT,
 ) -> tuple[rr.RecordingStream, str | None]:
-    """A new recording named ``name`` sent to a viewer or file; returns ``(recording, url)``.
-
-    ``mode`` is one of :data:`MODES`. ``"rerun"`` spawns the native viewer when there is a
-    display and otherwise serves the web viewer (logged warning). ``url`` is the web viewer's
-    address for ``serve`` (also logged), else None. ``"save"`` needs ``rrd_path`` (its folder
-    is created; an existing file is replaced).
-    """
-    if mode not in MODES:
-        raise ParameterError(f"view mode {mode!r} is unknown; use one of {', '.join(MODES)}")
-    if mode == "save" and rrd_path is None:
-        raise ParameterError("view mode 'save' needs rrd_path; pass the .rrd file to write")
-    rec = rr.RecordingStream(application_id, recording_id=None)
-    rec.send_recording_name(name)
-    if mode == "save":
-        path = Path(rrd_path)  # type: ignore[arg-type]
-        path.parent.mkdir(parents=True, exist_ok=True)
-        rec.save(path)
-        log.info("writing Rerun recording to %s", path)
-        return rec, None
-    if mode == "rerun":
-        if has_display():
-            rec.spawn()
-            return rec, None
-        log.warning("no display (DISPLAY/WAYLAND_DISPLAY unset): serving the web viewer instead")
-    grpc = rec.serve_grpc()
-    rr.serve_web_viewer(web_port=WEB_PORT, open_browser=False, connect_to=grpc)
-    url = f"http://localhost:{WEB_PORT}/?url={quote(grpc, safe='')}"
-    log.warning("Rerun web viewer: %s", url)
-    return rec, url
+    """:func:`cfcommon.rerun.open_recording`; an unknown mode or a busy port is a
+    :class:`ParameterError`."""
+    try:
+        return rerun_io.open_recording(name=name, mode=mode, rrd_path=rrd_path,
+                                       application_id=application_id, web_port=web_port)
+    except rerun_io.ViewModeError as exc:
+        raise ParameterError(str(exc)) from None
 
 
 def mode_slug(result: CompareResult) -> str:
@@ -132,16 +110,28 @@ def log_singular_values(
     *, rec: rr.RecordingStream, values: np.ndarray, order: int | None = None,
     prefix: str = "sysid",
 ) -> None:
-    """Singular values ``(r,)`` for order selection, linear and log10, and the chosen order.
+    """Singular values ``(r,)`` for order selection, linear and log, and the chosen order.
 
     A gap after :math:`\\sigma_n` (a large :math:`\\sigma_n / \\sigma_{n+1}`) suggests order n.
+    The first ``order`` bars are drawn again in red over the grey chart (``.../chosen``). The
+    log chart shows :math:`\\log_{10}(\\sigma_i / \\sigma_{min})`, decades above the smallest
+    positive value, so every bar rises from 0 (a chart of :math:`\\log_{10}\\sigma_i` would hang
+    bars below 1 down from 0).
     """
     sv = np.asarray(values, dtype=float).reshape(-1)
     index = np.arange(1, sv.size + 1, dtype=float)
     base = f"{prefix}/order/singular_values"
-    rec.log(base, rr.BarChart(sv, abscissa=index), static=True)
+    positive = sv[sv > 0]
+    floor = positive.min() if positive.size else 1.0
     with np.errstate(divide="ignore"):
-        rec.log(f"{base}/log10", rr.BarChart(np.log10(sv), abscissa=index), static=True)
+        decades = np.log10(np.maximum(sv, floor) / floor)
+    rec.log(base, rr.BarChart(sv, abscissa=index, color=_GREY), static=True)
+    rec.log(f"{base}/log10", rr.BarChart(decades, abscissa=index, color=_GREY), static=True)
+    if order is not None and 0 < order <= sv.size:
+        rec.log(f"{base}/chosen", rr.BarChart(sv[:order], abscissa=index[:order], color=_RED),
+                static=True)
+        rec.log(f"{base}/log10/chosen", rr.BarChart(decades[:order], abscissa=index[:order],
+                                                    color=_RED), static=True)
     if order is not None:
         ratio = sv[order - 1] / sv[order] if 0 < order < sv.size and sv[order] > 0 else np.inf
         rec.log(f"{prefix}/order/order", rr.TextDocument(
@@ -156,16 +146,35 @@ def _pole_points(poles: np.ndarray) -> np.ndarray:
 
 
 def log_poles(*, rec: rr.RecordingStream, model: StateSpaceModel, prefix: str = "sysid") -> None:
-    """Poles of ``model`` (eig A, and eig(A - KC) of its predictor) with the unit circle."""
+    """Poles of ``model`` (eig A, and eig(A - KC) of its predictor) with the unit circle.
+
+    Points are labelled by their row in the pole table (``<p>/poles/table``, the formatter of
+    :mod:`sysid.pole_format`): ``A1``, ``A2``, ... and ``K1``, ... for the predictor, short
+    enough not to pile up near z = 1 (the zoomed view separates them)."""
     base = f"{prefix}/poles"
     rec.log(base, _FLIP_Y, static=True)
     rec.log(f"{base}/unit_circle", rr.LineStrips2D([_CIRCLE], colors=[128, 128, 128]),
             static=True)
-    for entity, poles, color in (("A", model.poles(), (230, 80, 40)),
-                                 ("A_minus_KC", model.predictor_poles(), (40, 120, 230))):
-        labels = [f"|p| = {abs(p):.3f}" for p in poles]
-        rec.log(f"{base}/{entity}", rr.Points2D(_pole_points(poles), radii=0.02, colors=color,
+    texts = []
+    for entity, tag, poles, color, title in (
+            ("A", "A", model.poles(), _RED, "poles of A"),
+            ("A_minus_KC", "K", model.predictor_poles(), _BLUE, "predictor poles, eig(A - KC)")):
+        ordered = sorted_poles(poles)
+        labels = [f"{tag}{i + 1}" for i in range(ordered.size)]
+        rec.log(f"{base}/{entity}", rr.Points2D(_pole_points(ordered), radii=0.01, colors=color,
                                                 labels=labels), static=True)
+        rows = pole_cells(pole_rows(ordered, dt=model.dt))
+        texts.append(f"{title} (labels {tag}1...):\n\n" + _markdown_table(
+            POLE_COLUMNS, [(f"{tag}{r[0]}", *r[1:]) for r in rows]))
+    rec.log(f"{base}/table", rr.TextDocument("\n\n".join(texts),
+                                             media_type=rr.MediaType.MARKDOWN), static=True)
+
+
+def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    def row(cells: Sequence[str]) -> str:
+        return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
+    lines = [row(header), "|" + "---|" * len(header), *(row(r) for r in rows)]
+    return "\n".join(lines)
 
 
 def log_compare(
@@ -223,31 +232,50 @@ def log_sweep_poles(
 
 
 def identification_blueprint(
-    *, prefix: str = "sysid", comparisons: Sequence[tuple[str, Sequence[str]]] = (),
+    *, prefix: str = "sysid",
+    comparisons: Sequence[tuple[str, Sequence[str], int]] = (),
+    sweep: bool = False, singular_values: bool = True,
 ) -> rrb.Blueprint:
-    """Default layout: singular values, poles and sweep clouds on top; below, one tab per
-    comparison ``(mode slug, output names)`` with one plot per output channel (all
-    experiments), next to the fit summaries."""
-    top = rrb.Grid(
-        rrb.BarChartView(origin=f"/{prefix}/order/singular_values", contents="$origin",
-                         name="singular values"),
-        rrb.BarChartView(origin=f"/{prefix}/order/singular_values/log10",
-                         name="log10 singular values"),
-        # Origins above the y-flipping transforms, so that the flip applies.
-        rrb.Spatial2DView(origin=f"/{prefix}", contents="$origin/poles/**",
-                          name="poles: A (red), A-KC (blue)"),
-        rrb.Spatial2DView(origin=f"/{prefix}/sweep", contents="$origin/poles/**",
-                          name="sweep pole clouds"))
-    texts = rrb.Vertical(
-        rrb.TextDocumentView(origin=f"/{prefix}/order/order", name="order"),
-        *[rrb.TextDocumentView(origin=f"/{prefix}/{slug}/summary", name=f"{slug} fit")
-          for slug, _ in comparisons])
-    tabs = [rrb.Grid(*[rrb.TimeSeriesView(origin=f"/{prefix}/{slug}",
-                                          contents=f"$origin/*/{name}/**", name=name)
+    """Default layout: singular values and poles (whole plane, and zoomed near z = 1) on top,
+    the sweep's pole clouds when there was a sweep; below, one tab per comparison
+    ``(mode slug, output names, number of experiments)`` with one plot per output channel (all
+    experiments), next to the order, the pole table and the fit summaries.
+
+    Contents name entities explicitly or end in ``/**``: Rerun matches ``*`` only as a trailing
+    ``/**`` (``$origin/*/q/**`` would match nothing)."""
+    sv = f"/{prefix}/order/singular_values"
+    top: list[rrb.View] = []
+    if singular_values:
+        top += [rrb.BarChartView(origin=sv, contents=["$origin", "$origin/chosen"],
+                                 name="singular values (order in red)", plot_legend=_NO_LEGEND),
+                rrb.BarChartView(origin=f"{sv}/log10", name="log10(sigma / sigma_min)",
+                                 plot_legend=_NO_LEGEND)]
+    # Origins above the y-flipping transforms, so that the flip applies.
+    poles = ["+ $origin/poles/**", "- $origin/poles/table"]
+    (x0, x1), (y0, y1) = ZOOM
+    top += [rrb.Spatial2DView(origin=f"/{prefix}", contents=poles,
+                              name="poles: A red, A-KC blue"),
+            rrb.Spatial2DView(origin=f"/{prefix}", contents=poles, name="poles near z = 1",
+                              visual_bounds=rrb.VisualBounds2D(x_range=[x0, x1],
+                                                               y_range=[y0, y1]))]
+    if sweep:
+        top.append(rrb.Spatial2DView(origin=f"/{prefix}/sweep", contents="$origin/poles/**",
+                                     name="sweep pole clouds"))
+    texts = [rrb.TextDocumentView(origin=f"/{prefix}/poles/table", name="pole table")]
+    if singular_values:
+        texts.insert(0, rrb.TextDocumentView(origin=f"/{prefix}/order/order", name="order"))
+    texts += [rrb.TextDocumentView(origin=f"/{prefix}/{slug}/summary", name=f"{slug} fit")
+              for slug, _, _ in comparisons]
+    if sweep:
+        texts.append(rrb.TextDocumentView(origin=f"/{prefix}/sweep/table", name="sweep"))
+    tabs = [rrb.Grid(*[rrb.TimeSeriesView(
+                origin=f"/{prefix}/{slug}", name=name,
+                contents=[f"$origin/exp{e}/{name}/**" for e in range(n_exp)])
                        for name in names], name=slug.replace("_", " "))
-            for slug, names in comparisons]
-    bottom = rrb.Horizontal(rrb.Tabs(*tabs), texts, column_shares=[3, 1]) if tabs else texts
-    return rrb.Blueprint(rrb.Vertical(top, bottom), rrb.TimePanel(timeline="t"))
+            for slug, names, n_exp in comparisons]
+    side = rrb.Tabs(*texts)
+    bottom = rrb.Horizontal(rrb.Tabs(*tabs), side, column_shares=[3, 1]) if tabs else side
+    return rrb.Blueprint(rrb.Vertical(rrb.Grid(*top), bottom), rrb.TimePanel(timeline="t"))
 
 
 def log_identification(
@@ -275,5 +303,38 @@ def log_identification(
         log_compare(rec=rec, result=res, dt=model.dt, units=units, prefix=prefix)
     if sweep is not None:
         log_sweep_poles(rec=rec, result=sweep, prefix=prefix)
-    tabs = {mode_slug(r): _names(r) for r in comparisons}
-    rec.send_blueprint(identification_blueprint(prefix=prefix, comparisons=list(tabs.items())))
+    tabs = {mode_slug(r): (_names(r), len(r.y_measured)) for r in comparisons}
+    rec.send_blueprint(identification_blueprint(
+        prefix=prefix, comparisons=[(slug, *v) for slug, v in tabs.items()],
+        sweep=sweep is not None, singular_values=sv is not None))
+
+
+def _lag_series(*, rec: rr.RecordingStream, path: str, label: str, lags: np.ndarray,
+                values: np.ndarray) -> None:
+    rec.log(path, rr.SeriesLines(names=label), static=True)
+    rec.send_columns(path, indexes=[rr.TimeColumn("lag", sequence=lags)],
+                     columns=rr.Scalars.columns(scalars=values))
+
+
+def log_residuals(*, rec: rr.RecordingStream, result: ResidualResult,
+                  prefix: str = "sysid") -> None:
+    """Residual analysis (:func:`sysid.residuals`) on the ``lag`` timeline, as MATLAB's resid.
+
+    Per output ``y``: ``{prefix}/residuals/{y}/autocorr/{value,upper,lower}`` (lags 0..M with
+    the band ``+-z/sqrt(N)``) and ``{prefix}/residuals/{y}/cross/{u}/{value,upper,lower}``
+    (lags -M..M, positive = past inputs, with the Bartlett band), plus the summary text.
+    """
+    base = f"{prefix}/residuals"
+    for c, y in enumerate(result.output_names):
+        auto = result.autocorr[:, c]
+        band = np.full(auto.shape, result.auto_bound)
+        for leaf, values in (("value", auto), ("upper", band), ("lower", -band)):
+            _lag_series(rec=rec, path=f"{base}/{y}/autocorr/{leaf}", label=f"{y} {leaf}",
+                        lags=result.lags, values=values)
+        for i, u in enumerate(result.input_names):
+            cross = result.crosscorr[:, c, i]
+            band = np.full(cross.shape, result.cross_bound[c, i])
+            for leaf, values in (("value", cross), ("upper", band), ("lower", -band)):
+                _lag_series(rec=rec, path=f"{base}/{y}/cross/{u}/{leaf}",
+                            label=f"{y} x {u} {leaf}", lags=result.cross_lags, values=values)
+    rec.log(f"{base}/summary", rr.TextDocument(result.summary()), static=True)

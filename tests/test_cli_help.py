@@ -32,3 +32,17 @@ def test_top_level_help_lists_every_command():
 def test_sysid_subcommand_help_has_an_example(name):
     res = CliRunner().invoke(sysid_main, [name, "--help"])
     assert res.exit_code == 0 and "xample" in res.output
+
+
+@pytest.mark.parametrize(("main", "args", "where"), [
+    (gs_main, ["fly", "--bogus"], "groundstation fly -h"),
+    (gs_main, ["plan", "check"], "groundstation plan check -h"),
+    (gs_main, ["nope"], "groundstation -h"),
+    (sysid_main, ["identify", "--bogus"], "sysid identify -h"),
+])
+def test_usage_errors_are_one_line_exit_2_on_both_clis(main, args, where):
+    res = CliRunner().invoke(main, args, prog_name=where.split()[0])
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and f"(see '{where}')" in lines[0]
+    assert "Usage:" not in res.output and "Traceback" not in res.output

@@ -1,7 +1,7 @@
 """``groundstation demo``: the README's main command: fly, record, identify, validate.
 
 Flies the thesis' ``prbs-3axis`` plan and a second realisation of it (every PRBS advanced in its
-m-sequence, see :func:`groundstation.plan_variants.advance_prbs`) on two simulated Crazyflies
+m-sequence, see :func:`groundstation.plan.variants.advance_prbs`) on two simulated Crazyflies
 through the real cflib stack, records both sessions, identifies an 8th-order model with IEM from
 the first flight's excitation phase, and validates it on the second flight the way a quadrotor
 model must be validated: simulation over short windows (initial state estimated per window) and
@@ -19,13 +19,12 @@ import click
 import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-from rich.table import Table
 
+from cfcommon.cli import FiniteFloat, output_console, output_table
 from groundstation.flight import FlightResult, fly_plan
-from groundstation.plan_variants import advance_prbs
-from groundstation.plans import Plan, load_plan
+from groundstation.plan import Plan, load_plan
+from groundstation.plan.variants import advance_prbs
 from groundstation.recorder import check_folder
-from sysid.cli_types import FiniteFloat
 
 __all__ = ["command"]
 
@@ -46,17 +45,6 @@ def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> Fl
         result = fly_plan(plan=plan, out=out, uri=uri, tick_hook=tick)
     result.raise_if_aborted()
     return result
-
-
-def _poles_table(model) -> Table:
-    table = Table("pole", "|z|", "angle deg", "f Hz", "damping", title="IEM model poles")
-    for i, z in enumerate(sorted(model.poles(), key=lambda p: -abs(p))):
-        s = np.log(complex(z)) / model.dt if z != 0 else complex(-np.inf)
-        wn = abs(s)
-        zeta = -s.real / wn if np.isfinite(wn) and wn > 0 else float("nan")
-        table.add_row(f"{i + 1}", f"{abs(z):.4f}", f"{np.degrees(np.angle(z)):.1f}",
-                      f"{wn / (2 * np.pi):.2f}", f"{zeta:.3f}")
-    return table
 
 
 @click.command("demo")
@@ -87,11 +75,12 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
       groundstation replay demo-out/prbs-3axis-*.h5 --rrd flight.rrd
     """
     from sysid import compare, iem
+    from sysid.cli_support import poles_rich_table
     from sysid.session_io import load_session
 
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
     check_folder(folder)  # the recorder's rule: created if missing, must be writable
-    console = Console(highlight=False)
+    console = output_console()  # piped (CI logs): plain tables, never wrapped
     base = load_plan("prbs-3axis")
     flights = [
         (base, f"sim://0?speed={speed:g}&seed=1", "flight 1 (identification)"),
@@ -113,13 +102,14 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
     console.print(f"IEM: order {order}, past {past}, future {future}, "
                   f"{ident.n_samples} samples, {seconds:.2f} s; stable: {model.is_stable}, "
                   f"predictor stable: {model.predictor_is_stable}")
-    console.print(_poles_table(model))
+    console.print(poles_rich_table(model, title="IEM model poles", console=console))
     model_path = folder / "iem-model.h5"
     model.save(model_path)
 
     val = load_session(paths[1], window="excitation")
     names = list(val.output_names)
-    table = Table("validation on flight 2", *names, title="fit % (NRMSE, MATLAB compare)")
+    table = output_table("validation on flight 2", *names, console=console,
+                         title="fit % (NRMSE, MATLAB compare)")
     with console.status("validating on flight 2 ..."):
         rows = [("simulation, 2 s windows", compare(model, val, window=2.0)),
                 ("1-step prediction", compare(model, val, horizon=1)),

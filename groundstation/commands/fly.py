@@ -1,11 +1,15 @@
 """``groundstation fly PLAN``: fly a flight plan, record the session, print the summary.
 
-Progress (phase, flight time, packets) is shown with ``rich`` on a terminal and not otherwise.
-An aborted flight prints its cause and the session path on one line and exits 2.
+Progress (phase, flight time, packets) is a ``rich`` bar on a terminal and, otherwise (``nohup``,
+CI logs), a plain line every :data:`PLAIN_EVERY_S` seconds of flight time and at each phase
+start. An aborted flight prints its cause and the session path on one line and exits 2.
+A validation flight is the plan with a different PRBS realisation (``--advance``/``--seed``, see
+:mod:`groundstation.plan.variants`), named with ``--name`` (file name and ``tag`` metadata).
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import json
 import sys
@@ -16,25 +20,76 @@ from typing import Any
 
 import click
 
+from cfcommon.cli import FiniteFloat
+from cfsession.schema import StreamSpec
 from groundstation.errors import GroundStationError
-from groundstation.flight import FlightListener, RateLimits, fly_plan
-from groundstation.link import DEFAULT_URI, check_uri
-from groundstation.plans import load_plan
-from groundstation.recorder import check_folder
-from groundstation.session_schema import StreamSpec
-from sysid.cli_types import FiniteFloat
+from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
+from groundstation.flight.link import DEFAULT_URI, check_uri
+from groundstation.plan import Plan, load_plan
+from groundstation.plan.variants import advance_prbs, reseed_prbs
+from groundstation.recorder import check_folder, check_tag
 
-__all__ = ["ProgressListener", "command", "open_view", "summary_lines"]
+__all__ = ["PlainProgress", "ProgressListener", "command", "open_view", "summary_lines"]
 
 
-def open_view(*, mode: str, name: str) -> FlightListener:
+PLAIN_EVERY_S = 5.0
+"""Seconds of flight time between two plain progress lines (not on a terminal)."""
+
+
+def open_view(*, mode: str, name: str, web_port: int) -> FlightListener:
     """The live view's listener (``groundstation.live.open_view``), imported only when asked."""
     try:
         live = importlib.import_module("groundstation.live")
     except ImportError:
         raise GroundStationError(f"--view {mode} needs groundstation.live, which this "
                                  "installation lacks; use --view none") from None
-    return live.open_view(mode=mode, name=name)
+    return live.open_view(mode=mode, name=name, web_port=web_port)
+
+
+class PlainProgress:
+    """Progress as plain lines on stderr: at each phase start and every ``every_s`` seconds
+    of flight time, ``[fly] t 12.0/112.0 s  phase excitation  packets motors 600 ...``."""
+
+    def __init__(self, *, duration_s: float, every_s: float = PLAIN_EVERY_S) -> None:
+        self.duration_s, self.every_s = duration_s, every_s
+        self._t0: float | None = None
+        self._next = 0.0
+        self._phase = "connected"
+        self._packets: dict[str, int] = {}
+        self._logs: set[str] = set()
+        self.lines: list[str] = []
+
+    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
+        self._logs = {s.name for s in streams if s.kind == "log"}
+        self._emit(0.0)
+
+    def rows(self, stream: str, rows: Sequence[tuple]) -> None:
+        if stream in self._logs:
+            self._packets[stream] = self._packets.get(stream, 0) + len(rows)
+        elif stream == "phases" and rows:
+            self._phase = rows[-1][2].decode(errors="replace")
+            self._emit(self._elapsed(rows[-1][0]))
+        elif stream == "setpoints" and rows:
+            t = self._elapsed(rows[-1][0])
+            if t >= self._next:
+                self._emit(t)
+
+    def end(self, *, summary: Mapping[str, Any]) -> None:
+        self._phase = "ended"
+        self._emit(float(summary.get("duration_s", 0.0) or 0.0))
+
+    def _elapsed(self, host_time: float) -> float:
+        if self._t0 is None:
+            self._t0 = host_time
+        return host_time - self._t0
+
+    def _emit(self, t: float) -> None:
+        self._next = (t // self.every_s + 1) * self.every_s
+        packets = " ".join(f"{k} {v}" for k, v in self._packets.items()) or "-"
+        line = (f"[fly] t {t:6.1f}/{self.duration_s:.1f} s  phase {self._phase:<12} "
+                f"packets {packets}")
+        self.lines.append(line)
+        click.echo(line, err=True)
 
 
 class ProgressListener:
@@ -104,16 +159,33 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
               help="Crazyflie link: radio://..., usb://0, udp://127.0.0.1:19850, sim://0?speed=20.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("sessions"),
               show_default=True, help="Folder for the session file.")
+@click.option("--name", "tag", default="", metavar="TAG",
+              help="Tag for the file name (PLAN-TAG-TIME.h5) and the session's metadata, "
+                   "e.g. validation.")
+@click.option("--advance", type=click.IntRange(0, 1_000_000), default=None, metavar="CHIPS",
+              help="Fly another PRBS realisation: every PRBS advanced this many chips in its "
+                   "m-sequence (lags between axes kept), as demo's validation flight.")
+@click.option("--seed", type=click.IntRange(1), default=None,
+              help="Fly another PRBS realisation: the first PRBS starts from this register "
+                   "state, the others keep their lags to it.")
 @click.option("--view", type=click.Choice(["none", "rerun", "serve"]), default="none",
               show_default=True, help="Live view: Rerun viewer, web viewer, or none.")
+@click.option("--port", "web_port", type=click.IntRange(0, 65535), default=9090,
+              show_default=True, help="Web viewer port on 127.0.0.1 (--view serve; 0: any).")
 @click.option("--max-rate", type=FiniteFloat(min=1.0), default=None,
               help="Abort when a gyro axis exceeds this, deg/s [default: the plan's "
                    "safety.max_rate_deg_s, else 1000].")
 @click.option("--timeout", "timeout_s", type=FiniteFloat(min=0.5), default=10.0,
               show_default=True, help="Seconds to wait for the connection.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def command(plan: str, uri: str, out: Path, view: str, max_rate: float | None, timeout_s: float,
-            as_json: bool) -> None:
+@click.option("--emulated-radio", is_flag=True,
+              help="Fly radio:// through an emulated Crazyradio PA to a simulated Crazyflie on "
+                   "channel 80, 2M, E7E7E7E7E7 (cflib unchanged; docs/flying.md).")
+@click.option("--emulated-radio-speed", type=FiniteFloat(min=0.1, max=20.0), default=1.0,
+              show_default=True, help="Simulation speed behind --emulated-radio (x real time).")
+def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed: int | None,
+            view: str, web_port: int, max_rate: float | None, timeout_s: float,
+            as_json: bool, emulated_radio: bool, emulated_radio_speed: float) -> None:
     """Fly a flight plan and record it to a session file.
 
     Connects, checks the log TOC and the battery, streams the plan's setpoints at its rate and
@@ -124,33 +196,73 @@ def command(plan: str, uri: str, out: Path, view: str, max_rate: float | None, t
     Examples:
       groundstation fly hover-check
       groundstation fly prbs-3axis --uri sim://0?speed=20 --out sessions --view rerun
+      groundstation fly prbs-3axis --advance 500 --name validation   # validation flight
+      groundstation fly hover-check --emulated-radio --emulated-radio-speed 10
     """
+    if advance is not None and seed is not None:
+        raise click.UsageError("--advance and --seed both choose the PRBS; pass only one")
     loaded = load_plan(plan)
+    if advance is not None:
+        loaded = advance_prbs(loaded, chips=advance)
+    elif seed is not None:
+        loaded = reseed_prbs(loaded, seed=seed)
+    check_tag(tag)
     check_uri(uri)  # before any viewer opens; fly_plan checks the file name before connecting
+    missing = [p for p in (out, *out.parents) if not p.exists()]  # folders we will create
     check_folder(out)
-    listeners: list[FlightListener] = []
-    if view != "none":
-        listeners.append(open_view(mode=view, name=loaded.name))
-    if sys.stdout.isatty() and not as_json:
-        listeners.append(ProgressListener(duration_s=loaded.duration))
-    result = fly_plan(plan=loaded, out=out, uri=uri, listeners=listeners,
-                      limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
-                      connect_timeout_s=timeout_s)
+    bus: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
+    if emulated_radio:
+        from groundstation.sim.crazyradio_usb import emulated_radio as emulated
+
+        bus = emulated(speed=emulated_radio_speed)
+    try:
+        with bus:
+            result, url = _fly(loaded, uri=uri, out=out, tag=tag, view=view, web_port=web_port,
+                               max_rate=max_rate, timeout_s=timeout_s, as_json=as_json)
+    except BaseException:
+        for folder in missing:  # nothing recorded (no radio, no view): leave no empty folder
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
     if as_json:
         click.echo(json.dumps(result.summary, indent=2))
     else:
         click.echo("\n".join(summary_lines(result.summary)))
-    if view == "serve" and sys.stdin.isatty():
-        _keep_serving(listeners[0])
+    if url and sys.stdin.isatty():
+        _keep_serving(url)
+    elif url:
+        click.echo("the web viewer stops with this command (not started from a terminal); "
+                   f"groundstation replay {result.path} --view serve shows the flight again",
+                   err=True)
     result.raise_if_aborted()
 
 
-def _keep_serving(view: FlightListener) -> None:
-    """The web viewer lives in this process: keep it up after landing until Ctrl-C."""
-    url = getattr(view, "url", None) or "the web viewer"
-    click.echo(f"serving the flight at {url}; Ctrl-C to quit", err=True)
-    try:
-        while True:
-            time.sleep(1.0)
-    except KeyboardInterrupt:
-        click.echo("", err=True)
+def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
+         max_rate: float | None, timeout_s: float,
+         as_json: bool) -> tuple[FlightResult, str | None]:
+    """Open the view (before connecting: a view that cannot start stops us here), fly."""
+    listeners: list[FlightListener] = []
+    url = None
+    if view != "none":
+        listener = open_view(mode=view, name=plan.name, web_port=web_port)
+        listeners.append(listener)
+        url = getattr(listener, "url", None)
+        if url:
+            click.echo(f"Rerun web viewer: {url}", err=True)
+    if sys.stdout.isatty() and not as_json:
+        listeners.append(ProgressListener(duration_s=plan.duration))
+    else:  # nohup, CI logs, --json: plain lines on stderr
+        listeners.append(PlainProgress(duration_s=plan.duration))
+    result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag,
+                      limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
+                      connect_timeout_s=timeout_s)
+    return result, url
+
+
+def _keep_serving(url: str) -> None:
+    """The web viewer lives as long as this process: keep it up after landing until Ctrl-C."""
+    from cfcommon.rerun import serve_until_interrupted  # rerun loads only when serving
+
+    click.echo(f"still serving the flight at {url}; Ctrl-C to quit", err=True)
+    serve_until_interrupted()
+    click.echo("", err=True)

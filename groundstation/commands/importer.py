@@ -3,21 +3,33 @@
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import click
 
+from cfsession import open_session
 from groundstation.errors import SessionError
 from groundstation.importers.to_session import csv_to_session, usd_to_session
-from groundstation.session import open_session
 
-__all__ = ["command", "plan_imports"]
+__all__ = ["ImportJob", "command", "plan_imports"]
 
 _USD_MAGIC = b"\xbc"
+Kind = Literal["usd", "csv"]
 
 
-def _kind(path: Path) -> str:
-    """``usd`` or ``csv`` from the first bytes; one-line error for anything else."""
+@dataclass(frozen=True)
+class ImportJob:
+    """One session to write: its ``kind``, source ``files`` and output file ``stem``."""
+
+    kind: Kind
+    files: tuple[Path, ...]
+    stem: str
+
+
+def _kind(path: Path) -> Kind | None:
+    """``usd`` or ``csv`` from the first bytes, None for anything else."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(9)
@@ -27,67 +39,139 @@ def _kind(path: Path) -> str:
         return "usd"
     if head.startswith(b"Timestamp"):
         return "csv"
-    raise SessionError(
-        f"{path}: neither a uSD-card deck log (0xBC first byte) nor a cfclient CSV "
-        "('Timestamp,...' header); pass those only"
-    )
+    return None
 
 
-def plan_imports(paths: list[Path]) -> list[tuple[str, list[Path], str]]:
-    """What to write: ``(kind, source files, output stem)`` per session.
+def _entries(folder: Path) -> list[Path]:
+    """The folder's entries, sorted, hidden ones (``.name``) left out."""
+    try:
+        return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    except OSError as exc:
+        raise SessionError(f"{folder}: cannot list ({exc.strerror}); check the path") from None
 
-    Each uSD log is one session; the CSVs of one folder (one cfclient logging session) are one
-    session named after the folder; a folder argument stands for the CSVs in it.
+
+def _scan(folder: Path, *, depth: int, jobs: list[ImportJob],
+          csv_groups: dict[Path, list[Path]], skipped: list[Path]) -> None:
+    """uSD logs and cfclient CSVs in ``folder`` and, ``depth`` levels down, its subfolders."""
+    for p in _entries(folder):
+        if p.is_dir():
+            if depth > 0:
+                _scan(p, depth=depth - 1, jobs=jobs, csv_groups=csv_groups, skipped=skipped)
+            continue
+        if not p.is_file():
+            continue
+        kind = _kind(p)
+        if kind == "usd":
+            jobs.append(ImportJob("usd", (p,), p.stem))
+        elif kind == "csv":
+            csv_groups[p.resolve().parent].append(p)
+        else:
+            skipped.append(p)
+
+
+def plan_imports(paths: list[Path]) -> tuple[list[ImportJob], list[Path]]:
+    """What to write, and the files of folder arguments that are neither kind of log.
+
+    Each uSD log is one session named after its file; the cfclient CSVs of one folder (one per
+    log block of one logging session) are one session named after the folder. A folder argument
+    stands for the logs in it and in its subfolders (one level: a uSD card, cfclient's
+    ``logdata/`` folder of sessions, or a mix). A file argument must be one of the two kinds.
     """
-    jobs: list[tuple[str, list[Path], str]] = []
+    jobs: list[ImportJob] = []
     csv_groups: dict[Path, list[Path]] = defaultdict(list)
+    skipped: list[Path] = []
     for p in paths:
         if not p.exists():
             raise SessionError(f"{p}: no such file or folder")
         if p.is_dir():
-            found = sorted(p.glob("*.csv"))
-            if not found:
-                raise SessionError(f"{p}: folder holds no .csv files; pass cfclient CSVs")
-            csv_groups[p.resolve()].extend(found)
-        elif _kind(p) == "usd":
-            jobs.append(("usd", [p], p.stem))
+            before = len(jobs) + sum(len(v) for v in csv_groups.values())
+            _scan(p, depth=1, jobs=jobs, csv_groups=csv_groups, skipped=skipped)
+            if len(jobs) + sum(len(v) for v in csv_groups.values()) == before:
+                raise SessionError(f"{p}: holds no uSD-card deck logs (0xBC first byte) or "
+                                   "cfclient CSVs ('Timestamp,...'), nor do its subfolders")
+            continue
+        kind = _kind(p)
+        if kind is None:
+            raise SessionError(
+                f"{p}: neither a uSD-card deck log (0xBC first byte) nor a cfclient CSV "
+                "('Timestamp,...' header); pass those only")
+        if kind == "usd":
+            jobs.append(ImportJob("usd", (p,), p.stem))
         else:
             csv_groups[p.resolve().parent].append(p)
     for folder, files in csv_groups.items():
-        jobs.append(("csv", sorted(set(files)), folder.name or "cfclient"))
-    return jobs
+        unique = tuple(sorted(set(files), key=lambda f: f.resolve()))
+        jobs.append(ImportJob("csv", unique, folder.name or "cfclient"))
+    jobs = list({tuple(f.resolve() for f in j.files): j for j in jobs}.values())  # named twice
+    by_stem: dict[str, ImportJob] = {}
+    for j in jobs:
+        if (other := by_stem.setdefault(j.stem, j)) is not j:
+            raise SessionError(
+                f"{other.files[0]} and {j.files[0]} would both become {j.stem}.h5; import them "
+                "into different --out folders")
+    return jobs, skipped
+
+
+def _describe(path: Path, job: ImportJob) -> str:
+    s = open_session(path)
+    rows = ", ".join(f"{n} {len(st)} rows" for n, st in s.streams.items() if st.kind == "log")
+    air = [p for p in s.phases() if p.kind == "airborne"]
+    flown = ("airborne " + ", ".join(f"{p.start_s:.2f}-{p.end_s:.2f}" for p in air) + " s"
+             if air else "no airborne segment found")
+    n = len(job.files)
+    return f"{path}: {rows}; {flown} (from {n} {job.kind} file{'s' if n > 1 else ''})"
 
 
 @click.command("import")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="Folder for the session files (created if missing).")
+@click.option("--force", is_flag=True,
+              help="Replace session files that exist (once the new one is complete).")
 @click.option("--allow-damaged", is_flag=True,
               help="Salvage the records of a uSD log whose CRC does not match.")
-def command(paths: tuple[Path, ...], out_dir: Path, allow_damaged: bool) -> None:
+def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: bool) -> None:
     """Import uSD-card deck logs and cfclient "log to file" CSVs as session files.
 
-    Each uSD log becomes one session; the CSVs of one folder (one per log block) become one
-    session. Firmware times are kept; there are no setpoints, and one phase "log" covers the
-    whole log (use `sysid identify --window all` or `--window log`).
+    Each uSD log becomes one session named after it; the CSVs of one folder (one per log
+    block) become one session named after the folder. A folder may hold uSD logs, CSVs,
+    folders of CSVs (cfclient's logdata/) or a mix; other files in it are skipped and listed.
+    Firmware times are kept. The airborne segments found from the logged thrust and height
+    become phases airborne-1, airborne-2, ... (docs/session-format.md); a log without any has
+    one phase "log". A failed import leaves no file behind.
 
     \b
     Examples:
-      groundstation import /media/sd/log00 /media/sd/log01 --out sessions/
-      groundstation import ~/.config/cfclient/logdata/20240101T10-00-00 --out sessions/
+      groundstation import /media/sd --out sessions/
+      groundstation import /media/sd/log00 /media/sd/log01 --out sessions/ --force
+      groundstation import ~/.config/cfclient/logdata --out sessions/
     """
-    jobs = plan_imports(list(paths))
-    for _kind_name, _files, stem in jobs:
-        if (out_dir / f"{stem}.h5").exists():
-            raise SessionError(f"{out_dir / (stem + '.h5')}: already exists; choose another --out")
-    for kind, files, stem in jobs:
-        out = out_dir / f"{stem}.h5"
-        if kind == "usd":
-            usd_to_session(source=files[0], out=out, allow_damaged=allow_damaged)
-        else:
-            csv_to_session(sources=files, out=out)
-        s = open_session(out)
-        rows = ", ".join(f"{n} {len(st)} rows" for n, st in s.streams.items() if st.kind == "log")
-        span = sum(p.end_s - p.start_s for p in s.phases())
-        click.echo(f"{out}: {rows}, {span:.2f} s "
-                   f"(from {len(files)} {kind} file{'s' if len(files) > 1 else ''})")
+    jobs, skipped = plan_imports(list(paths))
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SessionError(f"{out_dir}: not a folder; --out takes a folder")
+    if not force:
+        for job in jobs:
+            if (target := out_dir / f"{job.stem}.h5").exists() or target.is_symlink():
+                raise SessionError(f"{target}: already exists; pass --force to replace it")
+    failed: list[str] = []
+    for job in jobs:
+        out = out_dir / f"{job.stem}.h5"
+        try:
+            if job.kind == "usd":
+                usd_to_session(source=job.files[0], out=out, allow_damaged=allow_damaged,
+                               force=force)
+            else:
+                csv_to_session(sources=list(job.files), out=out, force=force)
+        except SessionError as exc:
+            failed.append(str(exc))
+            continue
+        click.echo(_describe(out, job))
+    if skipped:
+        names = ", ".join(p.name for p in skipped[:5])
+        more = f" and {len(skipped) - 5} more" if len(skipped) > 5 else ""
+        click.echo(f"skipped {len(skipped)} file(s) that are neither uSD logs nor cfclient "
+                   f"CSVs: {names}{more}", err=True)
+    for line in failed[:-1]:
+        click.echo(f"error: {line}", err=True)
+    if failed:
+        raise SessionError(failed[-1])

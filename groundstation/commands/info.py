@@ -8,11 +8,10 @@ from typing import Any
 
 import click
 import numpy as np
-from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
 
-from groundstation.session import Session, open_session
+from cfcommon.cli import output_console, output_table
+from cfsession import Session, open_session
 
 __all__ = ["command", "describe"]
 
@@ -47,6 +46,7 @@ def describe(session: Session) -> dict[str, Any]:
         "uri": session.meta.get("uri", ""),
         "firmware": session.meta.get("firmware", ""),
         "plan": session.meta.get("plan_name", ""),
+        "tag": session.meta.get("tag", ""),
         "software": session.meta.get("software_version", ""),
         "duration_s": session.duration,
         "closed_cleanly": session.closed_cleanly,
@@ -76,7 +76,9 @@ def _fmt(x: float | None, spec: str = ".2f") -> str:
 @click.argument("session", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 @click.option("--events", "show_events", is_flag=True, help="Also list every event.")
-def command(session: Path, as_json: bool, show_events: bool) -> None:
+@click.option("--width", type=click.IntRange(40, 1000), default=None,
+              help="Line width [default: the terminal's; piped: as long as a line needs].")
+def command(session: Path, as_json: bool, show_events: bool, width: int | None) -> None:
     """Show what a session file holds: streams, rates, dropped packets, phases.
 
     \b
@@ -89,14 +91,16 @@ def command(session: Path, as_json: bool, show_events: bool) -> None:
     if as_json:
         click.echo(json.dumps(d, indent=2))
         return
-    out = Console(highlight=False)
+    out = output_console(width=width)
     state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
     out.print(f"[bold]{d['path']}[/] schema {d['schema_version']}, {state}")
     out.print(
         f"start {d['start']}  duration {d['duration_s']:.2f} s  uri {d['uri'] or '-'}  "
-        f"plan {d['plan'] or '-'}  firmware {d['firmware'] or '-'}"
+        f"plan {d['plan'] or '-'}{'  tag ' + d['tag'] if d['tag'] else ''}  "
+        f"firmware {d['firmware'] or '-'}"
     )
-    table = Table("stream", "kind", "rows", "rate Hz", "expected", "dropped", "fields [unit]")
+    table = output_table("stream", "kind", "rows", "rate Hz", "expected", "dropped",
+                         "fields [unit]", console=out)
     for name, e in d["streams"].items():
         fields = escape(_fields_text(e["fields"]))
         table.add_row(
@@ -110,7 +114,7 @@ def command(session: Path, as_json: bool, show_events: bool) -> None:
         )
     out.print(table)
     if d["phases"]:
-        phases = Table("phase", "kind", "start s", "end s", "length s")
+        phases = output_table("phase", "kind", "start s", "end s", "length s", console=out)
         for p in d["phases"]:
             phases.add_row(
                 p["name"],

@@ -9,7 +9,6 @@ PLAN is a path or the name of a shipped plan (``flightplans/NAME.toml``).
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -19,9 +18,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from groundstation.plans import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
-from sysid.cli_types import check_output
-from sysid.excitation import prbs_shift
+from cfcommon.cli import check_output, output_console
+from groundstation.plan import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
+from groundstation.plan.excitation import prbs_shift
 
 __all__ = ["command", "plot_lines", "summarize"]
 
@@ -240,7 +239,7 @@ def check(plan: str, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
-        _print_check(Console(highlight=False), summary)
+        _print_check(output_console(), summary)
 
 
 @command.command("show", short_help="Plot a plan's setpoints per axis, or dump them as JSON.")
@@ -250,7 +249,7 @@ def check(plan: str, as_json: bool) -> None:
     "--width",
     type=click.IntRange(10, 1000),
     default=None,
-    help="Plot width in characters (default: the terminal's).",
+    help="Plot width in characters [default: the terminal's; piped: 88].",
 )
 @click.option(
     "--height", type=click.IntRange(3, 50), default=5, show_default=True, help="Rows per axis."
@@ -277,5 +276,7 @@ def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | N
         plot_plan(schedule=schedule, view=open_view(mode="save", name=schedule.name, rrd_path=rrd))
         click.echo(f"wrote {rrd}")
         return
-    width = width or shutil.get_terminal_size((100, 24)).columns - 12
-    _print_show(Console(highlight=False), schedule, width=width, height=height)
+    console = output_console(width=None if width is None else width + 12)
+    if width is None:  # the terminal's width, or 100 columns when piped
+        width = (console.width if console.is_terminal else 100) - 12
+    _print_show(console, schedule, width=width, height=height)

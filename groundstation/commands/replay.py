@@ -13,10 +13,11 @@ from pathlib import Path
 
 import click
 
+from cfcommon.cli import check_output
+from cfcommon.rerun import serve_until_interrupted
+from cfsession import Session, open_session
+from cfsession.schema import Field, StreamSpec
 from groundstation.live import RerunView, open_view
-from groundstation.session import Session, open_session
-from groundstation.session_schema import Field, StreamSpec
-from sysid.cli_types import check_output
 
 __all__ = ["command", "replay_session", "specs_of"]
 
@@ -57,15 +58,17 @@ def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
               help="Write the view to this .rrd file (open it later with `rerun FILE`).")
 @click.option("--view", "mode", type=click.Choice(["rerun", "serve"]), default=None,
               help="rerun: native viewer (web viewer without a display); serve: web viewer "
-                   "on localhost. Default: rerun.")
-def command(session: Path, rrd: Path | None, mode: str | None) -> None:
+                   "on 127.0.0.1. Default: rerun.")
+@click.option("--port", "web_port", type=click.IntRange(0, 65535), default=9090,
+              show_default=True, help="Web viewer port on 127.0.0.1 (0: any free port).")
+def command(session: Path, rrd: Path | None, mode: str | None, web_port: int) -> None:
     """Show SESSION (an .h5 flight session) in Rerun as the live view showed it.
 
     \b
     Examples:
       groundstation replay sessions/prbs-3axis-20261122T100000Z.h5
       groundstation replay flight.h5 --rrd flight.rrd
-      groundstation replay flight.h5 --view serve
+      groundstation replay flight.h5 --view serve --port 9091
     """
     if rrd is not None and mode is not None:
         raise click.UsageError("--rrd writes a file and --view shows a viewer; pass only one")
@@ -73,7 +76,8 @@ def command(session: Path, rrd: Path | None, mode: str | None) -> None:
         check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=[session], overwrite=True)
     s = open_session(session)
     t0 = time.perf_counter()
-    view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd)
+    view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd,
+                     web_port=web_port)
     counts = replay_session(session=s, view=view)
     log.info("replayed %d rows in %.2f s", sum(counts.values()), time.perf_counter() - t0)
     if rrd is not None:
@@ -81,8 +85,4 @@ def command(session: Path, rrd: Path | None, mode: str | None) -> None:
         return
     if view.url:
         click.echo(f"Rerun web viewer: {view.url}  (Ctrl-C to stop serving)")
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            pass
+        serve_until_interrupted()

@@ -15,6 +15,7 @@ from typing import Any
 
 import click
 
+from groundstation.dongle import UDEV_HINT, firmware_version
 from groundstation.errors import LinkError
 
 __all__ = ["USB_IDS", "command", "find_usb_devices", "scan_crazyflies"]
@@ -25,9 +26,6 @@ USB_IDS = {
     (0x1915, 0x7777): "Crazyradio PA / 2.0",
     (0x0483, 0x5740): "Crazyflie 2.x (USB cable)",
 }
-UDEV_HINT = ("add the udev rule from docs/flying.md (SUBSYSTEM==\"usb\", "
-             "ATTRS{idVendor}==\"1915\", ATTRS{idProduct}==\"7777\", MODE=\"0664\", "
-             "GROUP=\"plugdev\"), then replug")
 
 
 def find_usb_devices() -> list[dict[str, Any]]:
@@ -37,10 +35,14 @@ def find_usb_devices() -> list[dict[str, Any]]:
     import usb.core
     import usb.util
 
+    from groundstation.sim.crazyradio_usb import usb_backend
+
     found = []
     try:
+        backend = usb_backend()  # cflib's choice: libusb 1.0, or the emulated bus
         for (vid, pid), name in USB_IDS.items():
-            for dev in usb.core.find(find_all=True, idVendor=vid, idProduct=pid) or ():
+            for dev in usb.core.find(find_all=True, idVendor=vid, idProduct=pid,
+                                     backend=backend) or ():
                 try:
                     index = dev.iSerialNumber
                     serial = usb.util.get_string(dev, index) if index else ""
@@ -49,7 +51,8 @@ def find_usb_devices() -> list[dict[str, Any]]:
                         raise
                     serial = ""
                 found.append({"name": name, "vid": vid, "pid": pid, "bus": dev.bus,
-                              "address": dev.address, "serial": serial or ""})
+                              "address": dev.address, "serial": serial or "",
+                              "firmware": firmware_version(int(getattr(dev, "bcdDevice", 0)))})
     except usb.core.NoBackendError:
         raise LinkError("no USB backend (libusb) found; install it (Debian/Ubuntu: "
                         "sudo apt install libusb-1.0-0) and retry") from None
@@ -64,7 +67,7 @@ def scan_crazyflies(address: int | None = None) -> list[str]:
     """URIs of the Crazyflies cflib finds on every link driver (radio, USB, UDP, ``sim://``)."""
     import cflib.crtp
 
-    from groundstation.link import install_drivers
+    from groundstation.flight.link import install_drivers
 
     install_drivers()
     uris = []
@@ -91,22 +94,37 @@ def _radio_address(text: str) -> int:
 
 @click.command("scan")
 @click.option("--address", default=None, help="Radio address to scan, hex (default E7E7E7E7E7).")
-def command(address: str | None) -> None:
+@click.option("--emulated-radio", is_flag=True,
+              help="Scan an emulated Crazyradio PA with a simulated Crazyflie on channel 80, "
+                   "2M, E7E7E7E7E7 instead of the USB bus (docs/flying.md).")
+def command(address: str | None, emulated_radio: bool) -> None:
     """List Crazyradios and Crazyflies.
 
     \b
     Examples:
       groundstation scan
       groundstation scan --address E7E7E7E7E8
+      groundstation scan --emulated-radio
     """
     addr = None if address is None else _radio_address(address)
+    if emulated_radio:
+        from groundstation.sim.crazyradio_usb import emulated_radio as emulated
+
+        with emulated():
+            _scan(addr)
+    else:
+        _scan(addr)
+
+
+def _scan(addr: int | None) -> None:
     try:
         devices, problem = find_usb_devices(), ""
     except LinkError as exc:  # still list what other links (sim://, udp://) can reach
         devices, problem = [], str(exc)
     for d in devices:
         serial = f" serial {d['serial']}" if d["serial"] else ""
-        click.echo(f"usb {d['vid']:04x}:{d['pid']:04x} {d['name']} (bus {d['bus']} "
+        firmware = f" firmware {d['firmware']:g}" if d["pid"] == 0x7777 else ""
+        click.echo(f"usb {d['vid']:04x}:{d['pid']:04x} {d['name']}{firmware} (bus {d['bus']} "
                    f"address {d['address']}){serial}")
     if not problem and not any(d["pid"] == 0x7777 for d in devices):
         problem = ("no Crazyradio found on USB; plug in a Crazyradio PA (1915:7777), "

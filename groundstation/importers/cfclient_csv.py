@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.errors import SessionError
+from groundstation.importers.limits import check_variables
 
 __all__ = ["CsvFormatError", "CsvLog", "block_name_of", "read_cfclient_csv"]
 
@@ -70,7 +71,7 @@ def _parse(line: str, *, path: Path, lineno: int, width: int) -> list[float] | N
     except ValueError:
         bad = next(c for c in cells if not _is_number(c))
         raise CsvFormatError(
-            f"{path}: line {lineno} has the non-number {bad!r}; fix or delete that line"
+            f"{path}: line {lineno} has the non-number {bad[:40]!r}; fix or delete that line"
         ) from None
 
 
@@ -99,8 +100,10 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
             "expected 'Timestamp,<group.name>,...')"
         )
     variables = header[1:]
-    if len(set(variables)) != len(variables):
-        raise CsvFormatError(f"{path}: a variable appears twice in the header {variables}")
+    try:
+        check_variables(variables, where=f"{path}: header")
+    except SessionError as exc:
+        raise CsvFormatError(str(exc)) from None
     rows: list[list[float]] = []
     linenos: list[int] = []
     for i, line in enumerate(lines[1:], start=2):

@@ -1,13 +1,18 @@
 """Turn logs written by other tools (uSD-card deck, cfclient CSV) into session files.
 
-The result is an ordinary session (``docs/session-format.md``) so everything downstream
-(``groundstation info``, ``sysid``) works on it. What an imported log cannot know is left out:
-no setpoints, no link samples, one phase ``log`` (kind ``imported``) covering the whole log.
+The result is an ordinary session (``docs/session-format.md``, "Imported sessions") so everything
+downstream (``groundstation info``, ``sysid``) works on it. What an imported log cannot know is
+left out: no setpoints or link streams, no wall-clock start. The airborne segments found in the
+log (:mod:`groundstation.importers.airborne`) are its phases ``airborne-1``, ``airborne-2``, ...
+with ``ground-0``, ``ground-1``, ... around them; a log without any has one phase ``log``.
 
 Times: these logs carry only the Crazyflie's clock, so ``host_time`` is the firmware time in
 seconds (full resolution, e.g. the µs of uSD format 2) and ``fw_time_ms`` the same instant in
 whole milliseconds (24-bit wrapped, as a log packet carries it). The root attribute
 ``time_base`` says so; ``source_format`` and ``source_files`` say where the data came from.
+
+A session is written to a private folder created next to ``out`` and renamed into place at the
+end: a failure leaves nothing behind, and an existing file is replaced only with ``force``.
 """
 
 from __future__ import annotations
@@ -15,6 +20,10 @@ from __future__ import annotations
 import logging
 import os
 import re
+import shutil
+import tempfile
+import time
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,13 +31,23 @@ from typing import Any
 
 import numpy as np
 
+from cfsession.schema import (
+    CFLIB_TYPES,
+    Field,
+    StreamSpec,
+    events_spec,
+    phases_spec,
+    unit_of,
+)
+from cfsession.writer import SessionWriter
 from groundstation.errors import SessionError
+from groundstation.importers.airborne import Segment, find_segments
 from groundstation.importers.cfclient_csv import CsvLog, read_cfclient_csv
+from groundstation.importers.limits import check_variables
 from groundstation.importers.usd import read_usd
-from groundstation.session import SessionWriter, check_writable, standard_streams
-from groundstation.session_schema import CFLIB_TYPES, log_block_spec
 
-__all__ = ["ImportedBlock", "csv_to_session", "usd_to_session", "write_imported_session"]
+__all__ = ["ImportedBlock", "csv_to_session", "field_names", "stream_name_of_groups",
+           "usd_to_session", "write_imported_session"]
 
 log = logging.getLogger(__name__)
 
@@ -36,78 +55,207 @@ _WRAP = 1 << 24
 _CFLIB_OF_DTYPE = {"uint8": "uint8_t", "int8": "int8_t", "uint16": "uint16_t",
                    "int16": "int16_t", "uint32": "uint32_t", "int32": "int32_t",
                    "float32": "float", "float16": "FP16", "float64": "double"}
+_RESERVED_FIELDS = frozenset({"host_time", "fw_time_ms"})
+_RESERVED_STREAMS = frozenset({"setpoints", "events", "phases", "link"})
+_MAX_BLOCKS = 256
 TIME_BASE = "imported: host_time is the firmware time in seconds (no host clock in the log)"
+NO_START = "unknown (the log carries no wall-clock time)"
 
 
 @dataclass(frozen=True)
 class ImportedBlock:
     """One log block to write: ``timestamps_s`` (n,) firmware seconds, ``values[var]`` (n,),
-    ``ctypes[var]`` the cflib type name of each variable ``group.name``."""
+    ``ctypes[var]`` the cflib type name of each variable ``group.name``; ``source_event`` the
+    uSD event it came from ('' for a CSV)."""
 
     name: str
     timestamps_s: np.ndarray
     values: Mapping[str, np.ndarray]
     ctypes: Mapping[str, str]
+    source_event: str = ""
 
     @property
     def period_s(self) -> float:
         """Median sample period in seconds, rounded to 0.1 ms (0.01 s for a single sample)."""
         if len(self.timestamps_s) < 2:
             return 0.01
-        return round(float(np.median(np.diff(self.timestamps_s))), 4) or 0.001
+        period = float(np.median(np.diff(self.timestamps_s)))
+        return round(period, 4) if np.isfinite(period) and period > 0 else 0.001
 
 
-def _safe_name(name: str, taken: set[str]) -> str:
-    base = re.sub(r"[^A-Za-z0-9_.-]", "_", name) or "block"
+def stream_name_of_groups(variables: Sequence[str]) -> str:
+    """A name saying what a block holds: its log groups in order, ``a+b+c+d+2-more`` past four."""
+    groups = list(dict.fromkeys(v.split(".", 1)[0] for v in variables))
+    if len(groups) > 4:
+        return "+".join(groups[:4]) + f"+{len(groups) - 4}-more"
+    return "+".join(groups) or "log"
+
+
+def _safe_stream_name(name: str, taken: set[str]) -> str:
+    base = re.sub(r"[^A-Za-z0-9_+-]", "_", name)[:64] or "block"
     out, i = base, 2
-    while out in taken or out in {s.name for s in standard_streams()}:
+    while out in taken or out in _RESERVED_STREAMS:
         out, i = f"{base}_{i}", i + 1
     taken.add(out)
     return out
 
 
+def field_names(variables: Sequence[str]) -> list[str]:
+    """Unique dataset field names for ``group.name`` variables, linear time.
+
+    ``motor.m1`` -> ``m1``; a short name two variables share, or a reserved one (``host_time``,
+    ``fw_time_ms``), becomes the full name with ``.`` as ``_``; characters other than letters,
+    digits and ``_`` become ``_``; a name still taken gets ``_2``, ``_3``, ... The variables must
+    have passed :func:`~groundstation.importers.limits.check_variables`.
+    """
+    shorts = [re.sub(r"\W", "_", v.split(".", 1)[-1], flags=re.ASCII) for v in variables]
+    counts = Counter(shorts)
+    taken = set(_RESERVED_FIELDS)
+    out = []
+    for var, short in zip(variables, shorts, strict=True):
+        clash = counts[short] > 1 or short in _RESERVED_FIELDS
+        base = re.sub(r"\W", "_", var, flags=re.ASCII) if clash else short
+        name, i = base, 2
+        while name in taken:
+            name, i = f"{base}_{i}", i + 1
+        taken.add(name)
+        out.append(name)
+    return out
+
+
+def _spec(block: ImportedBlock, name: str) -> StreamSpec:
+    variables = list(block.values)
+    fields = [Field("host_time", "<f8", "s", "firmware time, seconds (imported log)"),
+              Field("fw_time_ms", "<u4", "ms", "Crazyflie firmware tick (24-bit, wraps)")]
+    for var, fname in zip(variables, field_names(variables), strict=True):
+        ctype = block.ctypes[var]
+        if ctype not in CFLIB_TYPES:
+            raise SessionError(f"block {block.name!r}: variable {var!r} has the unsupported "
+                               f"type {ctype!r}")
+        fields.append(Field(fname, CFLIB_TYPES[ctype], unit_of(var), var))
+    attrs: dict[str, str | float | int] = {"cflib_types": ",".join(block.ctypes[v]
+                                                                   for v in variables)}
+    if block.source_event:
+        attrs["source_event"] = block.source_event
+    return StreamSpec(name=name, kind="log", fields=tuple(fields), period_s=block.period_s,
+                      description=f"imported log block '{block.name}'", attrs=attrs)
+
+
+def _phase_rows(segments: Sequence[Segment], t_first: float,
+                t_last: float) -> list[tuple[float, str, str]]:
+    """``(start, name, kind)`` per phase: ``ground-k`` around ``airborne-k``, else ``log``."""
+    if not segments:
+        return [(t_first, "log", "imported")]
+    rows = [(t_first, "ground-0", "ground")] if segments[0].start_s > t_first else []
+    for k, seg in enumerate(segments, start=1):
+        rows.append((seg.start_s, f"airborne-{k}", "airborne"))
+        if seg.end_s < t_last:
+            rows.append((seg.end_s, f"ground-{k}", "ground"))
+    return rows
+
+
+def _iso(ns: int) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(ns / 1e9))
+
+
+def _files_text(files: Sequence[str]) -> str:
+    names = ", ".join(str(f) for f in files[:5])
+    return names + (f" and {len(files) - 5} more" if len(files) > 5 else "")
+
+
+def _publish(tmp: Path, out: Path, *, force: bool) -> None:
+    """Move the finished ``tmp`` to ``out``: never over an existing path unless ``force``."""
+    if force:
+        os.replace(tmp, out)
+        return
+    try:
+        os.link(tmp, out)  # fails if out exists, even as a dangling symlink
+    except FileExistsError:
+        raise SessionError(f"{out}: already exists; pass --force to replace it") from None
+    except OSError:  # a file system without hard links
+        if os.path.lexists(out):
+            raise SessionError(f"{out}: already exists; pass --force to replace it") from None
+        os.rename(tmp, out)
+
+
 def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.PathLike[str],
-                           metadata: Mapping[str, Any]) -> Path:
-    """Write ``blocks`` as one session at ``out`` (module docstring); returns the path."""
+                           metadata: Mapping[str, Any], force: bool = False) -> Path:
+    """Write ``blocks`` as one session at ``out`` (module docstring); returns the path.
+
+    ``metadata`` needs ``source_format`` and ``source_files``; ``source_mtime_ns`` (the source
+    file's modification time) is recorded as ``source_mtime_iso``. With ``force`` an existing
+    ``out`` is replaced (only once the new session is complete).
+    """
+    out = Path(out)
     blocks = [b for b in blocks if len(b.timestamps_s)]
     if not blocks:
         raise SessionError(f"{out}: nothing to import (every log block is empty)")
-    out = Path(out)
-    check_writable(out)
+    if len(blocks) > _MAX_BLOCKS:
+        raise SessionError(f"{out}: {len(blocks)} log blocks; at most {_MAX_BLOCKS} fit one "
+                           "session (import fewer files at once)")
+    if os.path.lexists(out) and (not force or out.is_dir()):
+        raise SessionError(f"{out}: already exists; "
+                           + ("a folder" if out.is_dir() else "pass --force to replace it"))
     taken: set[str] = set()
     specs = []
     for b in blocks:
-        variables = [(v, b.ctypes[v]) for v in b.values]
-        bad = [t for _, t in variables if t not in CFLIB_TYPES]
-        if bad:
-            raise SessionError(f"block {b.name!r}: unsupported types {bad}")
-        specs.append(log_block_spec(name=_safe_name(b.name, taken), variables=variables,
-                                    period_s=b.period_s))
+        check_variables(list(b.values), where=f"block {b.name!r}")
+        specs.append(_spec(b, _safe_stream_name(b.name, taken)))
     t_first = min(float(b.timestamps_s[0]) for b in blocks)
     t_last = max(float(b.timestamps_s[-1]) for b in blocks)
-    meta = {"time_base": TIME_BASE, "uri": "", **metadata}
-    start_ns = int(meta.pop("start_time_ns", 0)) or None
-    with SessionWriter(out, streams=[*specs, *standard_streams()], metadata=meta,
-                       start_time_ns=start_ns) as w:
-        w.phase(t=t_first, phase_id=0, name="log", kind="imported")
-        w.event(t=t_first, text=f"imported from {meta.get('source_files')}", source="import")
-        for spec, b in zip(specs, blocks, strict=True):
-            ds = np.zeros(len(b.timestamps_s), dtype=spec.dtype)
-            ds["host_time"] = b.timestamps_s
-            ds["fw_time_ms"] = np.round(b.timestamps_s * 1000.0).astype(np.int64) % _WRAP
-            for f, var in zip(spec.fields[2:], b.values, strict=True):
-                ds[f.name] = b.values[var]
-            w.extend(spec.name, ds.tolist())
-        w.close(duration_s=t_last, summary={
-            "imported": True, "rows": {s.name: len(b.timestamps_s)
-                                       for s, b in zip(specs, blocks, strict=True)}})
+    segments, how = find_segments(blocks)
+    meta = {k: v for k, v in metadata.items() if k != "source_mtime_ns"}
+    if "source_mtime_ns" in metadata:
+        meta["source_mtime_iso"] = _iso(int(metadata["source_mtime_ns"]))
+    meta = {"time_base": TIME_BASE, "uri": "", **meta, "start_time_iso": NO_START}
+    files = [str(f) for f in meta.get("source_files", [])]
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing",
+                                       dir=out.parent))
+    except OSError as exc:
+        raise SessionError(f"{out.parent}: cannot write there ({exc.strerror}); choose another "
+                           "--out folder") from None
+    try:
+        tmp = tmpdir / out.name
+        with SessionWriter(tmp, streams=[*specs, events_spec(), phases_spec()], metadata=meta,
+                           start_time_ns=0) as w:
+            for i, (t, name, kind) in enumerate(_phase_rows(segments, t_first, t_last)):
+                w.phase(t=t, phase_id=min(i, 32767), name=name, kind=kind)
+            w.event(t=t_first, source="import",
+                    text=f"imported from {meta.get('source_format', 'a log')}: "
+                         f"{_files_text(files)}")
+            w.event(t=t_first, source="import", text=how)
+            for spec, b in zip(specs, blocks, strict=True):
+                ds = np.zeros(len(b.timestamps_s), dtype=spec.dtype)
+                ds["host_time"] = b.timestamps_s
+                ds["fw_time_ms"] = np.round(b.timestamps_s * 1000.0).astype(np.int64) % _WRAP
+                for f, var in zip(spec.fields[2:], b.values, strict=True):
+                    ds[f.name] = b.values[var]
+                w.extend(spec.name, ds.tolist())
+            w.close(duration_s=t_last, summary={
+                "imported": True,
+                "rows": {s.name: len(b.timestamps_s) for s, b in zip(specs, blocks, strict=True)},
+                "airborne_s": [[s.start_s, s.end_s] for s in segments]})
+        _publish(tmp, out, force=force)
+    except SessionError:
+        raise
+    except (OSError, ValueError) as exc:  # h5py: header too large, disk full, ...
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SessionError(f"{out}: cannot write the session ({first})") from None
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
     log.info("imported %d block(s) into %s", len(blocks), out)
     return out
 
 
 def usd_to_session(*, source: str | os.PathLike[str], out: str | os.PathLike[str],
-                   allow_damaged: bool = False) -> Path:
-    """Convert a uSD-card deck log (one block per non-empty event type) to a session."""
+                   allow_damaged: bool = False, force: bool = False) -> Path:
+    """Convert a uSD-card deck log (one block per non-empty event type) to a session.
+
+    The ``fixedFrequency`` event is named after the log groups it holds; other events keep
+    their firmware name (``docs/session-format.md``).
+    """
     usd = read_usd(source, allow_damaged=allow_damaged)
     blocks = []
     for ev in usd.events.values():
@@ -115,22 +263,26 @@ def usd_to_session(*, source: str | os.PathLike[str], out: str | os.PathLike[str
             log.info("%s: event %r has no records; skipped", source, ev.name)
             continue
         ctypes = {k: _CFLIB_OF_DTYPE[v.dtype.name] for k, v in ev.values.items()}
-        blocks.append(ImportedBlock(ev.name, ev.timestamps_s, ev.values, ctypes))
+        name = stream_name_of_groups(list(ev.values)) if ev.name == "fixedFrequency" else ev.name
+        blocks.append(ImportedBlock(name, ev.timestamps_s, ev.values, ctypes,
+                                    source_event=ev.name))
     src = Path(source)
-    meta = {"source_format": f"crazyflie uSD-card deck log, format {usd.version}",
-            "source_files": [str(src)], "crc_ok": int(usd.crc_ok),
-            "start_time_ns": src.stat().st_mtime_ns}
-    return write_imported_session(blocks=blocks, out=out, metadata=meta)
+    crc = "CRC ok" if usd.crc_ok else "CRC MISMATCH, damaged records dropped"
+    meta = {"source_format": f"crazyflie uSD-card deck log, format {usd.version} ({crc})",
+            "source_files": [str(src.resolve())], "crc_ok": int(usd.crc_ok),
+            "source_mtime_ns": src.stat().st_mtime_ns}
+    return write_imported_session(blocks=blocks, out=out, metadata=meta, force=force)
 
 
 def csv_to_session(*, sources: Sequence[str | os.PathLike[str]],
-                   out: str | os.PathLike[str]) -> Path:
+                   out: str | os.PathLike[str], force: bool = False) -> Path:
     """Convert a set of cfclient "log to file" CSVs (one per log block) to one session."""
     if not sources:
         raise SessionError(f"{out}: no CSV files given; pass the block CSVs of one flight")
     logs: list[CsvLog] = [read_cfclient_csv(p) for p in sources]
     blocks = [ImportedBlock(c.name, c.timestamps_s, c.values, c.ctypes) for c in logs]
     meta = {"source_format": "cfclient log-to-file CSV",
-            "source_files": [str(Path(p)) for p in sources],
-            "start_time_ns": min(Path(p).stat().st_mtime_ns for p in sources)}
-    return write_imported_session(blocks=blocks, out=out, metadata=meta)
+            "source_files": [str(Path(p).resolve()) for p in sources],
+            "source_mtime_ns": min(Path(p).stat().st_mtime_ns for p in sources)}
+    return write_imported_session(blocks=blocks, out=out, metadata=meta, force=force)
+

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.errors import SessionError
+from groundstation.importers.limits import check_variables
 
 __all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "read_usd"]
 
@@ -103,23 +104,33 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         raise UsdFormatError(f"{path}: uSD log version {version} is not supported (1 or 2)")
     idx = 5
     layouts: dict[int, tuple[str, struct.Struct, list[str], str]] = {}
+    seen_names: set[str] = set()
     for _ in range(n_types):
         if idx + 2 > len(body):
             raise UsdFormatError(f"{path}: header truncated in the event-type table")
         (event_id,) = struct.unpack_from("<H", body, idx)
         name, idx = _cstring(body, idx + 2, path=path, what="event name")
+        shown = repr(name[:64])
         if idx + 2 > len(body):
-            raise UsdFormatError(f"{path}: header truncated in event {name!r}")
+            raise UsdFormatError(f"{path}: header truncated in event {shown}")
         (count,) = struct.unpack_from("<H", body, idx)
         idx += 2
         names, fmt = [], "<"
         for _ in range(count):
-            entry, idx = _cstring(body, idx, path=path, what=f"variable of event {name!r}")
+            entry, idx = _cstring(body, idx, path=path, what=f"variable of event {shown}")
             if len(entry) < 4 or entry[-3] != "(" or entry[-1] != ")" or entry[-2] not in _TYPES:
-                raise UsdFormatError(f"{path}: bad variable entry {entry!r} in event {name!r}; "
+                raise UsdFormatError(f"{path}: bad variable entry {entry[:80]!r} in event {shown}; "
                                      "expected 'name(t)' with t in BbHhIife")
             names.append(entry[:-3])
             fmt += entry[-2]
+        if event_id in layouts or name in seen_names:
+            raise UsdFormatError(f"{path}: event {shown} (id {event_id}) is declared twice in "
+                                 "the header; the header is damaged")
+        seen_names.add(name)
+        try:
+            check_variables(names, where=f"{path}: event {shown}")
+        except SessionError as exc:
+            raise UsdFormatError(str(exc)) from None
         layouts[event_id] = (name, struct.Struct(fmt), names, fmt[1:])
     head = struct.Struct("<HI" if version == 1 else "<HQ")
     scale = 1e-3 if version == 1 else 1e-6

@@ -4,10 +4,13 @@ In process, through cflib: call :func:`install` once, then open ``sim://0?speed=
 other URI (options in :mod:`groundstation.sim.simulator`); :func:`instance` reaches the simulation
 behind a URI (its ``.vehicle``, fault methods and clock). Over UDP: :class:`UdpServer` (the
 ``groundstation sim`` command) serves the cflib >= 0.1.32 UDP protocol on ``udp://127.0.0.1:19850``.
+Through a Crazyradio: :func:`emulated_radio` puts an emulated dongle on an emulated USB bus
+(:mod:`groundstation.sim.crazyradio_usb`) so ``radio://`` runs through unmodified cflib.
 See ``docs/simulator.md``.
 """
 
 from groundstation.sim.clock import SimClock
+from groundstation.sim.crazyradio_usb import emulated_radio
 from groundstation.sim.crtp import CrtpPeer
 from groundstation.sim.driver import SimDriver, install
 from groundstation.sim.simulator import (
@@ -30,6 +33,7 @@ __all__ = [
     "Simulator",
     "UdpServer",
     "close_all",
+    "emulated_radio",
     "install",
     "instance",
     "parse_uri",

@@ -1,6 +1,6 @@
 """The simulation clock: the time line of a running simulated Crazyflie.
 
-:func:`groundstation.clock.clock_for_uri` hands a :class:`SimClock` to the flight runner for
+:func:`groundstation.flight.clock.clock_for_uri` hands a :class:`SimClock` to the flight runner for
 ``sim://`` URIs (registered on import of this module), so the runner's 10 Hz setpoints are scheduled
 on the vehicle's own time, however fast the simulation runs.
 
@@ -24,7 +24,7 @@ import threading
 import time
 from typing import Protocol
 
-from groundstation.clock import Clock, register_clock
+from groundstation.flight.clock import Clock, register_clock
 
 __all__ = ["SimClock", "TimeSource"]
 
@@ -49,7 +49,8 @@ class TimeSource(Protocol):
 
 
 class SimClock:
-    """The :class:`groundstation.clock.Clock` of one simulation (``speed`` sim s per wall s)."""
+    """The :class:`groundstation.flight.clock.Clock` of one simulation (``speed`` sim s per wall
+    s)."""
 
     def __init__(self, *, source: TimeSource) -> None:
         self._source = source

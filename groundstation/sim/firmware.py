@@ -117,8 +117,7 @@ class PidController:
                                   cutoff_hz=20.0 if rate else 10.0)
         self._ordered = tuple(self.pids[n] for n in ("roll", "pitch", "yaw", "roll_rate",
                                                        "pitch_rate", "yaw_rate"))
-        self.yaw_desired = 0.0
-        self.roll_out = self.pitch_out = self.yaw_out = 0.0
+        self.reset(yaw_deg=0.0)
 
     def reset(self, *, yaw_deg: float) -> None:
         """``attitudeControllerResetAllPID`` and re-seed the integrated yaw setpoint."""
@@ -126,6 +125,8 @@ class PidController:
             pid.reset()
         self.yaw_desired = yaw_deg
         self.roll_out = self.pitch_out = self.yaw_out = 0.0
+        self.attitude_desired = (0.0, 0.0, yaw_deg)   # controller.roll/pitch/yaw, deg
+        self.rate_desired = (0.0, 0.0, 0.0)            # controller.rollRate/..., deg/s
 
     def update(self, *, sp: Setpoint, roll: float, pitch_legacy: float, yaw: float,
                gx: float, gy: float, gz: float) -> tuple[float, float, float]:
@@ -149,6 +150,8 @@ class PidController:
         ye = yd - yaw
         ye = ye - 360.0 if ye > 180.0 else ye + 360.0 if ye < -180.0 else ye
         yr = p[2].update(ye)
+        self.attitude_desired = (sp.roll, sp.pitch, yd)
+        self.rate_desired = (rr, pr, yr)
         self.roll_out = float(int(p[3].update(rr - gx)))
         self.pitch_out = float(int(p[4].update(pr + gy)))   # measured = -gyro.y
         self.yaw_out = -float(int(p[5].update(yr - gz)))

@@ -128,7 +128,8 @@ class Simulator:
 
     def __init__(self, *, address: str = "0", speed: float = 1.0, seed: int = 0,
                  vehicle: Any = None, sink: Callable[[int, bytes], None] | None = None,
-                 linger: bool = True, link_timeout_ms: int | None = None) -> None:
+                 linger: bool = True, link_timeout_ms: int | None = None,
+                 max_backlog: int | None = None) -> None:
         if vehicle is None:
             from groundstation.sim.vehicle import SimVehicle
 
@@ -151,6 +152,10 @@ class Simulator:
         self._on_lost: Callable[[str], None] | None = None
         self._pace_ms: int | None = None  # paced: run no further than this (see pace())
         self._pace_wall = 0.0
+        # A link that fetches packets one by one (the emulated radio's acks) holds simulation
+        # time while this many wait for it, as a link faster than the host would never fall
+        # behind (the hold lapses like the pacing hold when nothing is fetched for 3 s).
+        self._max_backlog, self._taken_wall = max_backlog, time.monotonic()
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"sim-{address}", daemon=True)
@@ -184,6 +189,11 @@ class Simulator:
         """``target`` capped at the pace limit while a scheduler holds the simulation."""
         with self.cond:
             limit, since = self._pace_ms, self._pace_wall
+            behind = (self._max_backlog is not None and self._token != 0
+                      and len(self._out) >= self._max_backlog
+                      and time.monotonic() - self._taken_wall < _PACE_HOLD_S)
+        if behind:
+            return min(target, self.vehicle.firmware_ms)
         if limit is None or time.monotonic() - since > _PACE_HOLD_S:
             return target
         return min(target, max(limit, self.vehicle.firmware_ms))
@@ -239,6 +249,10 @@ class Simulator:
                     return None
                 if self._out and self._out[0][0] <= self._published_ms:
                     _, header, data = self._out.popleft()
+                    if self._max_backlog is not None:
+                        self._taken_wall = time.monotonic()
+                        if len(self._out) < self._max_backlog:
+                            self._wake.set()
                     return header, data
                 remaining = 0.1 if deadline is None else deadline - time.monotonic()
                 if remaining <= 0:

@@ -80,7 +80,20 @@ class SimVehicle:
         "controller.cmd_thrust": "float", "controller.cmd_roll": "float",
         "controller.cmd_pitch": "float", "controller.cmd_yaw": "float",
         "stateEstimate.x": "float", "stateEstimate.y": "float", "stateEstimate.z": "float",
+        # What the Crazyflie client reads (flight tab, battery bar, supervisor, tuning tab):
+        "stateEstimate.roll": "float", "stateEstimate.pitch": "float",
+        "stateEstimate.yaw": "float",
+        "controller.roll": "float", "controller.pitch": "float", "controller.yaw": "float",
+        "controller.rollRate": "float", "controller.pitchRate": "float",
+        "controller.yawRate": "float",
+        "controller.r_roll": "float", "controller.r_pitch": "float", "controller.r_yaw": "float",
+        "controller.accelz": "float", "controller.actuatorThrust": "float",
+        "pm.state": "int8_t", "supervisor.info": "uint16_t",
+        "sys.canfly": "uint8_t", "sys.isFlying": "uint8_t", "sys.isTumbled": "uint8_t",
     }
+    DECKS = ("bcFlow", "bcFlow2", "bcLighthouse4", "bcLoco", "bcDWM1000", "bcZRanger2",
+             "bcMultiranger", "bcAI", "bcLedRing", "bcUSD")
+    """The ``deck`` parameter group (read-only, 1 = attached): no deck on the simulated vehicle."""
 
     PARAMS: ClassVar[dict[str, str]] = {
         **{f"{g}.{a}_{k}": "float" for g in ("pid_rate", "pid_attitude")
@@ -94,8 +107,10 @@ class SimVehicle:
         "firmware.revision0": "uint32_t",
         "firmware.revision1": "uint16_t",
         "firmware.modified": "uint8_t",
+        **{f"deck.{d}": "uint8_t" for d in DECKS},
     }
-    PARAMS_READ_ONLY = frozenset({"firmware.revision0", "firmware.revision1", "firmware.modified"})
+    PARAMS_READ_ONLY = frozenset({"firmware.revision0", "firmware.revision1", "firmware.modified",
+                                  *(f"deck.{d}" for d in DECKS)})
 
     def __init__(self, *, seed: int = 0, vbat_full: float = 4.15, **overrides: float) -> None:
         const_fields = {f.name for f in dataclasses.fields(VehicleConstants)}
@@ -120,6 +135,7 @@ class SimVehicle:
         self.controller = PidController(dt=_PID_DT_S)
         self.commander = Commander()
         self.supervisor = Supervisor(auto_arm=auto_arm)
+        self._auto_arm = auto_arm
         self._tick = 0
         self._pwm = (0, 0, 0, 0)               # mixer outputs (motor.m1..m4)
         self._duty_pwm = (0, 0, 0, 0)          # after battery compensation (pwm.m1_pwm..)
@@ -142,7 +158,7 @@ class SimVehicle:
             "stabilizer.estimator": 1.0, "stabilizer.controller": 1.0, "stabilizer.stop": 0.0,
             "commander.enHighLevel": 0.0, "pm.lowVoltage": 3.2, "pm.criticalLowVoltage": 3.0,
             "firmware.revision0": float(_FIRMWARE_REVISION0), "firmware.revision1": 0.0,
-            "firmware.modified": 0.0,
+            "firmware.modified": 0.0, **{f"deck.{d}": 0.0 for d in self.DECKS},
         }
         self._log_getters = self._make_log_getters()
 
@@ -260,10 +276,33 @@ class SimVehicle:
             "stateEstimate.x": lambda: b.x, "stateEstimate.y": lambda: b.y,
             "stateEstimate.z": lambda: b.z,
         }
+        ctrl = self.controller
+        for i, axis in enumerate(("roll", "pitch", "yaw")):
+            g[f"stateEstimate.{axis}"] = lambda i=i: self._att[i] * (-1.0 if i == 1 else 1.0)
+            g[f"controller.{axis}"] = lambda i=i: ctrl.attitude_desired[i]
+            g[f"controller.{axis}Rate"] = lambda i=i: ctrl.rate_desired[i]
+        g["controller.r_roll"] = lambda: s.gx
+        g["controller.r_pitch"] = lambda: -s.gy
+        g["controller.r_yaw"] = lambda: s.gz
+        g["controller.accelz"] = lambda: s.az
+        g["controller.actuatorThrust"] = lambda: self._control[0]
+        g["pm.state"] = lambda: 3.0 if self._low_warned else 0.0   # 0 battery, 3 low power
+        g["supervisor.info"] = lambda: float(self._supervisor_info())
+        g["sys.canfly"] = lambda: float(self.supervisor.armed and not self.supervisor.locked)
+        g["sys.isFlying"] = lambda: float(self.supervisor.is_flying)
+        g["sys.isTumbled"] = lambda: 0.0
         for i in range(4):
             g[f"motor.m{i + 1}"] = lambda i=i: float(self._pwm[i])
             g[f"pwm.m{i + 1}_pwm"] = lambda i=i: float(self._duty_pwm[i])
         return g
+
+    def _supervisor_info(self) -> int:
+        """``supervisor.info``: bit 0 can be armed, 1 armed, 2 auto-arm, 3 can fly, 4 flying,
+        6 locked (``supervisor.c``)."""
+        sup = self.supervisor
+        can_fly = sup.armed and not sup.locked
+        return ((not sup.locked) | sup.armed << 1 | self._auto_arm << 2 | can_fly << 3
+                | sup.is_flying << 4 | sup.locked << 6)
 
     def read_log(self, name: str) -> float:
         """Current value of log variable ``name`` (units as in the firmware: g, deg/s, deg, V)."""

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from cfsession import Session, open_session
 from groundstation.flight import FlightResult
-from groundstation.plans import Plan
-from groundstation.session import Session, open_session
+from groundstation.plan import Plan
 
 BLOCKS = ("motors", "acc", "gyro")
 
@@ -37,8 +37,21 @@ def check_log_blocks(s: Session, result: FlightResult) -> None:
         assert stats["dropped"] == s.dropped()[name]
 
 
-def check_setpoints(s: Session, plan: Plan, *, complete: bool) -> np.ndarray:
-    """Scheduled setpoints as planned and on a 10 Hz grid; returns their rows."""
+def check_log_blocks_jittery(s: Session, result: FlightResult) -> None:
+    """For firmware whose log timer follows a busy host (SITL): about one packet per 20 ms of
+    firmware time, median spacing 20 ms, file rows = delivered rows."""
+    for name in BLOCKS:
+        stream, stats = s[name], result.summary["blocks"][name]
+        fw = np.asarray(stream.fw_time_s)
+        assert len(stream) >= 0.8 * (fw[-1] - fw[0]) / 0.02, (name, len(stream))
+        assert abs(np.median(np.diff(fw)) - 0.02) <= 0.002, name
+        assert stats["received"] == len(stream)
+
+
+def check_setpoints(s: Session, plan: Plan, *, complete: bool, slack_s: float = 0.0,
+                    ) -> np.ndarray:
+    """Scheduled setpoints as planned and on a 10 Hz grid; returns their rows. ``slack_s``
+    widens the bounds on single late sends for a wall-clock backend on a busy host (SITL)."""
     sp = s["setpoints"].data
     sched = plan.compile()
     rows = sp[sp["tick"] >= 0]
@@ -70,8 +83,8 @@ def check_setpoints(s: Session, plan: Plan, *, complete: bool) -> np.ndarray:
     # Never more than one setpoint period without a setpoint, from the thrust unlock on
     # (20 ms margin: the simulator steps in 10 ms; a real link's host jitter is a few ms).
     every = s["setpoints"].data["host_time"]
-    assert np.diff(every).max() <= 1 / sched.rate_hz + 0.02, np.diff(every).max()
-    assert late.max() < 0.05, late.max()
+    assert np.diff(every).max() <= 1 / sched.rate_hz + 0.02 + slack_s, np.diff(every).max()
+    assert late.max() < 0.05 + slack_s, late.max()
     span = (t[-1] - t[0]) / (len(t) - 1)
     assert abs(span - 1 / sched.rate_hz) < 2.0 / (len(t) - 1)
     return rows

@@ -1,5 +1,10 @@
 """Fixtures for flights against the simulated Crazyflie: a fresh ``sim://`` URI per test at 20x
-real time, every simulation powered off afterwards, and helpers that read the simulator's side."""
+real time, every simulation powered off afterwards, and helpers that read the simulator's side.
+
+``flight_uri`` is the same factory for one backend per parameter (python-can's back-to-back
+style): ``sim`` (``sim://``) or ``sitl`` (the real firmware with our physics on
+``udp://127.0.0.1:P``, real time; skipped when ``make sitl`` has not built it). Select backends
+with ``@pytest.mark.parametrize("flight_uri", [...], indirect=True)``."""
 
 from __future__ import annotations
 
@@ -9,8 +14,8 @@ import time
 import pytest
 
 import groundstation.sim as gsim
-from groundstation.link import install_drivers
-from groundstation.plans import load_plan, parse_plan
+from groundstation.flight.link import install_drivers
+from groundstation.plan import load_plan, parse_plan
 
 SPEED = 20
 _counter = itertools.count(500)
@@ -29,8 +34,29 @@ def sim_uri():
     gsim.close_all()
 
 
+@pytest.fixture(params=["sim", "sitl"])
+def flight_uri(request):
+    """A factory of fresh vehicle URIs on the backend named by the parameter."""
+    if request.param == "sim":
+        yield request.getfixturevalue("sim_uri")
+        return
+    from ..sitl import backend
+
+    def make(**faults: float) -> str:
+        assert not faults, "the sitl backend has no fault options"
+        return backend.start_vehicle().uri
+
+    yield make
+    backend.close_all()
+
+
 def wait_for_stop(uri: str, timeout_s: float = 5.0) -> gsim.Simulator:
-    """The simulation behind ``uri`` once its motors are off and it counted a stop."""
+    """The simulation behind ``uri`` once its motors are off and it counted a stop (``udp://``:
+    the SITL vehicle once the firmware's motor commands are zero)."""
+    if uri.startswith("udp://"):
+        from ..sitl import backend
+
+        return backend.wait_for_stop(uri)  # type: ignore[return-value]
     sim = gsim.instance(uri)
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

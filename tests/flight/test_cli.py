@@ -8,15 +8,15 @@ import sys
 import usb.core
 from click.testing import CliRunner
 
+from cfsession import open_session
 from groundstation.cli import main
-from groundstation.session import open_session
 
 
 def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
     res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(), "--out",
                                     str(tmp_path), "--json"])
     assert res.exit_code == 0, res.output
-    summary = json.loads(res.output)
+    summary = json.loads(res.stdout)  # progress lines go to stderr
     assert summary["setpoints"]["scheduled"] == 100 and not summary["aborted"]
     s = open_session(summary["file"])
     assert s.closed_cleanly and summary["file"].startswith(str(tmp_path))

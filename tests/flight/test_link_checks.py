@@ -7,7 +7,7 @@ import pytest
 
 from groundstation.errors import LinkError
 from groundstation.flight import block_summary
-from groundstation.link import FLIGHT_BLOCKS, LOG_MAX_BYTES, plan_blocks
+from groundstation.flight.link import FLIGHT_BLOCKS, LOG_MAX_BYTES, plan_blocks
 
 TOC_2025 = {**{f"motor.m{i}": "uint16_t" for i in range(1, 5)},
             **{f"acc.{a}": "float" for a in "xyz"}, **{f"gyro.{a}": "float" for a in "xyz"}}
@@ -43,8 +43,17 @@ def test_block_summary_counts_gaps_and_unwraps_the_24_bit_tick():
     ms = np.arange(0, 2000, 20)  # 100 packets
     kept = np.delete(ms, [10, 11, 12, 50])  # 4 lost
     assert block_summary(fw_ms=kept, period_s=0.02) == {
-        "received": 96, "expected": 100, "dropped": 4}
+        "received": 96, "expected": 100, "dropped": 4, "missing_at_end": 0}
     wrapped = (np.arange(2**24 - 100, 2**24 + 100, 20) % 2**24).tolist()
     assert block_summary(fw_ms=wrapped, period_s=0.02) == {
-        "received": 10, "expected": 10, "dropped": 0}
+        "received": 10, "expected": 10, "dropped": 0, "missing_at_end": 0}
     assert block_summary(fw_ms=[], period_s=0.02)["expected"] == 0
+
+
+def test_block_summary_counts_the_packets_missing_up_to_the_end_of_the_flight():
+    ms = np.arange(0, 2000, 20)  # 100 packets, then 1 s of silence before the link closed
+    assert block_summary(fw_ms=ms, period_s=0.02, silence_s=1.0) == {
+        "received": 100, "expected": 147, "dropped": 47, "missing_at_end": 47}
+    # a packet still on its way at the end (less than a period plus the allowance) is not lost
+    assert block_summary(fw_ms=ms, period_s=0.02, silence_s=0.06)["dropped"] == 0
+    assert block_summary(fw_ms=[5], period_s=0.5, silence_s=2.0)["missing_at_end"] == 3

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from cfsession import open_session
 from groundstation.flight import fly_plan
 from groundstation.live import open_view
-from groundstation.session import open_session
 from tests.viz.rrd import blueprint_views, load
 
 

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import groundstation.flight as flight_mod
+import groundstation.flight.runner as flight_mod
 import groundstation.recorder as recorder_mod
 import groundstation.sim as gsim
+from cfsession import open_session, standard_streams
 from groundstation.cli import main
 from groundstation.errors import LinkError, SessionError
 from groundstation.flight import fly_plan
-from groundstation.plans import load_plan
+from groundstation.plan import load_plan
+from groundstation.plan.schedule import Schedule
 from groundstation.recorder import Recorder, session_path
-from groundstation.schedule import Schedule
-from groundstation.session import open_session, standard_streams
 
 from .checks import check_closed_with_stop
 from .conftest import wait_for_stop

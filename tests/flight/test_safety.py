@@ -17,7 +17,7 @@ import pytest
 import groundstation.sim as gsim
 from groundstation.errors import FlightAborted, LinkError
 from groundstation.flight import RateLimits, fly_plan
-from groundstation.plans import load_plan
+from groundstation.plan import load_plan
 
 from .checks import check_closed_with_stop, check_setpoints
 from .conftest import plan_variant, wait_for_stop
@@ -27,7 +27,7 @@ def _safety_events(s):
     return [e for e in s.events() if e.source == "safety" and e.level in ("error", "warning")]
 
 
-def _check_descent(s, *, thrust_ceiling: int, n: int) -> None:
+def _check_descent(s, *, thrust_ceiling: int, n: int, slack_s: float = 0.0) -> None:
     sp = s["setpoints"].data
     abort = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
     assert len(abort) == n
@@ -39,10 +39,10 @@ def _check_descent(s, *, thrust_ceiling: int, n: int) -> None:
     # to the stop: never more than one period without a setpoint (the simulation is paced by
     # the runner's clock, so this holds on a busy host too; 20 ms margin for the 10 ms steps).
     t = sp["host_time"]
-    assert np.diff(t).max() <= 0.1 + 0.02, np.diff(t).max()
+    assert np.diff(t).max() <= 0.1 + 0.02 + slack_s, np.diff(t).max()  # slack: real time, SITL
     late = t[1:] - np.arange(len(t) - 1) * 0.1
     late -= late.min()
-    assert late[-1] < 0.05
+    assert late[-1] < 0.05 + slack_s
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -88,8 +88,8 @@ def test_link_cut_records_the_loss_and_the_watchdog_stops_the_motors(sim_uri, tm
     assert 40 <= s["setpoints"].data["tick"].max() < len(plan.compile()) - 1
 
 
-def test_exception_in_the_runner_aborts_safely(sim_uri, tmp_path):
-    plan, uri = load_plan("hover-check"), sim_uri()
+def test_exception_in_the_runner_aborts_safely(flight_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), flight_uri()
 
     def hook(k: int) -> None:
         if k == 40:
@@ -101,12 +101,12 @@ def test_exception_in_the_runner_aborts_safely(sim_uri, tmp_path):
     s = check_closed_with_stop(result)
     assert "injected fault" in _safety_events(s)[0].text
     assert s["setpoints"].data["tick"].max() == 39
-    _check_descent(s, thrust_ceiling=34000, n=20)
+    _check_descent(s, thrust_ceiling=34000, n=20, slack_s=0.4 if uri.startswith("udp:") else 0)
 
 
-def test_stop_policy_stops_at_once(sim_uri, tmp_path):
+def test_stop_policy_stops_at_once(flight_uri, tmp_path):
     plan = plan_variant("hover-check", **{'on_abort = "descend"': 'on_abort = "stop"'})
-    uri = sim_uri()
+    uri = flight_uri()
     result = fly_plan(plan=plan, out=tmp_path, uri=uri,
                       tick_hook=lambda k: k == 30 and os.kill(os.getpid(), signal.SIGINT))
     assert "SIGINT" in result.cause
@@ -164,9 +164,9 @@ class _Listener:
         self.ended = summary
 
 
-def test_failing_listener_is_dropped_and_the_flight_goes_on(sim_uri, tmp_path):
+def test_failing_listener_is_dropped_and_the_flight_goes_on(flight_uri, tmp_path):
     bad, good = _Listener(fail_at=50), _Listener()
-    plan, uri = load_plan("hover-check"), sim_uri()
+    plan, uri = load_plan("hover-check"), flight_uri()
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[bad, good])
     assert not result.aborted
     assert bad.ended is None and good.ended is not None and bad.calls == 50

@@ -11,13 +11,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from cfsession import open_session
 from groundstation.cli import main as gs
 from groundstation.importers import CsvFormatError, read_cfclient_csv
-from groundstation.session import open_session
 from sysid.cli import main as sysid_cli
 from sysid.session_io import load_session
-
-CRAZYPAD = Path(__file__).resolve().parents[3] / "shared" / "data" / "crazypad"
+from tests.paths import CRAZYPAD, needs_crazypad
 
 
 def write_csv(path: Path, header: list[str], rows: list[list]) -> Path:
@@ -55,8 +54,8 @@ def test_csv_folder_round_trip(tmp_path) -> None:
     np.testing.assert_allclose(s["Gyro"].time, unwrapped + 0.003)
     assert s["Motors"].units["m1"] == "PWM (0-65535)" and s["Gyro"].units["z"] == "deg/s"
     assert s["Gyro"].sources["y"] == "gyro.y" and s["Motors"].period_s == 0.01
-    assert len(s["setpoints"]) == 0 and len(s["link"]) == 0
-    [phase] = s.phases()
+    assert set(s.streams) == {"Motors", "Gyro", "events", "phases"}  # no empty setpoints, link
+    [phase] = s.phases()  # 0.49 s of motors on: too short for an airborne segment
     assert (phase.name, phase.start_s) == ("log", unwrapped[0])
     assert phase.end_s == pytest.approx(unwrapped[-1] + 0.003)
     assert s.meta["source_format"] == "cfclient log-to-file CSV"
@@ -104,16 +103,25 @@ def test_usd_round_trip(tmp_path) -> None:
     res = CliRunner().invoke(gs, ["import", str(src), "--out", str(tmp_path / "o")])
     assert res.exit_code == 0, res.output
     s = open_session(tmp_path / "o" / "log07.h5")
-    st = s["fixedFrequency"]
-    assert "empty" not in s.streams  # event types without records are skipped
+    assert set(s.streams) == {"acc+motor", "events", "phases"}  # named after what it holds
+    st = s["acc+motor"]
+    assert st.attrs["source_event"] == "fixedFrequency"
     np.testing.assert_array_equal(st.data["x"], acc)
     np.testing.assert_array_equal(st.data["m1"], m1)
     assert st.data.dtype["m1"] == np.uint16 and st.units["m1"] == "PWM (0-65535)"
     np.testing.assert_allclose(st.time, stamps / 1e6, rtol=0, atol=1e-12)  # µs kept
     np.testing.assert_array_equal(st.data["fw_time_ms"], np.round(stamps / 1000))
     assert "uSD" in s.meta["source_format"] and s.phases()[0].kind == "imported"
+    # no invented start time; the import said in words, not as a Python list
+    assert s.meta["start_time_ns"] == 0 and s.meta["start_time_iso"].startswith("unknown")
+    first = s.events()[0].text
+    assert first == ("imported from crazyflie uSD-card deck log, format 2 (CRC ok): "
+                     f"{src.resolve()}")
+    assert "no airborne segments" in s.events()[1].text
+    info = CliRunner().invoke(gs, ["info", str(s.path)])
+    assert "start unknown (the log carries no wall-clock time)" in info.stdout
     again = CliRunner().invoke(gs, ["import", str(src), "--out", str(tmp_path / "o")])
-    assert again.exit_code == 2 and "already exists" in again.stderr
+    assert again.exit_code == 2 and "already exists; pass --force" in again.stderr
 
 
 def test_import_refuses_unknown_files(tmp_path) -> None:
@@ -123,14 +131,17 @@ def test_import_refuses_unknown_files(tmp_path) -> None:
     assert res.exit_code == 2 and res.stderr.count("\n") == 1 and "junk.bin" in res.stderr
 
 
-@pytest.mark.skipif(not CRAZYPAD.is_dir(), reason="shared CrazyPAD logs not present")
+@needs_crazypad
 def test_crazypad_real_flight_imports_and_identifies(tmp_path) -> None:
     res = CliRunner().invoke(gs, ["import", str(CRAZYPAD / "controller_E8_log00"),
                                   str(CRAZYPAD / "motor_E8_log00"), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
     s = open_session(tmp_path / "controller_E8_log00.h5")
-    assert len(s["fixedFrequency"]) == 2606 and s.dropped() == {"fixedFrequency": 0}
-    assert s["fixedFrequency"].units["r_roll"] == "rad/s"
+    name = "stateEstimate+controller"
+    assert len(s[name]) == 2606 and s.dropped() == {name: 0}
+    assert s[name].units["r_roll"] == "rad/s"
+    assert [p.name for p in s.phases()] == ["ground-0", "airborne-1", "ground-1", "airborne-2",
+                                            "ground-2"]
     axes = ("roll", "pitch", "yaw")
     res = CliRunner().invoke(sysid_cli, [
         "identify", str(s.path), "--window", "all", "--dt", "0.01", "--order", "4",
@@ -141,3 +152,40 @@ def test_crazypad_real_flight_imports_and_identifies(tmp_path) -> None:
     report = json.loads(res.stdout)
     assert len(report["poles"]) == 4 and report["n_samples"][0] > 2500
     assert all(np.isfinite(v) for v in report["fit_percent"]["1-step"].values())
+
+
+def test_a_folder_of_usd_logs_and_csv_folders(tmp_path):
+    """A uSD card's files, a cfclient session folder beside them, and files that are neither."""
+    card = tmp_path / "card"
+    card.mkdir()
+    n = 20
+    for name in ("log00", "log01"):
+        (card / name).write_bytes(usd_bytes(stamps_us=10_000 * np.arange(n),
+                                            a=np.zeros(n, np.float32), b=np.zeros(n, np.uint16)))
+    (card / "config.txt").write_text("1 # version\n")
+    (card / ".hidden").mkdir()
+    folder, *_ = cfclient_folder(card)
+    res = CliRunner().invoke(gs, ["import", str(card), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
+        f"{folder.name}.h5", "log00.h5", "log01.h5"]
+    assert "skipped 1 file(s) that are neither uSD logs nor cfclient CSVs: config.txt" in res.stderr
+    assert open_session(tmp_path / "o" / f"{folder.name}.h5").streams.keys() >= {"Motors", "Gyro"}
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "notes.txt").write_text("hello")
+    res = CliRunner().invoke(gs, ["import", str(empty), "--out", str(tmp_path / "o2")])
+    assert res.exit_code == 2 and "holds no uSD-card deck logs" in res.stderr
+    assert not (tmp_path / "o2").exists()
+
+
+def test_two_sources_with_one_name_are_refused_before_any_work(tmp_path):
+    n = 5
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "log00").write_bytes(usd_bytes(
+            stamps_us=1000 * np.arange(n), a=np.zeros(n, np.float32), b=np.zeros(n, np.uint16)))
+    res = CliRunner().invoke(gs, ["import", str(tmp_path / "a"), str(tmp_path / "b"),
+                                  "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "would both become log00.h5" in res.stderr
+    assert not (tmp_path / "o").exists()

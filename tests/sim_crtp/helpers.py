@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -11,7 +12,7 @@ from cflib.crazyflie import Crazyflie
 from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
-from groundstation.clock import Clock
+from groundstation.flight.clock import Clock
 
 __all__ = ["BLOCKS", "Recorder", "connect", "fly"]
 
@@ -60,7 +61,7 @@ class Recorder:
         with self._lock:
             rows = list(self._data[name])
         t = np.array([r[0] for r in rows], dtype=np.int64)
-        v = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), -1)
+        v = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), len(self._names[name]))
         return t, v
 
 
@@ -75,3 +76,10 @@ def fly(cf: Crazyflie, clock: Clock, segments: list[tuple[float, float, float, f
             cf.commander.send_setpoint(roll, pitch, yawrate, thrust)
             t += 1.0 / rate_hz
             clock.sleep_until(t)
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that nothing holds right now (for a test's simulator)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -12,8 +12,8 @@ from cflib.crazyflie.log import LogConfig
 from cflib.crtp.crtpstack import CRTPPacket
 
 import groundstation.sim as gsim
-from groundstation.clock import clock_for_uri
 from groundstation.errors import LinkError
+from groundstation.flight.clock import clock_for_uri
 from groundstation.sim.vehicle import SimVehicle
 
 from .helpers import BLOCKS, Recorder, connect

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from groundstation.clock import clock_for_uri
+from groundstation.flight.clock import clock_for_uri
 from groundstation.sim.simulator import _PACE_HOLD_S, _PACE_LEAD_MS
 
 

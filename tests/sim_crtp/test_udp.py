@@ -16,21 +16,16 @@ import pytest
 from groundstation.errors import LinkError
 from groundstation.sim import UdpServer
 from groundstation.sim.crtp import crtp_header
+from groundstation.sim.udp import CLIENT_SILENCE_S
 
-from .helpers import Recorder, connect
+from .helpers import Recorder, connect, free_udp_port
 from .test_flight import hover_thrust
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture
 def server():
     cflib.crtp.init_drivers()
-    srv = UdpServer(port=_free_port(), seed=2)
+    srv = UdpServer(port=free_udp_port(), seed=2)
     yield srv
     srv.close()
     time.sleep(0.05)
@@ -96,6 +91,9 @@ def test_fuzz_then_a_normal_connect_still_works(server):
     t0 = sim.clock.now()
     time.sleep(0.2)
     assert sim.running and sim.clock.now() > t0 + 0.1  # still simulating
+    # The fuzzing socket held the link; it is free once that client has been silent for 1 s.
+    assert server.endpoints[0].client is not None
+    sim.clock.sleep_until(server.endpoints[0].client_seen_s + CLIENT_SILENCE_S + 0.05)
     with connect(server.uris[0]) as scf:
         assert scf.cf.log.toc.get_element_by_complete_name("motor.m1").ctype == "uint16_t"
 
@@ -123,7 +121,7 @@ def test_client_that_vanishes_mid_flight_triggers_the_watchdog(server):
 def _free_run(n: int) -> int:
     """A port p with p .. p + n - 1 all free on 127.0.0.1."""
     for _ in range(50):
-        base = _free_port()
+        base = free_udp_port()
         socks = []
         try:
             for k in range(n):
@@ -152,3 +150,42 @@ def test_several_vehicles_on_consecutive_ports_bound_to_loopback():
         assert srv.endpoints[2].datagrams > 0 and srv.endpoints[0].datagrams == 0
     finally:
         srv.close()
+
+
+def test_one_client_at_a_time_others_are_ignored(server, caplog):
+    """A second socket on the machine can neither fly the vehicle nor take its telemetry."""
+    sim, endpoint = server.simulators[0], server.endpoints[0]
+    addr = ("127.0.0.1", endpoint.port)
+    commander = crtp_header(3, 0)
+    with connect(server.uris[0]) as scf, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        Recorder(scf.cf, blocks={"gyro": ["gyro.x", "gyro.y", "gyro.z"]})
+        s.settimeout(0.3)
+        for _ in range(20):  # unlock, then full thrust and a hard roll, for 2 s
+            scf.cf.commander.send_setpoint(0, 0, 0, 0)  # the client keeps the link, grounded
+            s.sendto(bytes([commander]) + struct.pack("<fffH", 0, 0, 0, 0), addr)
+            s.sendto(bytes([commander]) + struct.pack("<fffH", 20, 0, 0, 60000), addr)
+            time.sleep(0.1)
+        assert not any(sim.vehicle.motors_pwm) and not sim.vehicle.is_flying
+        assert endpoint.foreign >= 30  # the kernel may drop a few on a loaded machine
+        with pytest.raises(TimeoutError):  # no telemetry went to the intruder
+            s.recv(64)
+        s.sendto(b"\xff", addr)  # a scan probe is still answered
+        assert s.recv(64) == b"\xff"
+    warnings = [r for r in caplog.records if "ignoring datagrams" in r.getMessage()]
+    assert len(warnings) == 1  # logged once, counted after
+
+
+@pytest.mark.parametrize("host", ["", "0.0.0.0", " ", "192.0.2.1"])
+def test_a_host_others_reach_needs_allow_remote(host):
+    with pytest.raises(LinkError, match=r"would let other machines fly .*--allow-remote"):
+        UdpServer(host=host, port=free_udp_port())
+
+
+def test_sim_command_refuses_a_wildcard_host_in_one_line():
+    from click.testing import CliRunner
+
+    from groundstation.cli import main
+
+    result = CliRunner().invoke(main, ["sim", "--host", "0.0.0.0", "--duration", "0.1"])
+    assert result.exit_code == 2
+    assert result.output.strip().count("\n") == 0 and "--allow-remote" in result.output

@@ -13,9 +13,8 @@ from groundstation.sim.firmware import (
     mix_legacy_x,
 )
 from groundstation.sim.vehicle import SimConfigError, SimVehicle
+from tests.paths import CRAZYPAD, needs_crazypad
 from tests.sim_physics.conftest import fly
-
-CRAZYPAD = "/work/shared/data/crazypad"
 
 
 def test_mixer_signs_and_reduce_all_four_rule():
@@ -28,6 +27,7 @@ def test_mixer_signs_and_reduce_all_four_rule():
     assert mix_legacy_x(thrust=1000, roll=0, pitch=-6000, yaw=0)[0] == 0    # clipped at 0
 
 
+@needs_crazypad
 def test_battery_compensation_matches_the_real_log():
     ev = read_usd(f"{CRAZYPAD}/motor_E8_log00").events["fixedFrequency"]
     m, pwm = ev.values["motor.m1"].astype(float), ev.values["pwm.m1_pwm"].astype(float)

@@ -8,9 +8,8 @@ import pytest
 from groundstation.importers import read_usd
 from groundstation.sim.sensors import HOVER_ACC_STD_G, HOVER_GYRO_STD_DPS, hover_noise_std
 from groundstation.sim.vehicle import SimVehicle
+from tests.paths import CRAZYPAD, needs_crazypad
 from tests.sim_physics.conftest import fly
-
-CRAZYPAD = "/work/shared/data/crazypad"
 
 
 def _hover_segments(z: np.ndarray) -> list[np.ndarray]:
@@ -29,6 +28,7 @@ def _real_std(name: str, files: list[str], *, scale: float = 1.0) -> float:
     return float(np.median(stds))
 
 
+@needs_crazypad
 def test_calibration_targets_are_what_the_real_hover_shows():
     ctl = ["controller_E8_log00", "controller_E8_log01"]
     deg = 180.0 / np.pi

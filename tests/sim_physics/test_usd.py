@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from groundstation.importers import UsdFormatError, read_usd
-
-CRAZYPAD = "/work/shared/data/crazypad"
+from tests.paths import CRAZYPAD, needs_crazypad
 
 
 def _write(path, *, version: int, records: list[tuple[int, int, tuple]], crc_fix: int = 0):
@@ -66,6 +65,7 @@ def test_truncated_and_foreign_files(tmp_path):
         read_usd(tmp_path / "missing")
 
 
+@needs_crazypad
 def test_real_crazypad_logs():
     ev = read_usd(f"{CRAZYPAD}/motor_E8_log00").events["fixedFrequency"]
     t = ev.timestamps_s

@@ -29,8 +29,9 @@ def test_thesis_variant_is_table_4_3_and_never_a_hybrid():
     # asking only for the thesis' B/D no longer gets the predictor refinement on top
     assert sysid.iem(data, bk_method="thesis", **KW).provenance["refine"].startswith("off")
     default = sysid.iem(data, **KW)
-    assert default.provenance["refine"].startswith("done")
+    assert default.provenance["refine"] == "off"  # the refinement is opt-in (issue 10)
     assert default.provenance["variant"] == "consistent"
+    assert sysid.iem(data, refine=True, **KW).provenance["refine"] == "done"
 
 
 def test_offsets_are_warned_about_naming_the_channel(caplog):

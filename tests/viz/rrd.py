@@ -87,3 +87,86 @@ def blueprint_views(path: Path) -> dict[str, list[str]]:
                 queries[c.entity_path.rsplit("/", 1)[0]] = rb.column(
                     "ViewContents:query").to_pylist()[-1]
     return {name: queries.get(path_, []) for path_, name in names.items()}
+
+
+# ------------------------------------------------------------------ blueprint resolution
+_SHOWS = {  # view class -> components it draws (any one makes an entity visible in it)
+    "TimeSeries": ("Scalars:scalars",),
+    "BarChart": ("BarChart:values",),
+    "2D": ("Points2D:positions", "LineStrips2D:strips"),
+    "TextDocument": ("TextDocument:text",),
+    "TextLog": ("TextLog:text",),
+    "StateTimeline": ("StateChange:state",),
+}
+
+
+@dataclass
+class View:
+    """One view of a blueprint: class, title, origin, content rules and blueprint properties."""
+
+    kind: str
+    name: str
+    origin: str
+    query: list[str]
+    properties: dict[str, object] = field(default_factory=dict)
+
+
+def views(path: Path) -> list[View]:
+    """Every view of the file's blueprint, with its content query (default ``$origin/**``)."""
+    reader = RrdReader(path)
+    found: dict[str, View] = {}
+    extra: dict[str, dict[str, object]] = {}
+    for b in reader.blueprints():
+        for c in reader.stream(store=b).to_chunks():
+            rb = c.to_record_batch()
+            last = {n: rb.column(n).to_pylist()[-1] for n in rb.schema.names if ":" in n}
+            if "ViewBlueprint:class_identifier" in last:
+                found[c.entity_path] = View(
+                    kind=last["ViewBlueprint:class_identifier"][0],
+                    name=(last.get("ViewBlueprint:display_name") or [""])[0],
+                    origin=(last.get("ViewBlueprint:space_origin") or ["/"])[0],
+                    query=["$origin/**"])
+            else:
+                extra.setdefault(c.entity_path.rsplit("/", 1)[0], {}).update(last)
+    for path_, view in found.items():
+        props = extra.get(path_, {})
+        view.query = list(props.pop("ViewContents:query", view.query))
+        view.properties = props
+    return list(found.values())
+
+
+def _rule(rule: str, origin: str) -> tuple[bool, str, bool]:
+    """``(include, path, recursive)`` of one rule line (``+ p``, ``- p`` or ``p``)."""
+    rule = rule.strip()
+    include = not rule.startswith("-")
+    rule = rule.lstrip("+-").strip().replace("$origin", origin.rstrip("/") or "")
+    recursive = rule.endswith("/**") or rule == "**"
+    path_ = rule[:-3] if rule.endswith("/**") else rule
+    if "*" in path_:
+        raise AssertionError(f"rule {rule!r}: Rerun supports '*' only as a trailing '/**'")
+    path_ = "/" + path_.strip("/")
+    return include, path_, recursive
+
+
+def resolve(view: View, entities: dict[str, Entity]) -> list[str]:
+    """Entities of ``entities`` that ``view``'s query selects and that hold something the view
+    can draw, by Rerun's rules (EntityPathFilter: the most specific matching rule wins, an
+    exact path beats ``/**``; the last of equally specific rules wins; no rule: excluded)."""
+    rules = [_rule(r, view.origin) for r in view.query if r.strip()]
+    shown = []
+    for name, ent in entities.items():
+        best: tuple[int, int, int] | None = None
+        verdict = False
+        for k, (include, path_, recursive) in enumerate(rules):
+            if name == path_ or (recursive and (path_ == "/" or name.startswith(path_ + "/"))):
+                rank = (path_.count("/") + (path_ != "/"), 0 if recursive else 1, k)
+                if best is None or rank > best:
+                    best, verdict = rank, include
+        if verdict and any(c in ent.static or ent.rows.get(c) for c in _SHOWS[view.kind]):
+            shown.append(name)
+    return sorted(shown)
+
+
+def explicit_entities(view: View) -> list[str]:
+    """Entities a view names one by one (include rules without ``/**``)."""
+    return [p for inc, p, rec in (_rule(r, view.origin) for r in view.query) if inc and not rec]

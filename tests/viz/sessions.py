@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.session import SessionWriter, standard_streams
-from groundstation.session_schema import StreamSpec, log_block_spec
+from cfsession.schema import StreamSpec, log_block_spec
+from cfsession.writer import SessionWriter, standard_streams
 
 __all__ = ["LONG_TEXT", "N_LOG", "flight_rows", "flight_specs", "write_session"]
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import socket
+
 import numpy as np
 from click.testing import CliRunner
 
 from groundstation.cli import main
-from groundstation.plans import load_plan
+from groundstation.plan import load_plan
 from tests.viz.rrd import load
 from tests.viz.sessions import N_LOG, write_session
 
@@ -33,6 +35,14 @@ def test_replay_errors_are_one_line(tmp_path):
                                "--view", "serve"])
     assert res.exit_code == 2 and "pass only one" in res.output
     assert not (tmp_path / "a.rrd").exists()
+    with socket.socket() as busy:  # a busy web viewer port: one line, nothing served
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        res = runner.invoke(main, ["replay", str(session), "--view", "serve", "--port",
+                                   str(port)])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert f"error: port {port} is in use" in res.output and "--port" in res.output
 
 
 def test_plan_show_rrd_equals_the_schedule(tmp_path):

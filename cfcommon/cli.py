@@ -1,0 +1,159 @@
+"""Command-line pieces shared by the ``sysid`` and ``groundstation`` commands.
+
+* :class:`FiniteFloat`: a click number type that refuses ``nan`` and ``inf`` (click's
+  ``FloatRange`` lets ``nan`` through every bound, which would switch a safety limit off).
+* :func:`check_output`: the one rule for files a command writes. The suffix must be one the
+  command writes, the folder must exist and be writable, an input of the same command is never
+  written over, and an existing file is replaced only when the caller allows it.
+
+Both raise :class:`click.BadParameter`, so each CLI prints one line and exits with 2.
+
+* :class:`OneLineErrorGroup`: the click group both CLIs use. A user error (a usage error, one
+  of the group's ``user_errors``, a missing or unreadable file) prints ``error: ...`` on one
+  line and exits with 2, never a traceback; ``-h`` still shows the usage.
+
+* :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
+  terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
+  plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import click
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+__all__ = ["FiniteFloat", "OneLineErrorGroup", "check_output", "output_console", "output_table"]
+
+_UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
+
+
+def output_console(*, width: int | None = None, stderr: bool = False) -> Console:
+    """The console for a command's text output (module docstring); ``width`` in characters."""
+    if Console(stderr=stderr).is_terminal:
+        return Console(highlight=False, width=width, stderr=stderr)
+    return Console(highlight=False, width=width or _UNWRAPPED, stderr=stderr, no_color=True,
+                   soft_wrap=width is None)
+
+
+def output_table(*columns: str, console: Console, title: str | None = None) -> Table:
+    """A table drawn with box lines on a terminal, and plain (columns separated by two
+    spaces, one header line) when piped."""
+    columns = tuple(escape(c) for c in columns)  # "fields [unit]" is a title, not markup
+    if console.is_terminal:
+        return Table(*columns, title=title)
+    return Table(*columns, title=title, box=None, pad_edge=False, padding=(0, 2, 0, 0),
+                 title_justify="left")
+
+
+class FiniteFloat(click.ParamType):
+    """A finite float within optional bounds: ``FiniteFloat(min=0.5)``, ``min_open=True`` for
+    ``> min``."""
+
+    name = "float"
+
+    def __init__(self, *, min: float | None = None, max: float | None = None,
+                 min_open: bool = False) -> None:
+        self.min, self.max, self.min_open = min, max, min_open
+
+    def convert(self, value: object, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        try:
+            x = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(x):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.min is not None and (x <= self.min if self.min_open else x < self.min):
+            self.fail(f"{x:g} is {'not above' if self.min_open else 'below'} {self.min:g}",
+                      param, ctx)
+        if self.max is not None and x > self.max:
+            self.fail(f"{x:g} is above {self.max:g}", param, ctx)
+        return x
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        lo = "" if self.min is None else f"{'>' if self.min_open else '>='}{self.min:g}"
+        hi = "" if self.max is None else f"<={self.max:g}"
+        return f"FLOAT {' '.join(s for s in (lo, hi) if s)}".strip()
+
+
+def check_output(path: Path, *, option: str, suffixes: Sequence[str],
+                 inputs: Sequence[Path] = (), overwrite: bool = False,
+                 force_flag: str | None = None) -> Path:
+    """Return ``path`` if a command may write it; otherwise raise a one-line ``BadParameter``.
+
+    ``suffixes`` are the allowed endings (``(".rrd",)``); ``inputs`` the files the command
+    reads (never written over, whatever ``overwrite`` says); ``overwrite`` allows replacing an
+    existing output; ``force_flag`` names the flag that would allow it, for the message.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in {s.lower() for s in suffixes}:
+        raise click.BadParameter(f"{str(path)!r} must end in {' or '.join(suffixes)}",
+                                 param_hint=option)
+    for src in inputs:
+        if _same_file(path, Path(src)):
+            raise click.BadParameter(f"{str(path)!r} is an input of this command; write the "
+                                     "output to another file", param_hint=option)
+    folder = path.parent
+    if not folder.is_dir():
+        raise click.BadParameter(f"folder {str(folder)!r} does not exist; create it first",
+                                 param_hint=option)
+    if not os.access(folder, os.W_OK):
+        raise click.BadParameter(f"folder {str(folder)!r} is not writable", param_hint=option)
+    if path.is_dir():
+        raise click.BadParameter(f"{str(path)!r} is a folder; give a file name",
+                                 param_hint=option)
+    if path.exists() and not overwrite:
+        how = f"pass {force_flag} to replace it or " if force_flag else ""
+        raise click.BadParameter(f"{str(path)!r} already exists; {how}choose another name",
+                                 param_hint=option)
+    return path
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return a.resolve() == b.resolve()
+
+
+class OneLineErrorGroup(click.Group):
+    """A click group whose user errors print one line and exit 2, never a traceback.
+
+    Subclasses name their own exception trees in ``user_errors`` (printed as their first line)
+    and may add messages for other exceptions in :meth:`user_error_message`. ``sysid X`` alone
+    (no arguments) still shows X's help.
+    """
+
+    user_errors: ClassVar[tuple[type[BaseException], ...]] = ()
+
+    def user_error_message(self, exc: Exception, *, ctx: click.Context) -> str | None:
+        """The one line for ``exc``, or None when it is not a user error (it propagates)."""
+        if isinstance(exc, click.UsageError):
+            if isinstance(exc, click.exceptions.NoArgsIsHelpError):
+                return None
+            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
+            return f"{exc.format_message()} (see '{where} -h')"
+        if isinstance(exc, self.user_errors):
+            return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, FileNotFoundError | PermissionError | IsADirectoryError):
+            return f"{exc.strerror}: {exc.filename}"
+        return None
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except Exception as exc:  # click's Exit and Abort are not user errors: they propagate
+            msg = self.user_error_message(exc, ctx=ctx)
+            if msg is None:
+                raise
+        click.echo(f"error: {msg}", err=True)
+        sys.exit(2)

@@ -1,0 +1,224 @@
+"""Opening a Rerun recording: write an ``.rrd`` file, serve the web viewer, or spawn the viewer.
+
+Both sides use it: the ground station's live view and replay (:mod:`groundstation.live`) and the
+identification plots (:mod:`sysid.viz`). :func:`serve_until_interrupted` keeps a served viewer
+up until Ctrl-C (``groundstation fly --view serve``, ``groundstation replay --view serve``).
+
+Serving binds 127.0.0.1 only: the Rerun SDK's own servers listen on every interface (0.0.0.0)
+with no option to change that, so :func:`serve_web` runs the Rerun viewer binary as a child
+process, ``rerun --serve-web --bind 127.0.0.1``, and streams the recording to it.
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Literal
+from urllib.parse import quote
+
+import rerun as rr
+
+__all__ = [
+    "MODES",
+    "WEB_PORT",
+    "ViewModeError",
+    "check_port",
+    "has_display",
+    "open_recording",
+    "serve_until_interrupted",
+    "serve_web",
+    "stop_servers",
+]
+
+log = logging.getLogger(__name__)
+
+MODES = ("rerun", "serve", "save")
+"""``rerun``: native viewer (web viewer without a display); ``serve``: web viewer on
+127.0.0.1 (:func:`serve_web`); ``save``: write an ``.rrd`` file."""
+
+WEB_PORT = 9090
+
+
+class ViewModeError(ValueError):
+    """An unknown view mode, ``save`` without a file, or a port that is taken (one line)."""
+
+
+def has_display() -> bool:
+    """True when a native viewer can open a window (Linux: ``DISPLAY``/``WAYLAND_DISPLAY``)."""
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def open_recording(
+    *,
+    name: str,
+    mode: Literal["rerun", "serve", "save"],
+    rrd_path: Path | None = None,
+    application_id: str = "cf-sysid",
+    web_port: int = WEB_PORT,
+) -> tuple[rr.RecordingStream, str | None]:
+    """A new recording named ``name`` sent to a viewer or file; returns ``(recording, url)``.
+
+    ``mode`` is one of :data:`MODES`. ``"rerun"`` spawns the native viewer when there is a
+    display and otherwise serves the web viewer (logged warning). ``"serve"`` runs the web
+    viewer on ``127.0.0.1:web_port`` (0: any free port, see :func:`serve_web`); ``url`` is its
+    address, else None (the caller prints it). ``"save"`` needs ``rrd_path`` (its folder is
+    created; an existing file is replaced).
+    """
+    if mode not in MODES:
+        raise ViewModeError(f"view mode {mode!r} is unknown; use one of {', '.join(MODES)}")
+    if mode == "save" and rrd_path is None:
+        raise ViewModeError("view mode 'save' needs rrd_path; pass the .rrd file to write")
+    if mode == "rerun" and not has_display():
+        log.warning("no display (DISPLAY/WAYLAND_DISPLAY unset): serving the web viewer instead")
+        mode = "serve"
+    if mode == "serve":
+        check_port(web_port)  # before anything starts: a busy port is a one-line error
+    rec = rr.RecordingStream(application_id, recording_id=None)
+    rec.send_recording_name(name)
+    if mode == "save":
+        path = Path(rrd_path)  # type: ignore[arg-type]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rec.save(path)
+        log.info("writing Rerun recording to %s", path)
+        return rec, None
+    if mode == "rerun":
+        rec.spawn()
+        return rec, None
+    return rec, serve_web(rec=rec, web_port=web_port)
+
+
+def check_port(port: int) -> None:
+    """One-line :class:`ViewModeError` unless TCP ``port`` on 127.0.0.1 is free (0: any)."""
+    if not 0 <= port <= 65535:
+        raise ViewModeError(f"port {port} is out of range; use 1-65535, or 0 for any free port")
+    if port and not _port_free(port):
+        raise ViewModeError(f"port {port} is in use (another Rerun viewer?); pass --port with "
+                             "a free port, or --port 0 for any free port")
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _listening(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+_SERVERS: list[subprocess.Popen] = []
+_RECORDINGS: list[rr.RecordingStream] = []
+
+
+def stop_servers() -> None:
+    """Stop the web viewers :func:`serve_web` started (also run at exit)."""
+    while _RECORDINGS:  # cut the recordings loose first: no gRPC errors when it goes away
+        rec = _RECORDINGS.pop()
+        rec.flush()
+        rec.disconnect()
+    while _SERVERS:
+        proc = _SERVERS.pop()
+        for sig in (signal.SIGTERM, signal.SIGKILL):  # its own process group (and only it)
+            try:
+                os.killpg(proc.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                break
+            try:
+                proc.wait(timeout=5.0)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+
+
+def _die_with_parent() -> None:
+    """In the child, Linux: SIGTERM when this process dies (even by SIGKILL, without atexit)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _rerun_executable() -> str:
+    """The Rerun binary itself (not the ``rerun`` Python wrapper, which would outlive a
+    terminate), else the ``rerun`` next to this Python, else ``rerun`` on PATH."""
+    try:
+        import rerun_cli  # the rerun-sdk's bundled viewer
+
+        binary = Path(rerun_cli.__file__).with_name("rerun.exe" if os.name == "nt" else "rerun")
+        if binary.is_file():
+            return str(binary)
+    except ImportError:
+        pass
+    script = Path(sys.executable).with_name("rerun")
+    return str(script) if script.exists() else "rerun"
+
+
+atexit.register(stop_servers)
+
+
+def serve_web(*, rec: rr.RecordingStream, web_port: int = WEB_PORT,
+              timeout_s: float = 30.0) -> str:
+    """Serve ``rec`` to the Rerun web viewer on ``127.0.0.1:web_port``; returns its URL.
+
+    The Rerun SDK's own servers listen on every interface (0.0.0.0) with no option to change
+    that, so the viewer runs as a child process, ``rerun --serve-web --bind 127.0.0.1``
+    (stopped at exit, or by :func:`stop_servers`); its gRPC port is any free port, and the
+    recording streams to it. A busy ``web_port`` or a viewer that does not come up is a
+    one-line :class:`ViewModeError`, raised before the caller starts any work.
+    """
+    check_port(web_port)
+    web_port = web_port or _free_port()
+    grpc_port = _free_port()
+    command = [_rerun_executable(), "--serve-web", "--bind", "127.0.0.1",
+               "--port", str(grpc_port), "--web-viewer-port", str(web_port),
+               "--hide-welcome-screen"]
+    try:
+        proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True,
+                                preexec_fn=_die_with_parent)
+    except OSError as exc:
+        raise ViewModeError(f"cannot start the Rerun web viewer ({command[0]}): "
+                             f"{exc.strerror or exc}") from None
+    _SERVERS.append(proc)
+    deadline = time.monotonic() + timeout_s
+    while not (_listening(grpc_port) and _listening(web_port)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            stop_servers()
+            raise ViewModeError(f"the Rerun web viewer did not start on 127.0.0.1:{web_port} "
+                                 "(port taken meanwhile?); pass --port 0 for any free port")
+        time.sleep(0.05)
+    grpc = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+    rec.connect_grpc(grpc)
+    _RECORDINGS.append(rec)
+    return f"http://127.0.0.1:{web_port}/?url={quote(grpc, safe='')}"
+
+
+def serve_until_interrupted(*, poll_s: float = 1.0) -> None:
+    """Block until Ctrl-C: the served web viewer lives in this process."""
+    try:
+        while True:
+            time.sleep(poll_s)
+    except KeyboardInterrupt:
+        pass

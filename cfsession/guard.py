@@ -1,0 +1,277 @@
+"""Opening session files that may be damaged or crafted, without hanging or reading elsewhere.
+
+A session file comes from anywhere (a colleague, a crashed writer, a download), so the reader
+opens it only through :func:`open_untrusted` and checks every object before reading it
+(:func:`check_dataset`, :func:`hard_links`, :func:`read_attrs`); anything refused is one
+:class:`~cfsession.errors.SessionError` line.
+
+**Files not closed cleanly.** A writer that died leaves the superblock's status flags set
+(file open for writing, SWMR writing). HDF5 reads such a file only in SWMR mode, where a
+metadata checksum failure is retried, with back-off, for over a minute per object: one flipped
+byte hangs every tool. Instead, :func:`open_untrusted` reads the superblock itself: a file whose
+flags are set is read into memory (at most :data:`MAX_UNCLEAN_BYTES`), the flags are cleared in
+that private copy (its checksum recomputed) and the copy is opened read-only in the ordinary
+mode, where a checksum failure is an immediate error. No SWMR read, so nothing to time out;
+the file on disk is never changed. A stored end of file beyond the real size is "truncated".
+
+**What is refused** (before any data is read): a path that is not a regular file; soft and
+external links; datasets with external storage (they read other files: ``/etc/passwd``, a FIFO
+that blocks for ever) and virtual datasets; stream datasets that are not one-dimensional, whose
+fields are not numbers or fixed-length text, or whose declared rows exceed what the file could
+hold (chunked: the allocated chunks plus slack; contiguous: its storage; any: more than
+:data:`MAX_EXPANSION` times the file size); more than :data:`MAX_OBJECTS` streams or
+attributes; attributes larger than :data:`MAX_ATTR_BYTES`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import mmap
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from cfsession.errors import SessionError
+
+__all__ = ["MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
+           "check_dataset", "hard_links", "open_untrusted", "read_attrs"]
+
+_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+MAX_UNCLEAN_BYTES = 1 << 30
+"""Largest file not closed cleanly that is read (into memory, see the module docstring)."""
+MAX_EXPANSION = 1000
+"""Rows may declare at most this many times the file's size in bytes (gzip's best ratio)."""
+MAX_OBJECTS = 1024
+"""Most streams in a file, and most attributes on one object."""
+MAX_ATTR_BYTES = 1 << 20
+MAX_CHUNK_BYTES = 16 << 20
+MAX_ROW_BYTES = 1 << 16
+_CHUNK_SLACK = 2  # chunks a killed writer may have resized into but not yet written
+
+
+# ---------------------------------------------------------------------- superblock
+
+
+def _rot(x: int, k: int) -> int:
+    return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
+
+
+def lookup3(data: bytes, initval: int = 0) -> int:
+    """Bob Jenkins' lookup3 ``hashlittle``: HDF5's metadata checksum (``H5_checksum_lookup3``)."""
+    m = 0xFFFFFFFF
+    a = b = c = (0xDEADBEEF + len(data) + initval) & m
+    n = len(data)
+    i = 0
+    while n - i > 12:
+        a = (a + int.from_bytes(data[i:i + 4], "little")) & m
+        b = (b + int.from_bytes(data[i + 4:i + 8], "little")) & m
+        c = (c + int.from_bytes(data[i + 8:i + 12], "little")) & m
+        a = (a - c) & m; a ^= _rot(c, 4); c = (c + b) & m  # noqa: E702
+        b = (b - a) & m; b ^= _rot(a, 6); a = (a + c) & m  # noqa: E702
+        c = (c - b) & m; c ^= _rot(b, 8); b = (b + a) & m  # noqa: E702
+        a = (a - c) & m; a ^= _rot(c, 16); c = (c + b) & m  # noqa: E702
+        b = (b - a) & m; b ^= _rot(a, 19); a = (a + c) & m  # noqa: E702
+        c = (c - b) & m; c ^= _rot(b, 4); b = (b + a) & m  # noqa: E702
+        i += 12
+    if n - i == 0:
+        return c
+    tail = data[i:].ljust(12, b"\0")
+    a = (a + int.from_bytes(tail[0:4], "little")) & m
+    b = (b + int.from_bytes(tail[4:8], "little")) & m
+    c = (c + int.from_bytes(tail[8:12], "little")) & m
+    c ^= b; c = (c - _rot(b, 14)) & m  # noqa: E702
+    a ^= c; a = (a - _rot(c, 11)) & m  # noqa: E702
+    b ^= a; b = (b - _rot(a, 25)) & m  # noqa: E702
+    c ^= b; c = (c - _rot(b, 16)) & m  # noqa: E702
+    a ^= c; a = (a - _rot(c, 4)) & m  # noqa: E702
+    b ^= a; b = (b - _rot(a, 14)) & m  # noqa: E702
+    c ^= b; c = (c - _rot(b, 24)) & m  # noqa: E702
+    return c
+
+
+def _superblock(head: bytes) -> tuple[int, int, int] | None:
+    """``(status flags, stored end of file, checksum offset)`` of a version 2/3 superblock with
+    8-byte addresses at offset 0, or ``None`` for any other layout."""
+    if len(head) < 48 or head[:8] != _SIGNATURE or head[8] not in (2, 3) or head[9] != 8:
+        return None
+    return head[11], int.from_bytes(head[28:36], "little"), 44
+
+
+def _cleared_copy(path: Path, size: int) -> io.BytesIO:
+    """The file's bytes with the superblock's status flags cleared (checksum recomputed)."""
+    if size > MAX_UNCLEAN_BYTES:
+        raise SessionError(f"{path}: not closed cleanly and {size / 2**20:.0f} MiB, more than "
+                           f"the {MAX_UNCLEAN_BYTES >> 20} MiB read to recover such a file")
+    data = bytearray(path.read_bytes())
+    data[11] = 0
+    data[44:48] = lookup3(bytes(data[:44])).to_bytes(4, "little")
+    return io.BytesIO(bytes(data))
+
+
+def _heap_loop(data: bytes | mmap.mmap) -> int | None:
+    """Offset of a global heap collection (``GCOL``: where variable-length strings live)
+    whose object list HDF5 would walk for ever (a free-space object of size 0 does not
+    advance its parser; a size near 2**64 wraps it back), or ``None``."""
+    at = data.find(b"GCOL")
+    while at >= 0:
+        size = int.from_bytes(data[at + 8:at + 16], "little")
+        end = at + min(size, len(data) - at)
+        p = at + 16
+        while p + 16 <= end:
+            idx = int.from_bytes(data[p:p + 2], "little")
+            obj = int.from_bytes(data[p + 8:p + 16], "little")
+            need = obj if idx == 0 else 16 + (obj + 7) // 8 * 8
+            if need == 0 or need >= 1 << 62:
+                return at
+            p += need
+        at = data.find(b"GCOL", at + 4)
+    return None
+
+
+def open_untrusted(path: Path) -> tuple[h5py.File, bool]:
+    """Open ``path`` read-only without SWMR; returns the file and whether its superblock says
+    it was closed cleanly. One-line :class:`SessionError` when it cannot be opened."""
+    try:
+        st = path.stat()
+        if path.is_dir():
+            raise SessionError(f"{path}: is a folder, not a session file")
+        if not path.is_file():
+            raise SessionError(f"{path}: not a regular file (a device, FIFO or socket), so not a "
+                               "flight session")
+        with open(path, "rb") as fh:
+            head = fh.read(48)
+    except OSError as exc:
+        raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if head[:8] != _SIGNATURE:
+        raise SessionError(f"{path}: not an HDF5 file, so not a flight session")
+    sb = _superblock(head)
+    if sb is not None and sb[1] > st.st_size:
+        raise SessionError(f"{path}: damaged beyond repair (truncated at {st.st_size} of "
+                           f"{sb[1]} bytes)")
+    flagged = sb is not None and sb[0] != 0
+    copy = _cleared_copy(path, st.st_size) if flagged else None
+    with contextlib.ExitStack() as stack:
+        if copy is not None:
+            loop = _heap_loop(copy.getbuffer().tobytes())
+        elif st.st_size:
+            fh = stack.enter_context(open(path, "rb"))
+            loop = _heap_loop(stack.enter_context(mmap.mmap(fh.fileno(), 0,
+                                                            access=mmap.ACCESS_READ)))
+        else:
+            loop = None
+    if loop is not None:
+        raise SessionError(f"{path}: damaged beyond repair (text heap at byte {loop} would be "
+                           "read for ever)")
+    try:
+        if copy is not None:
+            return h5py.File(copy, "r", locking=False), False
+        return h5py.File(path, "r", locking=False), True
+    except SessionError:
+        raise
+    except Exception as exc:  # h5py: OSError; the file-object driver passes others through
+        raise SessionError(f"{path}: damaged beyond repair ({_short(exc)})") from None
+
+
+def _short(exc: BaseException) -> str:
+    """The first line of an HDF5 error, without its internals."""
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    first = msg.split("(")[0].strip() or type(exc).__name__
+    return first[:200]
+
+
+# ---------------------------------------------------------------------- objects
+
+
+def hard_links(group: h5py.Group, *, where: str) -> Iterator[tuple[str, Any]]:
+    """``(name, object)`` for each member of ``group``; a soft or external link, or more than
+    :data:`MAX_OBJECTS` members, is a one-line :class:`SessionError`."""
+    names = list(group.keys())
+    if len(names) > MAX_OBJECTS:
+        raise SessionError(f"{where}: {len(names)} objects, more than a session has "
+                           f"({MAX_OBJECTS})")
+    for name in names:
+        link = group.get(name, getlink=True)
+        if isinstance(link, h5py.ExternalLink):
+            raise SessionError(f"{where}: {name!r} links to another file "
+                               f"({link.filename}); refusing to follow it")
+        if isinstance(link, h5py.SoftLink):
+            raise SessionError(f"{where}: {name!r} is a soft link ({link.path}); session files "
+                               "have none, refusing to follow it")
+        yield name, group[name]
+
+
+def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str]) -> dict[str, Any]:
+    """The attributes of ``obj`` that can be read; one too large or unreadable is skipped
+    and listed in ``problems``."""
+    attrs = obj.attrs
+    names = list(attrs.keys())
+    if len(names) > MAX_OBJECTS:
+        raise SessionError(f"{where}: {len(names)} attributes, more than a session has "
+                           f"({MAX_OBJECTS})")
+    out: dict[str, Any] = {}
+    for name in names:
+        try:
+            size = attrs.get_id(name).get_storage_size()
+            if size > MAX_ATTR_BYTES:
+                problems.append(f"{where}: attribute {name!r} skipped ({size} bytes)")
+                continue
+            out[name] = attrs[name]
+        except Exception as exc:
+            problems.append(f"{where}: attribute {name!r} unreadable ({_short(exc)})")
+    return out
+
+
+def _field_ok(dt: np.dtype) -> bool:
+    return dt.subdtype is None and (dt.kind in "biuf" or (dt.kind == "S" and dt.itemsize > 0))
+
+
+def check_dataset(ds: h5py.Dataset, *, where: str, file_size: int) -> None:
+    """Refuse, in one line, a stream dataset that reads elsewhere or more than the file holds
+    (see the module docstring)."""
+    dcpl = ds.id.get_create_plist()
+    if ds.is_virtual:
+        raise SessionError(f"{where}: a virtual dataset (reads other files); refusing it")
+    if dcpl.get_external_count():
+        name = dcpl.get_external(0)[0].decode(errors="replace")
+        raise SessionError(f"{where}: data stored outside the file ({name}); refusing to read it")
+    dt = ds.dtype
+    if dt.names is None or not dt.names:
+        raise SessionError(f"{where}: dtype {dt}, not a session stream (rows of named fields)")
+    bad = [n for n in dt.names if not _field_ok(dt.fields[n][0])]
+    if bad:
+        raise SessionError(f"{where}: field {bad[0]!r} has type {dt.fields[bad[0]][0]}; "
+                           "session streams hold numbers and fixed-length text only")
+    if "host_time" not in dt.names or dt.fields["host_time"][0].kind != "f":
+        raise SessionError(f"{where}: no floating-point host_time field; not a session stream")
+    if dt.itemsize > MAX_ROW_BYTES:
+        raise SessionError(f"{where}: rows of {dt.itemsize} bytes; not a session stream")
+    if ds.ndim != 1:
+        raise SessionError(f"{where}: shape {ds.shape}; session streams are one-dimensional")
+    rows = ds.shape[0]
+    nbytes = rows * dt.itemsize
+    if nbytes > MAX_EXPANSION * max(file_size, 1024):
+        raise SessionError(f"{where}: declares {rows} rows ({nbytes} bytes), more than a "
+                           f"{file_size}-byte file can hold")
+    if ds.chunks is not None:
+        chunk = ds.chunks[0]
+        if chunk * dt.itemsize > MAX_CHUNK_BYTES:
+            raise SessionError(f"{where}: chunks of {chunk} rows; not a session stream")
+        stored = (ds.id.get_num_chunks() + _CHUNK_SLACK) * chunk
+        if rows > stored:
+            raise SessionError(f"{where}: declares {rows} rows but stores at most {stored}")
+    elif dcpl.get_layout() == h5py.h5d.CONTIGUOUS and nbytes > ds.id.get_storage_size():
+        raise SessionError(f"{where}: declares {rows} rows but stores "
+                           f"{ds.id.get_storage_size() // max(dt.itemsize, 1)}")
+
+
+def file_size(f: h5py.File, path: Path) -> int:
+    """Bytes of the open file (its in-memory copy's, for a recovered one)."""
+    try:
+        return int(f.id.get_filesize())
+    except Exception:
+        return os.stat(path).st_size

@@ -1,0 +1,361 @@
+"""Reading session files, including ones left behind by a crashed writer.
+
+:func:`open_session` loads every stream into memory (a flight is a few MB) and returns a
+:class:`Session`. A file whose writer died is opened in SWMR-read mode; rows that were allocated
+but never written (NaN ``host_time``) are dropped; a stream whose chunks cannot all be read is
+read as far as it goes and listed in :attr:`Session.problems`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from cfsession.errors import SessionError
+from cfsession.guard import check_dataset, file_size, hard_links, open_untrusted, read_attrs
+from cfsession.schema import (
+    SCHEMA_NAME,
+    SCHEMA_VERSION,
+    events_spec,
+    link_spec,
+    phases_spec,
+    setpoints_spec,
+)
+
+__all__ = ["Event", "Gap", "PhaseWindow", "Session", "StreamData", "open_session"]
+
+log = logging.getLogger(__name__)
+
+_WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
+_LEVEL_NAMES = {1: "debug", 2: "info", 3: "warning", 4: "error", 5: "critical"}
+_REQUIRED = {spec.name: tuple(f.name for f in spec.fields)
+             for spec in (events_spec(), phases_spec(), setpoints_spec(), link_spec())}
+"""The fields the reader's own methods use in the standard streams."""
+
+
+@dataclass(frozen=True)
+class Gap:
+    """Log packets missing between two received ones (firmware time, seconds)."""
+
+    stream: str
+    start_s: float
+    end_s: float
+    missing: int
+
+
+@dataclass(frozen=True)
+class PhaseWindow:
+    """A phase of the flight on the host clock: ``[start_s, end_s)``."""
+
+    phase_id: int
+    name: str
+    kind: str
+    start_s: float
+    end_s: float
+
+
+@dataclass(frozen=True)
+class Event:
+    t: float
+    level: str
+    source: str
+    text: str
+
+
+def _decode(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", errors="replace")
+    if isinstance(value, np.ndarray) and value.dtype.kind in "OSU":
+        return [_decode(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+@dataclass(frozen=True)
+class StreamData:
+    """One stream's rows as a numpy structured array ``data`` (shape ``(n_rows,)``)."""
+
+    name: str
+    kind: str
+    data: np.ndarray
+    units: dict[str, str]
+    sources: dict[str, str]
+    period_s: float | None = None
+    attrs: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    @property
+    def time(self) -> np.ndarray:
+        """Host receive/send time, seconds since session start, shape ``(n_rows,)``."""
+        return self.data["host_time"]
+
+    @property
+    def value_fields(self) -> list[str]:
+        """Fields other than the timestamps."""
+        return [f for f in self.data.dtype.names if f not in ("host_time", "fw_time_ms")]
+
+    @property
+    def fw_time_s(self) -> np.ndarray | None:
+        """Firmware time in seconds with 24-bit wrap-arounds undone, or None if not a log stream."""
+        if "fw_time_ms" not in self.data.dtype.names:
+            return None
+        ms = self.data["fw_time_ms"].astype(np.int64)
+        if len(ms) > 1:
+            wraps = np.concatenate([[0], np.cumsum(np.diff(ms) < -(_WRAP // 2))])
+            ms = ms + wraps * _WRAP
+        return ms / 1000.0
+
+    def values(self, fields: list[str] | None = None) -> np.ndarray:
+        """Value columns as float64, shape ``(n_rows, n_fields)``."""
+        names = fields or self.value_fields
+        missing = [f for f in names if f not in self.data.dtype.names]
+        if missing:
+            raise SessionError(
+                f"stream {self.name!r} has no field(s) {missing}; has {self.value_fields}"
+            )
+        return (
+            np.column_stack([self.data[f].astype(np.float64) for f in names])
+            if names
+            else (np.empty((len(self.data), 0)))
+        )
+
+    def gaps(self, *, tolerance: float = 0.5) -> list[Gap]:
+        """Runs of dropped packets: firmware-time steps longer than (1 + tolerance) periods."""
+        t = self.fw_time_s
+        if t is None or not self.period_s or len(t) < 2:
+            return []
+        dt = np.diff(t)
+        idx = np.flatnonzero(dt > self.period_s * (1.0 + tolerance))
+        return [
+            Gap(self.name, float(t[i]), float(t[i + 1]), round(dt[i] / self.period_s) - 1)
+            for i in idx
+        ]
+
+
+class Session:
+    """A session file read into memory. ``problems`` lists anything found damaged."""
+
+    def __init__(
+        self, path: Path, meta: dict[str, Any], streams: dict[str, StreamData], problems: list[str]
+    ) -> None:
+        self.path = path
+        self.meta = meta
+        self.streams = streams
+        self.problems = problems
+
+    @property
+    def schema_version(self) -> int:
+        return int(self.meta["schema_version"])
+
+    @property
+    def closed_cleanly(self) -> bool:
+        """False when the writer died (the file holds what was flushed before)."""
+        return bool(self.meta.get("closed_cleanly", 0))
+
+    def __getitem__(self, name: str) -> StreamData:
+        try:
+            return self.streams[name]
+        except KeyError:
+            raise SessionError(
+                f"{self.path}: no stream {name!r}; streams are {sorted(self.streams)}"
+            ) from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.streams
+
+    def json_meta(self, key: str, default: Any = None) -> Any:
+        """A metadata attribute stored as JSON (params, phase table, summary), decoded."""
+        raw = self.meta.get(key)
+        if not isinstance(raw, str) or not raw.strip():
+            return default
+        try:
+            return json.loads(raw)
+        except (ValueError, RecursionError):  # damaged, or nested too deep to be ours
+            return default
+
+    @property
+    def duration(self) -> float:
+        """Seconds from session start to the last row of any stream."""
+        ends = [float(np.nanmax(s.time)) for s in self.streams.values() if len(s)]
+        return max(ends, default=0.0)
+
+    def gaps(self) -> list[Gap]:
+        """Dropped-packet gaps of every log stream."""
+        return [g for s in self.streams.values() if s.kind == "log" for g in s.gaps()]
+
+    def dropped(self) -> dict[str, int]:
+        """Dropped log packets per log stream, from firmware timestamp gaps."""
+        return {
+            name: sum(g.missing for g in s.gaps())
+            for name, s in self.streams.items()
+            if s.kind == "log"
+        }
+
+    def phases(self) -> list[PhaseWindow]:
+        """Phase windows in order; the last one ends at the end of the session."""
+        if "phases" not in self.streams:
+            return []
+        d = self.streams["phases"].data
+        end = self.duration
+        out = []
+        for i, row in enumerate(d):
+            stop = float(d["host_time"][i + 1]) if i + 1 < len(d) else end
+            out.append(
+                PhaseWindow(
+                    int(row["phase_id"]),
+                    _decode(row["name"]),
+                    _decode(row["kind"]),
+                    float(row["host_time"]),
+                    stop,
+                )
+            )
+        return out
+
+    def phase_window(self, name_or_kind: str) -> tuple[float, float]:
+        """Host-time span from the first to the last phase with this name or kind."""
+        hits = [p for p in self.phases() if name_or_kind in (p.name, p.kind)]
+        if not hits:
+            names = sorted({p.name for p in self.phases()})
+            kinds = sorted({p.kind for p in self.phases()})
+            raise SessionError(f"{self.path}: no phase {name_or_kind!r}; phases are {names} "
+                               f"(kinds {kinds})")
+        return hits[0].start_s, hits[-1].end_s
+
+    def events(self) -> list[Event]:
+        """Events with continued texts joined (bytes first, so split characters survive)."""
+        if "events" not in self.streams:
+            return []
+        parts: list[tuple[float, str, str, bytes]] = []
+        for row in self.streams["events"].data:
+            raw = bytes(row["text"])
+            if row["cont"] and parts:
+                t, level, source, prev = parts[-1]
+                parts[-1] = (t, level, source, prev + raw)
+            else:
+                level = _LEVEL_NAMES.get(int(row["level"]), "info")
+                parts.append((float(row["host_time"]), level, _decode(row["source"]), raw))
+        return [Event(t, lv, src, raw.decode("utf-8", errors="replace"))
+                for t, lv, src, raw in parts]
+
+
+def _read_dataset(ds: h5py.Dataset, problems: list[str], name: str) -> np.ndarray:
+    """Read all rows; on a damaged chunk, keep the rows before it and record the problem."""
+    try:
+        data = ds[()]
+    except Exception:  # h5py raises OSError / RuntimeError / KeyError on corrupt chunks
+        chunk = (ds.chunks or (1024,))[0]
+        parts = []
+        for start in range(0, ds.shape[0], chunk):
+            try:
+                parts.append(ds[start : start + chunk])
+            except Exception as exc:
+                problems.append(f"stream {name!r}: unreadable from row {start} ({exc})")
+                break
+        data = np.concatenate(parts) if parts else np.empty(0, dtype=ds.dtype)
+    written = ~np.isnan(data["host_time"])
+    if not written.all():
+        log.info("%s: dropping %d unwritten rows", name, int((~written).sum()))
+    return data[written]
+
+
+def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
+    """Check the root attributes a reader relies on: schema, schema_version (one-line
+    :class:`SessionError`); wrongly typed optional ones are dropped and listed in problems."""
+    if meta.get("schema") != SCHEMA_NAME:
+        raise SessionError(f"{p}: HDF5 file but not a flight session (no '{SCHEMA_NAME}' schema)")
+    version = meta.get("schema_version")
+    if isinstance(version, float) and version.is_integer():
+        version = int(version)
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise SessionError(f"{p}: schema_version {version!r} is not a session schema version "
+                           f"(1 to {SCHEMA_VERSION}); the file is damaged or not a session")
+    if version > SCHEMA_VERSION:
+        raise SessionError(f"{p}: written with session schema {version}, this groundstation "
+                           f"reads up to {SCHEMA_VERSION}; upgrade groundstation")
+    meta["schema_version"] = version
+    for key, kinds in (("closed_cleanly", (int, float)), ("duration_s", (int, float)),
+                       ("start_time_ns", (int,)), ("summary", (str,))):
+        if key in meta and (not isinstance(meta[key], kinds) or isinstance(meta[key], bool)):
+            problems.append(f"attribute {key!r} has the wrong type; ignored")
+            del meta[key]
+    if isinstance(meta.get("summary"), str):
+        meta["summary"] = meta["summary"].rstrip()
+
+
+def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
+            problems: list[str]) -> StreamData | None:
+    """One stream group, checked (:mod:`cfsession.guard`) and read."""
+    where = f"{p}: stream {name!r}"
+    members = dict(hard_links(group, where=where))
+    ds = members.get("data")
+    if not isinstance(ds, h5py.Dataset):
+        return None
+    check_dataset(ds, where=where, file_size=size)
+    names = list(ds.dtype.names or ())
+    required = _REQUIRED.get(name, ())
+    missing = [f for f in required if f not in names]
+    if missing:
+        raise SessionError(f"{where}: lacks field(s) {missing}; not a session stream")
+    dattrs = read_attrs(ds, where=where, problems=problems)
+    gattrs = {k: _decode(v) for k, v in read_attrs(group, where=where, problems=problems).items()}
+
+    def labels(key: str) -> dict[str, str]:
+        raw = _decode(dattrs.get(key, []))
+        raw = raw if isinstance(raw, list) and all(isinstance(x, str) for x in raw) else []
+        return dict(zip(names, raw + [""] * (len(names) - len(raw)), strict=False))
+
+    period = gattrs.get("period_s")
+    if period is not None and not (isinstance(period, int | float) and not isinstance(period, bool)
+                                   and 0 < period < 1e6):
+        problems.append(f"stream {name!r}: period_s {period!r} ignored")
+        period = None
+    kind = gattrs.get("kind", "")
+    return StreamData(name=name, kind=kind if isinstance(kind, str) else "",
+                  data=_read_dataset(ds, problems, name), units=labels("units"),
+                  sources=labels("sources"), period_s=period, attrs=gattrs)
+
+
+def open_session(path: str | os.PathLike[str]) -> Session:
+    """Read a session file; one-line :class:`SessionError` if it is not a readable session
+    (or was crafted to read elsewhere or exhaust memory: :mod:`cfsession.guard`).
+    A damaged file is read as far as it goes, its damage listed in :attr:`Session.problems`."""
+    p = Path(path)
+    if not p.exists() and not p.is_symlink():
+        raise SessionError(f"{p}: no such file")
+    f, clean_superblock = open_untrusted(p)
+    problems: list[str] = []
+    streams: dict[str, StreamData] = {}
+    try:
+        with f:
+            size = file_size(f, p)
+            meta = {k: _decode(v) for k, v in read_attrs(f, where=str(p),
+                                                         problems=problems).items()}
+            _meta_problems(meta, p, problems)
+            for name, obj in hard_links(f, where=str(p)):
+                if isinstance(obj, h5py.Group):
+                    stream = _stream(name, obj, p=p, size=size, problems=problems)
+                    if stream is not None:
+                        streams[name] = stream
+    except SessionError:
+        raise
+    except Exception as exc:  # HDF5 errors on damaged metadata: never a traceback
+        log.debug("reading %s", p, exc_info=True)
+        raise SessionError(f"{p}: damaged beyond repair ({type(exc).__name__}: "
+                           f"{str(exc).splitlines()[0][:200] if str(exc) else ''})") from None
+    if not meta.get("closed_cleanly", 0) or not clean_superblock:
+        problems.append("writer did not close the file (crash or kill): data up to the last flush")
+    return Session(p, meta, streams, problems)
+
+
+Stream = StreamData
+"""Former name of :class:`StreamData` (kept for callers; ``sysid.Stream`` is another class)."""

@@ -1,0 +1,230 @@
+"""``groundstation export SESSION --to csv|mat|parquet``: the session for pandas and MATLAB.
+
+* ``csv``: a folder with one ``STREAM.csv`` per stream (header ``field [unit]``, values at full
+  precision, text decoded as UTF-8, an event's continued text joined into one row) and
+  ``metadata.json``; ``pandas.read_csv`` reads each.
+* ``mat``: one MATLAB file holding what ``iddata`` needs, ``u`` (N x m), ``y`` (N x l), ``Ts``
+  (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit`` (cell arrays), built as
+  ``sysid`` builds its data (resampled on a uniform grid, not detrended; ``--inputs``,
+  ``--outputs``, ``--window``, ``--dt``), plus every stream as ``streams.STREAM.FIELD`` (column
+  vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata``::
+
+      s = load('flight.mat');
+      data = iddata(s.y, s.u, s.Ts, 'InputName', s.InputName, 'OutputName', s.OutputName, ...
+                    'InputUnit', s.InputUnit, 'OutputUnit', s.OutputUnit);
+
+* ``parquet``: a folder with one ``STREAM.parquet`` per stream (each field's unit in its
+  metadata, key ``unit``); needs ``pyarrow``.
+
+Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``).
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import json
+import re
+from pathlib import Path
+from typing import Any, Literal
+
+import click
+import numpy as np
+
+from cfsession import Session, open_session
+from groundstation.errors import GroundStationError
+
+__all__ = ["command", "export_csv", "export_mat", "export_parquet"]
+
+Format = Literal["csv", "mat", "parquet"]
+
+
+def _columns(session: Session, name: str) -> dict[str, list[Any] | np.ndarray]:
+    """Every field of stream ``name``: numbers as arrays, text (bytes) decoded; an event text
+    continued on following rows is joined into one row (``Session.events``)."""
+    if session[name].kind == "events":
+        events = session.events()
+        return {"host_time": np.array([e.t for e in events], dtype=float),
+                "level": [e.level for e in events], "source": [e.source for e in events],
+                "text": [e.text for e in events]}
+    data = session[name].data
+    out: dict[str, list[Any] | np.ndarray] = {}
+    for f in data.dtype.names:
+        col = data[f]
+        if col.dtype.kind == "S":
+            out[f] = [bytes(v).decode("utf-8", errors="replace") for v in col]
+        else:
+            out[f] = col
+    return out
+
+
+def _metadata(session: Session) -> dict[str, Any]:
+    return json.loads(json.dumps(dict(session.meta), default=_plain))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, bytes):
+        return value.decode("utf-8", errors="replace")
+    return str(value)
+
+
+def export_csv(session: Session, folder: Path) -> list[Path]:
+    """One ``STREAM.csv`` per stream and ``metadata.json`` in ``folder``; returns the files."""
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    for name, stream in session.streams.items():
+        cols = _columns(session, name)
+        header = [f"{f} [{stream.units[f]}]" if stream.units.get(f) else f for f in cols]
+        path = folder / f"{name}.csv"
+        with path.open("w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(header)
+            lists = [c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values()]
+            writer.writerows(zip(*lists, strict=True))
+        files.append(path)
+    meta = folder / "metadata.json"
+    meta.write_text(json.dumps(_metadata(session), indent=1))
+    return [*files, meta]
+
+
+def _identifier(name: str) -> str:
+    """A MATLAB identifier for ``name`` (``stateEstimate.z`` -> ``stateEstimate_z``)."""
+    ident = re.sub(r"\W", "_", name)
+    return ident if re.match(r"[A-Za-z]", ident) else f"f_{ident}"
+
+
+def _cell(values: Any) -> np.ndarray:
+    """A MATLAB cell array (1 x n) of strings."""
+    cell = np.empty((1, len(values)), dtype=object)
+    for i, v in enumerate(values):
+        cell[0, i] = str(v)
+    return cell
+
+
+def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list[str],
+               window: Any, dt: float) -> Path:
+    """One ``.mat`` file: iddata's ``u``, ``y``, ``Ts``, names and units, and every stream."""
+    from scipy.io import savemat
+
+    from sysid.errors import SysIdError
+    from sysid.session_io import load_session
+
+    try:
+        data = load_session(session.path, inputs=inputs, outputs=outputs, window=window, dt=dt,
+                            detrend=None)
+    except SysIdError as exc:
+        raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}; choose "
+                                 "--inputs/--outputs/--window") from None
+    streams: dict[str, dict[str, Any]] = {}
+    units: dict[str, dict[str, str]] = {}
+    for name, stream in session.streams.items():
+        cols = _columns(session, name)
+        streams[_identifier(name)] = {
+            _identifier(f): (_cell(c).T if isinstance(c, list) else
+                             np.asarray(c, dtype=float).reshape(-1, 1))
+            for f, c in cols.items()}
+        units[_identifier(name)] = {_identifier(f): stream.units.get(f, "") for f in cols}
+    meta = {_identifier(k): json.dumps(v) if not isinstance(v, str) else v
+            for k, v in _metadata(session).items()}
+    savemat(path, {
+        "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
+        "Ts": float(data.dt), "InputName": _cell(data.input_names),
+        "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
+        "OutputUnit": _cell(data.output_units),
+        "Window": "all" if window is None else str(window),
+        "streams": streams, "units": units, "metadata": meta,
+    }, long_field_names=True, do_compression=True, oned_as="column")
+    return path
+
+
+def export_parquet(session: Session, folder: Path) -> list[Path]:
+    """One ``STREAM.parquet`` per stream in ``folder`` (units in the field metadata)."""
+    try:
+        pa = importlib.import_module("pyarrow")
+        pq = importlib.import_module("pyarrow.parquet")
+    except ImportError:
+        raise GroundStationError("--to parquet needs pyarrow: pip install pyarrow "
+                                 "(or use --to csv)") from None
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    for name, stream in session.streams.items():
+        cols = _columns(session, name)
+        fields = [pa.field(f, pa.string() if isinstance(c, list) else pa.from_numpy_dtype(
+            c.dtype), metadata={"unit": stream.units.get(f, "")}) for f, c in cols.items()]
+        table = pa.Table.from_arrays([pa.array(c) for c in cols.values()],
+                                     schema=pa.schema(fields, metadata={
+                                         "stream": name, "kind": stream.kind}))
+        path = folder / f"{name}.parquet"
+        pq.write_table(table, path)
+        files.append(path)
+    return files
+
+
+def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
+    """The output (a .mat file or a folder), checked before any work."""
+    from cfcommon.cli import check_output
+
+    if to == "mat":
+        path = out or session.with_suffix(".mat")
+        return check_output(path, option="--out", suffixes=(".mat",), inputs=[session],
+                            overwrite=force, force_flag="--force")
+    folder = out or session.with_name(f"{session.stem}-{to}")
+    if folder.exists() and not folder.is_dir():
+        raise click.BadParameter(f"{str(folder)!r} is a file; give a folder", param_hint="--out")
+    if folder.is_dir() and any(folder.iterdir()) and not force:
+        raise click.BadParameter(f"{str(folder)!r} is not empty; pass --force to write "
+                                 "over the files of the same names, or choose another "
+                                 "folder", param_hint="--out")
+    if not folder.parent.is_dir():
+        raise click.BadParameter(f"folder {str(folder.parent)!r} does not exist; create it "
+                                 "first", param_hint="--out")
+    return folder
+
+
+@click.command("export", short_help="Write a session as CSV files, a MATLAB .mat or Parquet.")
+@click.argument("session", type=click.Path(path_type=Path))
+@click.option("--to", "to", type=click.Choice(["csv", "mat", "parquet"]), required=True,
+              help="csv: one file per stream; mat: one file for MATLAB's iddata and every "
+                   "stream; parquet: one file per stream (needs pyarrow).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (csv, parquet) or .mat file [default: next to SESSION, "
+                   "SESSION-csv/, SESSION-parquet/ or SESSION.mat].")
+@click.option("--force", is_flag=True, help="Replace an existing output.")
+@click.option("--inputs", default="motors", show_default=True,
+              help="mat: iddata inputs u (streams, stream.field or group.variable).")
+@click.option("--outputs", default="acc,gyro", show_default=True,
+              help="mat: iddata outputs y.")
+@click.option("--window", default="excitation", show_default=True,
+              help="mat: phase name or kind, T0:T1 (session seconds), or 'all'.")
+@click.option("--dt", type=click.FloatRange(min=0, min_open=True), default=0.02,
+              show_default=True, help="mat: sample time Ts of u and y, s.")
+def command(session: Path, to: Format, out: Path | None, force: bool, inputs: str,
+            outputs: str, window: str, dt: float) -> None:
+    """Write SESSION for pandas, MATLAB or Arrow users.
+
+    \b
+    Examples:
+      groundstation export flight.h5 --to csv              # flight-csv/STREAM.csv
+      groundstation export flight.h5 --to mat --window all # flight.mat: iddata u, y, Ts, ...
+      groundstation export flight.h5 --to parquet --out parquet/
+    """
+    from sysid.cli_support import parse_window
+    from sysid.errors import ParameterError
+
+    target = _target(session, to, out, force)
+    s = open_session(session)
+    if to == "mat":
+        try:
+            win = parse_window(window)
+        except ParameterError as exc:
+            raise click.BadParameter(str(exc), param_hint="--window") from None
+        names = [[n.strip() for n in v.split(",") if n.strip()] for v in (inputs, outputs)]
+        export_mat(s, target, inputs=names[0], outputs=names[1], window=win, dt=dt)
+        click.echo(f"wrote {target}")
+        return
+    files = export_csv(s, target) if to == "csv" else export_parquet(s, target)
+    click.echo(f"wrote {len(files)} files to {target}")

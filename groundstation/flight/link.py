@@ -1,0 +1,431 @@
+"""The cflib connection of a flight: drivers, connect, TOC checks, log blocks, metadata.
+
+:func:`open_link` connects to a Crazyflie (``radio://``, ``usb://``, ``udp://`` or the simulator's
+``sim://``) with a timeout and returns a :class:`Link`. Everything cflib calls back from its own
+threads (log packets, console text, link quality and latency, link loss) is turned into a tuple and
+handed to ``post`` (the flight runner's queue), stamped with the flight clock:
+
+=====================================================  =========================================
+``("log", block, t, fw_ms, values)``                   one log packet; ``values`` in block order
+``("console", t, text)``                               console text as it arrives (not by line)
+``("link", t, quality_pct, latency_ms)``               one of the two is NaN
+``("lost", t, message)``                               the link was lost (cflib connection_lost)
+``("log_error", t, message)``                          cflib refused or failed a log block
+=====================================================  =========================================
+
+``t`` is ``clock.now()`` in seconds. :func:`plan_blocks` checks the logged variables against the
+TOC before anything flies: each must exist, its type is taken from the TOC (``motor.m1`` is
+``uint16_t`` or ``uint32_t`` depending on the firmware) and each block must fit the firmware's
+26 data bytes per packet: :math:`\\sum_i \\text{size}(\\text{type}_i) \\le 26`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from cfsession.schema import CFLIB_TYPES, StreamSpec, log_block_spec
+from groundstation.dongle import check_dongle, radio_metadata
+from groundstation.errors import LinkError
+from groundstation.flight.clock import Clock
+
+__all__ = [
+    "BATTERY_BLOCK",
+    "BLOCK_PERIOD_S",
+    "DEFAULT_URI",
+    "FLIGHT_BLOCKS",
+    "LOG_MAX_BYTES",
+    "SEND_TIMEOUT_S",
+    "STOP_REPEATS",
+    "URI_SCHEMES",
+    "BlockPlan",
+    "Link",
+    "check_uri",
+    "install_drivers",
+    "open_link",
+    "plan_blocks",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
+URI_SCHEMES = ("radio", "usb", "udp", "sim")
+"""The link URI schemes the ground station flies over (cflib's drivers plus the simulator's)."""
+_OTHER_SCHEMES = ("tcp", "prrt")  # cflib has drivers for these too; rarely used, not advertised
+LOG_MAX_BYTES = 26
+"""Data bytes in one log packet (firmware ``LOG_MAX_LEN``, cflib ``LogConfig.MAX_LEN``)."""
+BLOCK_PERIOD_S = 0.020
+FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
+    "motors": ("motor.m1", "motor.m2", "motor.m3", "motor.m4"),
+    "acc": ("acc.x", "acc.y", "acc.z"),
+    "gyro": ("gyro.x", "gyro.y", "gyro.z"),
+}
+"""The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
+BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
+"""A slow block (name, variables, period s) for the take-off check and the battery's sag."""
+ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
+"""The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
+the radio's budget stays with the thesis' three 50 Hz blocks)."""
+
+STOP_REPEATS = 5
+STOP_SPACING_S = 0.02
+"""The stop setpoint is sent :data:`STOP_REPEATS` times this far apart (flight clock, s)."""
+DRAIN_TIMEOUT_S = 0.5
+"""Longest wait (wall s) for the link driver to send what is queued before the link closes."""
+SEND_TIMEOUT_S = 1.5
+"""Longest wait (wall s) for cflib to take a setpoint or close the link. Longer is a stuck link:
+with the Crazyradio unplugged cflib's radio driver stops taking packets, blocks the sender for 2 s
+and then deadlocks in its link-error path (the sender holds ``Crazyflie._send_lock`` while the
+error handler joins the ping thread, which waits for that lock), so these calls never return."""
+
+_WIRE_BYTES = {"uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "FP16": 2,
+               "uint32_t": 4, "int32_t": 4, "float": 4}
+_PLATFORM_PORT, _VERSION_CHANNEL, _VERSION_GET_FIRMWARE = 13, 1, 1
+
+Post = Callable[[tuple], None]
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """A log block as it will be created: ``variables`` are ``(group.name, TOC type)``."""
+
+    name: str
+    variables: tuple[tuple[str, str], ...]
+    period_s: float
+
+    @property
+    def n_bytes(self) -> int:
+        """Data bytes per packet: the sum of the variables' wire sizes."""
+        return sum(_WIRE_BYTES[t] for _, t in self.variables)
+
+    def spec(self) -> StreamSpec:
+        """The session stream this block is recorded to."""
+        return log_block_spec(name=self.name, variables=self.variables, period_s=self.period_s)
+
+
+def plan_blocks(
+    *, toc_type: Callable[[str], str | None], blocks: Mapping[str, Sequence[str]],
+    period_s: float,
+) -> list[BlockPlan]:
+    """Blocks with types from the TOC (``toc_type(name)``, ``None`` if absent), each checked.
+
+    Raises :class:`LinkError` naming the variable missing from the TOC, a type cflib cannot log,
+    or the block beyond :data:`LOG_MAX_BYTES`.
+    """
+    out = []
+    for name, variables in blocks.items():
+        typed = []
+        for var in variables:
+            ctype = toc_type(var)
+            if ctype is None:
+                raise LinkError(f"log variable {var} (block {name}) is not in the Crazyflie's "
+                                "log TOC; update the firmware or log another variable")
+            if ctype not in _WIRE_BYTES or ctype not in CFLIB_TYPES:
+                raise LinkError(f"log variable {var} has TOC type {ctype!r}, which cannot be "
+                                "logged; choose another variable")
+            typed.append((var, ctype))
+        block = BlockPlan(name=name, variables=tuple(typed), period_s=period_s)
+        if block.n_bytes > LOG_MAX_BYTES:
+            raise LinkError(f"log block {name} needs {block.n_bytes} bytes per packet, more than "
+                            f"the {LOG_MAX_BYTES} a log packet holds; split it into two blocks")
+        out.append(block)
+    return out
+
+
+_drivers_lock = threading.Lock()
+_drivers_ready = False
+
+
+def install_drivers() -> None:
+    """cflib's link drivers plus the simulator's ``sim://`` (idempotent)."""
+    global _drivers_ready
+    with _drivers_lock:
+        if _drivers_ready:
+            return
+        import cflib.crtp
+
+        import groundstation.sim  # the simulated Crazyflie is one more link driver
+
+        if not cflib.crtp.CLASSES:
+            cflib.crtp.init_drivers()
+        groundstation.sim.install()
+        _drivers_ready = True
+
+
+class _Caller:
+    """One daemon thread making the cflib calls that can hang, so the caller can give up."""
+
+    def __init__(self, name: str) -> None:
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        threading.Thread(target=self._run, name=name, daemon=True).start()
+
+    def _run(self) -> None:
+        while True:
+            fn, done, error = self._jobs.get()
+            try:
+                fn()
+            except BaseException as exc:  # handed to the caller
+                error.append(exc)
+            done.set()
+
+    def call(self, fn: Callable[[], Any], *, timeout_s: float) -> bool:
+        """Run ``fn`` on the thread; ``False`` if it did not return within ``timeout_s``
+        (it stays stuck there); its exception is raised here."""
+        done, error = threading.Event(), []
+        self._jobs.put((fn, done, error))
+        if not done.wait(timeout_s):
+            return False
+        if error:
+            raise error[0]
+        return True
+
+
+class Link:
+    """An open connection to one Crazyflie (made by :func:`open_link`)."""
+
+    def __init__(self, *, cf: Any, uri: str, clock: Clock, post: Post) -> None:
+        self.cf, self.uri, self.clock, self._post = cf, uri, clock, post
+        self.lost = False
+        self.stuck = False  # a cflib call never returned (see SEND_TIMEOUT_S): no more calls
+        self._caller: _Caller | None = None  # made for the radio driver's first call
+        self._configs: list[Any] = []
+        cf.connection_lost.add_callback(self._on_lost)
+        cf.console.receivedChar.add_callback(
+            lambda text: post(("console", clock.now(), text)))
+        stats = cf.link_statistics
+        stats.link_quality_updated.add_callback(
+            lambda q: post(("link", clock.now(), float(q), math.nan)))
+        stats.latency_updated.add_callback(
+            lambda ms: post(("link", clock.now(), math.nan, float(ms))))
+
+    def _on_lost(self, uri: str, message: str) -> None:
+        self.lost = True
+        self._post(("lost", self.clock.now(), str(message).strip().splitlines()[0]))
+
+    # ------------------------------------------------------------------ TOC and metadata
+    def toc_type(self, name: str) -> str | None:
+        """The log TOC type of ``group.name`` (``None`` if the firmware has no such variable)."""
+        element = self.cf.log.toc.get_element_by_complete_name(name)
+        return None if element is None else element.ctype
+
+    def plan_blocks(self, *, blocks: Mapping[str, Sequence[str]],
+                    period_s: float) -> list[BlockPlan]:
+        """:func:`plan_blocks` against this Crazyflie's TOC."""
+        return plan_blocks(toc_type=self.toc_type, blocks=blocks, period_s=period_s)
+
+    def firmware_version(self, *, timeout_s: float = 1.0) -> str:
+        """The firmware's version text (platform service), or its revision parameters."""
+        from cflib.crtp.crtpstack import CRTPPacket
+
+        got: list[str] = []
+        done = threading.Event()
+
+        def on_platform(pk: Any) -> None:
+            if pk.channel == _VERSION_CHANNEL and pk.data[:1] == bytes([_VERSION_GET_FIRMWARE]):
+                got.append(bytes(pk.data[1:]).split(b"\0")[0].decode("utf-8", "replace"))
+                done.set()
+
+        self.cf.add_port_callback(_PLATFORM_PORT, on_platform)
+        try:
+            pk = CRTPPacket()
+            pk.set_header(_PLATFORM_PORT, _VERSION_CHANNEL)
+            pk.data = (_VERSION_GET_FIRMWARE,)
+            self.cf.send_packet(pk)
+            done.wait(timeout_s)
+        finally:
+            self.cf.remove_port_callback(_PLATFORM_PORT, on_platform)
+        if got:
+            return got[0]
+        fw = self.cf.param.values.get("firmware", {})
+        return " ".join(f"{k}={v}" for k, v in sorted(fw.items())) or "unknown"
+
+    def metadata(self) -> dict[str, Any]:
+        """Root attributes for the session: uri, firmware, protocol_version, params."""
+        return {
+            "uri": self.uri,
+            "firmware": self.firmware_version(),
+            "protocol_version": int(self.cf.platform.get_protocol_version()),
+            "params": self._typed_params(),
+            **radio_metadata(self.cf),  # radio://: channel, data rate, address, dongle firmware
+        }
+
+    def _typed_params(self) -> dict[str, dict[str, float | int | str]]:
+        """Parameters read at connect, as numbers typed from the param TOC (cflib keeps the
+        text it printed them as)."""
+        out: dict[str, dict[str, float | int | str]] = {}
+        for group, values in self.cf.param.values.items():
+            for name, text in values.items():
+                try:
+                    ctype = self.cf.param.toc.get_element(group, name).ctype
+                    value: float | int | str = float(text) if ctype in ("float", "double",
+                                                                        "FP16") else int(text)
+                except (AttributeError, KeyError, TypeError, ValueError):
+                    value = text  # keep what cflib read rather than lose it
+                out.setdefault(group, {})[name] = value
+        return out
+
+    # ------------------------------------------------------------------ logging
+    def start_blocks(self, blocks: Sequence[BlockPlan]) -> None:
+        """Create and start ``blocks``; their packets are posted as ``("log", ...)``."""
+        from cflib.crazyflie.log import LogConfig
+
+        for block in blocks:
+            conf = LogConfig(name=block.name, period_in_ms=round(block.period_s * 1000))
+            for var, ctype in block.variables:
+                conf.add_variable(var, ctype)
+            names = [v for v, _ in block.variables]
+            conf.data_received_cb.add_callback(
+                lambda ts, data, c, names=names: self._post(
+                    ("log", c.name, self.clock.now(), int(ts), tuple(data[n] for n in names))))
+            conf.error_cb.add_callback(
+                lambda c, msg: self._post(("log_error", self.clock.now(), f"{c.name}: {msg}")))
+            try:
+                self.cf.log.add_config(conf)
+            except (KeyError, AttributeError) as exc:
+                raise LinkError(f"log block {block.name}: cflib refused it ({exc}); "
+                                "check the variables and the period") from None
+            conf.start()
+            self._configs.append(conf)
+
+    # ------------------------------------------------------------------ commander
+    def _bounded(self, fn: Callable[[], Any], *, what: str) -> None:
+        """``fn()`` (a cflib call) unless the link is stuck; one that does not return within
+        :data:`SEND_TIMEOUT_S` makes the link lost and stuck (posted as ``"lost"``)."""
+        if self.stuck:
+            return
+        if not hasattr(self.cf.link, "out_queue"):  # only the radio driver's send can block
+            fn()
+            return
+        if self._caller is None:
+            self._caller = _Caller(f"cflib-calls {self.uri}")
+        if not self._caller.call(fn, timeout_s=SEND_TIMEOUT_S):
+            self.stuck = True
+            log.error("cflib did not take the %s within %g s", what, SEND_TIMEOUT_S)
+            if not self.lost:
+                self.lost = True
+                self._post(("lost", self.clock.now(), f"cflib did not take the {what} within "
+                            f"{SEND_TIMEOUT_S:g} s: the radio stopped answering (unplugged?)"))
+
+    def send_setpoint(self, *, roll: float, pitch: float, yaw_rate: float, thrust: int) -> None:
+        """``Commander.send_setpoint`` (deg, deg, deg/s, PWM); cflib negates pitch on the wire."""
+        self._bounded(lambda: self.cf.commander.send_setpoint(roll, pitch, yaw_rate,
+                                                              int(thrust)), what="setpoint")
+
+    def send_stop(self) -> None:
+        """The stop setpoint: motors off at once."""
+        self._bounded(self.cf.commander.send_stop_setpoint, what="stop setpoint")
+
+    def deliver_stop(self) -> None:
+        """The stop setpoint, sent :data:`STOP_REPEATS` times :data:`STOP_SPACING_S` apart on
+        the flight clock (one lost on the way is sent again), then wait, at most
+        :data:`DRAIN_TIMEOUT_S` of wall time, until the link driver's send queue is empty:
+        closing the link right after cannot discard it (cflib's radio driver empties its
+        queue on close)."""
+        for i in range(STOP_REPEATS):
+            if i:
+                self.clock.sleep_until(self.clock.now() + STOP_SPACING_S)
+            self.send_stop()
+        out = getattr(self.cf.link, "out_queue", None)  # the radio driver's; others send at once
+        give_up = time.monotonic() + DRAIN_TIMEOUT_S
+        while out is not None and not out.empty() and time.monotonic() < give_up:
+            time.sleep(0.002)
+        if out is not None and not out.empty():
+            log.warning("the stop setpoint is still queued after %g s", DRAIN_TIMEOUT_S)
+
+    def close(self) -> None:
+        """Stop the log blocks and close the link (never raises; a stuck link is left as it
+        is, its cflib threads with it)."""
+        def close() -> None:
+            if not self.lost:
+                for conf in self._configs:
+                    conf.stop()
+            self.cf.close_link()
+
+        try:
+            self._bounded(close, what="link close")
+        except Exception:  # closing must not hide the flight's own outcome
+            log.exception("closing the link to %s failed", self.uri)
+        if self.stuck:
+            log.warning("the link to %s is stuck in cflib; left open", self.uri)
+
+
+def check_uri(uri: str) -> str:
+    """``uri`` if its scheme is one a link driver serves; one-line :class:`LinkError` naming the
+    supported schemes otherwise (checked before anything is created or connected)."""
+    scheme, sep, _ = uri.partition("://")
+    if not sep or scheme.lower() not in (*URI_SCHEMES, *_OTHER_SCHEMES):
+        supported = ", ".join(f"{s}://" for s in URI_SCHEMES)
+        raise LinkError(f"cannot connect to {uri}: unknown link URI scheme "
+                        f"{scheme + sep if sep else scheme!r}; use one of {supported} (e.g. "
+                        f"{DEFAULT_URI}; groundstation scan lists the Crazyflies in reach)")
+    return uri
+
+
+def _connect_advice(why: str) -> str:
+    """What to do about a failed connect, from cflib's reason."""
+    low = why.lower()
+    if "malformed uri" in low:
+        return (f"check the URI's form, e.g. {DEFAULT_URI}, usb://0, udp://127.0.0.1:19850 "
+                "or sim://0?speed=20")
+    if "crazyradio" in low or "dongle" in low:
+        return ("plug in the Crazyradio (groundstation scan lists radios; on Linux without "
+                "permission see the udev rule in docs/flying.md)")
+    if "too many packets lost" in low:  # the radio's acks never came: nobody on that channel
+        return ("no Crazyflie acknowledges on that channel, data rate and address: check it is "
+                "on, and run groundstation scan to find its URI")
+    if "access denied" in low or "permission" in low or "errno 13" in low:
+        return "no USB permission: install the udev rule in docs/flying.md and replug"
+    return ("check that the Crazyflie is on, the channel/address in the URI are right "
+            "(groundstation scan lists them) and nothing else is connected to it")
+
+
+def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
+              cancel: threading.Event | None = None) -> Link:
+    """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
+
+    ``timeout_s`` is wall-clock seconds; setting ``cancel`` (Ctrl-C while connecting) gives up
+    at once. Failure raises a one-line :class:`LinkError`.
+    """
+    check_uri(uri)
+    install_drivers()
+    check_dongle(uri)  # no dongle, too old a firmware: one line with the fix
+    from cflib.crazyflie import Crazyflie
+
+    # Without a cache folder cflib warns on every connect that it cannot save the TOC.
+    logging.getLogger("cflib.crazyflie.toccache").setLevel(logging.ERROR)
+    cf = Crazyflie(rw_cache=None)
+    ready, failure = threading.Event(), []
+    cf.fully_connected.add_callback(lambda _uri: ready.set())
+
+    def failed(_uri: str, message: str) -> None:
+        failure.append(str(message).strip().splitlines()[0] if str(message).strip() else "")
+        ready.set()
+
+    cf.connection_failed.add_callback(failed)
+    cf.connection_lost.add_callback(failed)
+    link = Link(cf=cf, uri=uri, clock=clock, post=post)
+    t0 = time.monotonic()
+    cf.open_link(uri)
+    deadline = time.monotonic() + timeout_s
+    while not ready.wait(0.05) and time.monotonic() < deadline:
+        if cancel is not None and cancel.is_set():
+            failure.append("connect cancelled")
+            break
+    ok = ready.is_set() and not failure
+    if not ok:
+        try:
+            cf.close_link()
+        except Exception:
+            log.debug("close after failed connect", exc_info=True)
+        why = failure[0] if failure else f"no answer within {timeout_s:g} s"
+        raise LinkError(f"cannot connect to {uri}: {why}; {_connect_advice(why)}")
+    cf.connection_failed.remove_callback(failed)
+    cf.connection_lost.remove_callback(failed)
+    log.info("connected to %s in %.2f s", uri, time.monotonic() - t0)
+    return link

@@ -1,0 +1,60 @@
+"""What a flight returns (see :mod:`groundstation.flight`; its limits: :mod:`.safety`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from groundstation.errors import FlightAborted
+
+__all__ = ["FlightResult", "block_summary"]
+
+_FW_WRAP = 1 << 24  # log packets carry 24-bit firmware milliseconds
+LATENCY_ALLOWANCE_S = 0.05
+"""Time a log packet may take to arrive: silence shorter than this plus one period before the
+end of a flight is not a missing packet."""
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    """What :func:`fly_plan` returns: ``cause`` is ``""`` for a flight that ran to the end."""
+
+    path: Path
+    summary: dict[str, Any] = field(default_factory=dict)
+    cause: str = ""
+
+    @property
+    def aborted(self) -> bool:
+        return bool(self.cause)
+
+    def raise_if_aborted(self) -> None:
+        """One-line :class:`FlightAborted` naming the cause and the file."""
+        if self.cause:
+            raise FlightAborted(f"flight aborted: {self.cause}; session saved to {self.path}")
+
+
+def block_summary(*, fw_ms: Sequence[int], period_s: float,
+                  silence_s: float = 0.0) -> dict[str, Any]:
+    """Packets of one log block: received, expected from the firmware-time span
+    :math:`\\lfloor (t_{last} - t_{first}) / T \\rceil + 1`, dropped from timestamp gaps
+    (steps beyond 1.5 periods count :math:`\\mathrm{round}(\\Delta t / T) - 1`), plus
+    ``missing_at_end``: the packets due in the ``silence_s`` seconds (host clock) from the last
+    one received to the end of the flight, less :data:`LATENCY_ALLOWANCE_S` (a link that died
+    before the end; counted in ``expected`` and ``dropped`` too)."""
+    ms = np.asarray(fw_ms, dtype=np.int64)
+    tail = max(0, int((silence_s - LATENCY_ALLOWANCE_S) / period_s)) if len(ms) else 0
+    if len(ms) < 2:
+        return {"received": len(ms), "expected": len(ms) + tail, "dropped": tail,
+                "missing_at_end": tail}
+    dt = np.diff(ms) % _FW_WRAP / 1000.0  # unwraps the 24-bit counter
+    gaps = dt[dt > 1.5 * period_s]
+    return {
+        "received": len(ms),
+        "expected": round(dt.sum() / period_s) + 1 + tail,
+        "dropped": int(np.sum(np.round(gaps / period_s) - 1)) + tail,
+        "missing_at_end": tail,
+    }

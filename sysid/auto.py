@@ -1,0 +1,258 @@
+"""Choosing past, future and order by validation on held-out data (no knobs).
+
+**Held-out rule** (:func:`holdout`). With experiments from several sessions, the experiments
+of the *last* session validate and those of the others identify. With one session, the first
+70 % of each of its experiments identifies and the last 30 % validates.
+
+**Default grid** (:func:`default_grid`), scaled to the sample rate and the record length:
+pasts from 0.1 s to 1.2 s and futures from 0.06 s to 0.4 s (the thesis used 1.2 s and 0.34 s
+at 50 Hz), about evenly spaced on a log scale, in samples of ``dt``; both capped so that the
+identification data have at least three Hankel columns per row of the largest pair (a 6.5 s
+hover at 100 Hz gets pasts up to about 0.15 s). Orders 2 to 12, capped by the rank the
+horizons allow.
+
+**Focus** (:func:`pick_focus`): when the caller does not fix it, the grid runs with both
+focus choices and the one whose chosen model scores best on the held-out data wins; the
+method's default (IEM: prediction) unless the other is better by more than 0.5 points.
+
+**Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
+scored by simulation over windows of ``min(2 s, shortest validation record)`` on the held-out
+data, ranked by the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious
+best stable model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
+grid (largest or smallest past, future or order tried, when more than one was) is flagged.
+The chosen horizons and order are then identified again on all the data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sysid.data import IOData
+from sysid.errors import DataError
+from sysid.grid import pair_flights
+from sysid.methods import Method, Options
+from sysid.model import StateSpaceModel
+from sysid.sweep import SweepResult, SweepRow, sweep
+
+__all__ = ["HOLDOUT_FRACTION", "Plan", "Selection", "default_grid", "finish", "focus_order",
+           "holdout", "max_blocks", "pick_focus", "plan", "select"]
+
+log = logging.getLogger(__name__)
+
+#: Share of each experiment kept for validation when only one session is given.
+HOLDOUT_FRACTION = 0.3
+#: Hankel columns per row of the largest pair the default grid leaves at least.
+COLUMNS_PER_ROW = 3.0
+PAST_S = (0.1, 1.2)
+FUTURE_S = (0.06, 0.4)
+ORDERS = (2, 12)
+#: Simulation window of the score, seconds (shortened to the shortest validation record).
+SCORE_WINDOW_S = 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """What :func:`select` chose and why."""
+
+    best: SweepRow
+    result: SweepResult
+    model: StateSpaceModel
+    rule: str
+    window_s: float
+    warnings: tuple[str, ...]
+    grid: dict[str, list[int]]
+    focus_note: str = ""
+    focus_scores: dict[str, float] | None = None
+
+    def top(self, count: int = 8) -> list[SweepRow]:
+        """The best ``count`` models by score (the chosen one included)."""
+        return self.result.ranked()[:count]
+
+
+def holdout(groups: Sequence[Sequence[IOData]], *, fraction: float = HOLDOUT_FRACTION
+            ) -> tuple[list[IOData], list[IOData], str]:
+    """``(identification, validation, rule)`` by the held-out rule (module docstring);
+    ``groups`` holds the experiments of each session."""
+    groups = [list(g) for g in groups if g]
+    if len(groups) > 1:
+        ident = [e for g in groups[:-1] for e in g]
+        val = groups[-1]
+        return ident, val, (f"identified on {len(ident)} experiment(s) of the first "
+                            f"{len(groups) - 1} session(s), validated on the last session "
+                            f"({len(val)} experiment(s))")
+    ident, val = [], []
+    for e in groups[0]:
+        cut = round(e.n_samples * (1.0 - fraction))
+        ident.append(_part(e, 0, cut))
+        val.append(_part(e, cut, e.n_samples))
+    return ident, val, (f"one session: the first {100 * (1 - fraction):.0f} % of each of its "
+                        f"{len(ident)} experiment(s) identifies, the last "
+                        f"{100 * fraction:.0f} % validates")
+
+
+def _part(d: IOData, start: int, stop: int) -> IOData:
+    import dataclasses
+
+    return dataclasses.replace(d, u=d.u[start:stop], y=d.y[start:stop])
+
+
+def _spread(low: int, high: int, count: int) -> list[int]:
+    if high <= low:
+        return [max(high, 1)]
+    return sorted({round(v) for v in np.geomspace(low, high, count)})
+
+
+def max_blocks(flights: Sequence[IOData], *, columns_per_row: float = COLUMNS_PER_ROW) -> int:
+    """Largest ``past + future`` leaving ``columns_per_row`` Hankel columns per row."""
+    c = flights[0].n_inputs + flights[0].n_outputs
+    best = 0
+    for b in range(2, max(d.n_samples for d in flights) + 1):  # columns fall, rows grow
+        if sum(max(d.n_samples - b + 1, 0) for d in flights) < columns_per_row * b * c:
+            break
+        best = b
+    return best
+
+
+def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
+    """Pasts, futures and orders for ``flights`` (module docstring), in samples."""
+    dt = flights[0].dt
+    room = max_blocks(flights)
+    ell = flights[0].n_outputs
+    if room < 4:
+        need = 4 * (flights[0].n_inputs + ell) * COLUMNS_PER_ROW
+        raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
+                        f"(need about {need:.0f}); give longer records or fewer channels")
+    f_hi = max(2, min(round(FUTURE_S[1] / dt), room // 3))
+    f_lo = max(2, min(round(FUTURE_S[0] / dt), f_hi))
+    futures = _spread(f_lo, f_hi, 4)
+    p_hi = max(1, min(round(PAST_S[1] / dt), room - futures[-1]))
+    p_lo = max(1, min(round(PAST_S[0] / dt), p_hi))
+    pasts = _spread(p_lo, p_hi, 6)
+    top = min((futures[-1] - 1) * ell, ORDERS[1])
+    orders = list(range(min(ORDERS[0], top), top + 1))
+    return {"pasts": pasts, "futures": futures, "orders": orders}
+
+
+def _edges(best: SweepRow, grid: dict[str, list[int]], *, capped: bool) -> list[str]:
+    out = []
+    for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
+        values = grid[f"{name}s"]
+        if len(values) < 2:
+            continue
+        if value == max(values):
+            why = " (the data allow no longer horizons)" if capped and name != "order" else ""
+            out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
+        elif value == min(values):
+            out.append(f"{name} {value} is the smallest tried: the best may lie below")
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The data and grid of a selection: identification and validation experiments, the
+    rule that split them, the grid (samples) and the score's simulation window (s)."""
+
+    everything: list[IOData]
+    ident: list[IOData]
+    val: list[IOData]
+    rule: str
+    grid: dict[str, list[int]]
+    window_s: float
+    capped: bool
+    given_validation: bool
+
+
+def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = None,
+         futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
+         validation: Sequence[IOData] | None = None) -> Plan:
+    """Split the data (held-out rule, or ``validation``) and choose the grid; given
+    ``pasts``/``futures``/``orders`` replace the default grid's."""
+    everything = [e for g in groups for e in g]
+    if validation:
+        ident, val = everything, list(validation)
+        rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
+    else:
+        ident, val, rule = holdout(groups)
+    auto = default_grid(ident)
+    grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
+            "futures": sorted(futures) if futures else auto["futures"],
+            "orders": sorted(orders) if orders else auto["orders"]}
+    shortest = min(d.n_samples for d in val) * val[0].dt
+    capped = not pasts and grid["pasts"][-1] < round(PAST_S[1] / ident[0].dt)
+    return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
+                window_s=min(SCORE_WINDOW_S, shortest), capped=capped,
+                given_validation=bool(validation))
+
+
+def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
+    """The parsimonious best stable model of ``result``, flagged at the grid's edges, and
+    identified again on all the data (on the identification data when validation was given)."""
+    best = result.best()
+    warnings = _edges(best, p.grid, capped=p.capped)
+    for w in warnings:
+        log.info("selection: %s", w)
+    final = p.ident if p.given_validation else p.everything
+    try:
+        model = method.identify(final, order=best.order, past=best.past, future=best.future,
+                                options=options)
+    except DataError:  # the full data cannot hold what the grid's common columns could
+        trimmed = pair_flights(p.ident, past=best.past, future=best.future,
+                               past_max=p.grid["pasts"][-1], future_max=p.grid["futures"][-1])
+        model = method.identify(list(trimmed), order=best.order, past=best.past,
+                                future=best.future, options=options)
+    return Selection(best=best, result=result, model=model, rule=p.rule, window_s=p.window_s,
+                     warnings=tuple(warnings), grid=p.grid)
+
+
+def focus_order(default: str) -> list[str]:
+    """Both focus choices, the method's default first (it wins ties, :func:`pick_focus`)."""
+    return [default, *(f for f in ("prediction", "simulation") if f != default)]
+
+
+def pick_focus(selections: Sequence[Selection], *, tol: float = 0.5) -> Selection:
+    """The selection whose chosen model scores best on the held-out data; the first one (the
+    method's default focus) unless another beats it by more than ``tol`` points. The
+    reason is in :attr:`Selection.focus_note`."""
+    first = selections[0]
+    best = max(selections, key=lambda s: s.best.score)
+    chosen = first if best.best.score <= first.best.score + tol else best
+    scores = ", ".join(f"{s.model.provenance.get('focus')} {s.best.score:.1f}"
+                       for s in selections)
+    note = (f"focus {chosen.model.provenance.get('focus')}: best held-out score per focus "
+            f"{scores} (the method's default unless another is better by more than "
+            f"{tol:g} points)")
+    log.info("selection: %s", note)
+    return dataclasses.replace(chosen, focus_note=note, focus_scores={
+        str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
+
+
+def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
+           pasts: Sequence[int] | None = None, futures: Sequence[int] | None = None,
+           orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
+           workers: int = 1, progress: Callable[[int, int], None] | None = None,
+           keep_models: bool = False, choose_focus: bool = False) -> Selection:
+    """Choose past, future and order (module docstring) and identify the chosen model on all
+    the data: :func:`plan`, :func:`sysid.sweep.sweep`, :func:`finish`. With
+    ``choose_focus`` the grid runs for both focus choices and :func:`pick_focus` decides."""
+    p = plan(groups, pasts=pasts, futures=futures, orders=orders, validation=validation)
+    variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
+                if choose_focus else [options])
+    selections = []
+    for opts in variants:
+        result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
+                       window=p.window_s, workers=workers, progress=progress,
+                       keep_models=keep_models)
+        try:
+            selections.append(finish(p, result, method=method, options=opts))
+        except DataError:
+            if len(variants) == 1:
+                raise
+    if not selections:
+        raise DataError("no model of the grid is stable, with either focus; give horizons "
+                        "and an order, other channels or a longer window")
+    return pick_focus(selections) if choose_focus else selections[0]

@@ -1,0 +1,229 @@
+"""Identify many sessions, or groups of flights, with one configuration (``sysid batch``).
+
+**Groups.** Sessions are grouped by a key read from each session's metadata; one model is
+identified per group (its sessions are its experiments):
+
+- ``session`` (default): every session is its own group, named after its file (``f3``);
+- ``vehicle``: the ``vehicle`` attribute when present, else the radio ``uri``
+  (``radio-0-80-2M-E7E7E7E7E7``);
+- ``day``: the UTC day the session started (``2026-11-23``);
+- ``plan``: the flight plan's name (``plan_name``, e.g. ``roll-prbs``);
+- ``all``: one group of every session (``all``).
+
+A name is the key with every character other than letters, digits, ``.``, ``_`` and ``-``
+replaced by ``-``; a session without the key falls in ``unknown-vehicle`` (``-day``,
+``-plan``). The model of group G is ``DIR/G.h5``.
+
+**Each group** is identified by :func:`sysid.auto.select` (no knobs: held-out validation,
+the default grid) with the given past/future/order fixing those axes. A group that fails
+(unreadable session, too little data, no stable model) becomes a row with its one-line reason;
+the batch goes on. The summary (``summary.csv`` and ``summary.json``) is rewritten as each
+group finishes, so an interrupted batch keeps every finished group.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import re
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from sysid.auto import select
+from sysid.data import IOData
+from sysid.errors import SysIdError
+from sysid.methods import Method, Options
+from sysid.session_io import SessionFileError
+
+__all__ = ["GROUP_BY", "BatchRow", "GroupBy", "group_sessions", "run_batch", "write_summary"]
+
+log = logging.getLogger(__name__)
+
+GroupBy = Literal["session", "vehicle", "day", "plan", "all"]
+GROUP_BY: tuple[str, ...] = ("session", "vehicle", "day", "plan", "all")
+
+
+@dataclass
+class BatchRow:
+    """One group's outcome: its model and validation fits, or the reason it failed."""
+
+    group: str
+    sessions: list[str]
+    flights: int = 0
+    past: int | None = None
+    future: int | None = None
+    order: int | None = None
+    poles: list[complex] = field(default_factory=list)
+    fit: list[float] = field(default_factory=list)
+    score: float | None = None
+    stable: bool | None = None
+    model: str | None = None
+    error: str | None = None
+    seconds: float = 0.0
+
+    def record(self) -> dict[str, Any]:
+        return {"group": self.group, "sessions": self.sessions, "flights": self.flights,
+                "past": self.past, "future": self.future, "order": self.order,
+                "poles": [[float(p.real), float(p.imag)] for p in self.poles],
+                "validation_fit_percent": self.fit, "score_percent": self.score,
+                "stable": self.stable, "model": self.model, "error": self.error,
+                "seconds": round(self.seconds, 3)}
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).strip("-.") or "unnamed"
+
+
+def _key(path: Path, meta: dict[str, Any], by: GroupBy) -> str:
+    if by == "all":
+        return "all"
+    if by == "session":
+        return _safe(path.stem)
+    value = {"vehicle": meta.get("vehicle") or meta.get("uri"),
+             "day": str(meta.get("start_time_iso") or "")[:10],
+             "plan": meta.get("plan_name")}[by]
+    return _safe(str(value)) if value else f"unknown-{by}"
+
+
+def group_sessions(paths: Sequence[Path], *, by: GroupBy,
+                   read_meta: Callable[[Path], dict[str, Any]]
+                   ) -> tuple[dict[str, list[Path]], list[BatchRow]]:
+    """``({group: sessions}, rows of sessions whose metadata cannot be read)``, groups in
+    order of first appearance; two sessions with the same file stem get ``-2``, ``-3`` ..."""
+    groups: dict[str, list[Path]] = {}
+    bad = []
+    for path in paths:
+        try:
+            meta = read_meta(path) if by not in ("all", "session") else {}
+        except Exception as exc:  # any unreadable file is one failed row, never the end
+            bad.append(BatchRow(group=_safe(path.stem), sessions=[str(path)],
+                                error=_one_line(exc)))
+            continue
+        key = _key(path, meta, by)
+        if by == "session":
+            base, k = key, 2
+            while key in groups:
+                key, k = f"{base}-{k}", k + 1
+        groups.setdefault(key, []).append(path)
+    return groups, bad
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    return text or type(exc).__name__
+
+
+def identify_group(groups: list[list[IOData]], *, method: Method, options: Options,
+                   grid: dict[str, list[int]], workers: int = 1) -> dict[str, Any]:
+    """Select and identify one group's model (:func:`sysid.auto.select`); runs anywhere."""
+    from sysid.sweep import one_blas_thread
+
+    with one_blas_thread():  # the same bits locally and on a Dask worker (sysid.sweep)
+        sel = select(groups, method=method, options=options, workers=workers, **grid)
+    return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
+            "order": sel.best.order, "fit": [float(f) for f in sel.best.fit],
+            "score": sel.best.score, "stable": sel.model.is_stable}
+
+
+def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
+    """``summary.json`` and ``summary.csv`` in ``out_dir`` (each replaced atomically)."""
+    records = [r.record() for r in rows]
+    tmp = out_dir / ".summary.json.tmp"
+    tmp.write_text(json.dumps(records, indent=1))
+    tmp.replace(out_dir / "summary.json")
+    tmp = out_dir / ".summary.csv.tmp"
+    with tmp.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["group", "sessions", "flights", "past", "future", "order", "poles",
+                    "validation_fit_percent", "score_percent", "stable", "model", "error",
+                    "seconds"])
+        for r in rows:
+            w.writerow([r.group, ";".join(r.sessions), r.flights, _cell(r.past),
+                        _cell(r.future), _cell(r.order),
+                        ";".join(f"{p.real:.6g}{p.imag:+.6g}j" for p in r.poles),
+                        ";".join(f"{f:.3f}" for f in r.fit),
+                        "" if r.score is None else f"{r.score:.3f}", _cell(r.stable),
+                        r.model or "", r.error or "", f"{r.seconds:.3f}"])
+    tmp.replace(out_dir / "summary.csv")
+
+
+def _cell(value: Any) -> str:
+    return "" if value is None else str(value)
+
+
+def run_batch(
+    groups: dict[str, list[Path]], *, out_dir: Path,
+    load: Callable[[list[Path]], list[list[IOData]]], method: Method, options: Options,
+    grid: dict[str, list[int]], workers: int = 1, client: Any | None = None,
+    rows: list[BatchRow] | None = None, progress: Callable[[int, int], None] | None = None,
+) -> list[BatchRow]:
+    """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
+    group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
+    groups run one after another, each sweep on ``workers`` processes; with ``client`` every
+    group is one task on the Dask cluster (its records sent with it)."""
+    rows = list(rows or [])
+    total, done = len(groups), 0
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_summary(rows, out_dir)
+    pending: dict[str, tuple[BatchRow, float]] = {}
+
+    def finish(row: BatchRow, t0: float, outcome: dict[str, Any] | BaseException) -> None:
+        nonlocal done
+        row.seconds = time.perf_counter() - t0
+        if isinstance(outcome, BaseException):
+            row.error = _one_line(outcome)
+        else:
+            path = out_dir / f"{row.group}.h5"
+            outcome["model"].save(path)
+            row.past, row.future, row.order = outcome["past"], outcome["future"], outcome["order"]
+            row.poles = list(np.sort_complex(outcome["model"].poles()))
+            row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
+            row.model = str(path)
+        rows.append(row)
+        write_summary(rows, out_dir)
+        done += 1
+        log.info("group %s: %s", row.group, row.error or f"order {row.order}")
+        if progress is not None:
+            progress(done, total)
+
+    futures: dict[Any, str] = {}
+    try:
+        for name, paths in groups.items():
+            row, t0 = BatchRow(group=name, sessions=[str(p) for p in paths]), time.perf_counter()
+            try:
+                data = load(paths)
+                row.flights = sum(len(g) for g in data)
+                if client is None:
+                    outcome: dict[str, Any] | BaseException = identify_group(
+                        data, method=method, options=options, grid=grid, workers=workers)
+                else:
+                    fut = client.submit(identify_group, data, method=method, options=options,
+                                        grid=grid, pure=False)
+                    futures[fut] = name
+                    pending[name] = (row, t0)
+                    continue
+            except (SysIdError, SessionFileError, OSError, ValueError,
+                    np.linalg.LinAlgError) as exc:
+                outcome = exc
+            finish(row, t0, outcome)
+        if futures:
+            from sysid.cluster import require_distributed
+
+            for fut in require_distributed().as_completed(list(futures)):
+                row, t0 = pending.pop(futures[fut])
+                try:
+                    result = fut.result()
+                except (SysIdError, OSError, ValueError, np.linalg.LinAlgError) as exc:
+                    result = exc
+                finish(row, t0, result)
+    except BaseException:
+        if futures:
+            client.cancel(list(futures))
+        raise
+    return rows

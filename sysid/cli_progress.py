@@ -1,0 +1,64 @@
+"""Progress of long ``sysid`` commands (sweep, batch) on stderr.
+
+On a terminal: a bar with counts, elapsed time and ETA. Not on a terminal (a log file, CI): one
+plain line each time another tenth of the work is done (and at the end), with the ETA, so logs
+stay short and readable. Quiet (``--json``) prints nothing.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import TextIO
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+__all__ = ["progress"]
+
+#: Plain lines are printed every this fraction of the work.
+STEP = 0.1
+
+
+@contextmanager
+def progress(label: str, *, total: int, quiet: bool = False,
+             stream: TextIO | None = None) -> Iterator[Callable[[int], None]]:
+    """Yield ``update(done)``; a bar on a TTY, plain periodic lines otherwise."""
+    out = stream if stream is not None else sys.stderr
+    if quiet:
+        yield lambda _done: None
+        return
+    if out.isatty():
+        with Progress(label, BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      "eta", TimeRemainingColumn(), console=Console(file=out)) as bar:
+            task = bar.add_task(label, total=total)
+            yield lambda done: bar.update(task, completed=done)
+        return
+    t0 = time.monotonic()
+    shown, ended = 0, False
+
+    def update(done: int) -> None:
+        nonlocal shown, ended
+        step = int(done / max(total, 1) / STEP + 1e-9)
+        if done >= total:
+            if ended:
+                return
+            ended = True
+        elif step <= shown:
+            return
+        shown = step
+        elapsed = time.monotonic() - t0
+        eta = elapsed / done * (total - done) if done else float("nan")
+        tail = "done" if done >= total else f"eta {eta:.0f} s"
+        print(f"{label}: {done}/{total} ({100 * done / max(total, 1):.0f} %), "
+              f"{elapsed:.0f} s, {tail}", file=out, flush=True)
+
+    yield update

@@ -1,0 +1,136 @@
+"""B, D and the initial states by output error, given A and C (simulation focus).
+
+With A ``(n, n)`` and C ``(l, n)`` fixed, the deterministic model's simulated output
+
+.. math::
+
+    \\hat y(k) = C A^k x_0 + \\sum_{t<k} C A^{k-1-t} B u(t) + D u(k)
+
+is linear in ``(B, D, x_0)`` (one ``x_0`` per flight), so minimising the simulation error
+:math:`\\sum_k \\lVert y(k) - \\hat y(k) \\rVert^2` is one linear least-squares problem. This is
+what MATLAB's ``n4sid`` does with ``Focus="simulation"`` and what makes a subspace model
+*simulate* well on colored or real inputs, where the thesis' eq. 3.15
+(:math:`\\Gamma^\\perp Y_f U_f^\\dagger`) amplifies the small error of :math:`\\Gamma^\\perp`.
+
+The regressors are the responses of ``(A, e_i, C)`` to each input channel: with
+``A = V Λ V^{-1}`` the response to ``u_j`` through mode ``a`` is one first-order filter
+``z_{a j}(k) = Σ_{t<k} λ_a^{k-1-t} u_j(t)`` (``scipy.signal.lfilter``), and the regressor of
+``B[i, j]`` at output ``o`` is ``Re Σ_a z_{a j}(k) (C V)[o, a] (V^{-1})[a, i]``. When A is not
+safely diagonalisable (``cond(V) > 1e8``) the states are propagated by a plain recursion
+instead. In closed loop the input is correlated with the noise and output error is biased
+(see ``docs/sysid.md``, "Focus").
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.signal
+
+__all__ = ["output_error_bd"]
+
+log = logging.getLogger(__name__)
+
+#: Largest cond(V) of A's eigenvectors for the modal (filter) route.
+_COND_MODAL = 1e8
+
+
+def _modal_responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """``(resp (N, l, n, m), free (N, l, n))``: output regressors of ``B[i, j]`` and of
+    ``x0[i]`` by modal filtering; raises ``LinAlgError`` when A is not diagonalisable."""
+    lam, vec = np.linalg.eig(a)
+    if not np.isfinite(vec).all() or np.linalg.cond(vec) > _COND_MODAL:
+        raise np.linalg.LinAlgError("A is not safely diagonalisable")
+    vinv = np.linalg.inv(vec)
+    t = np.einsum("oa,ai->aoi", c @ vec, vinv)  # (n_modes, l, n)
+    n_samples = u.shape[0]
+    z = np.empty((n_samples, u.shape[1], lam.size), dtype=complex)
+    for i, li in enumerate(lam):
+        z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -li], u, axis=0)
+    resp = np.einsum("kja,aoi->koij", z, t).real
+    with np.errstate(over="ignore", invalid="ignore"):
+        powers = lam[None, :] ** np.arange(n_samples)[:, None]  # (N, n_modes)
+    free = np.einsum("ka,aoi->koi", powers, t).real
+    return resp, free
+
+
+def _recursive_responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """The same as :func:`_modal_responses` by propagating ``X_j(k+1) = A X_j(k) + I u_j(k)``."""
+    n_samples, m = u.shape
+    n = a.shape[0]
+    xs = np.zeros((m, n, n))
+    resp = np.empty((n_samples, c.shape[0], n, m))
+    free = np.empty((n_samples, c.shape[0], n))
+    power = np.eye(n)
+    eye = np.eye(n)
+    for k in range(n_samples):
+        resp[k] = np.einsum("on,jni->oij", c, xs)
+        free[k] = c @ power
+        xs = a @ xs + eye[None] * u[k][:, None, None]
+        power = a @ power
+    return resp, free
+
+
+def output_error_bd(*, a: np.ndarray, c: np.ndarray,
+                    flights: Sequence[tuple[np.ndarray, np.ndarray]], feedthrough: bool,
+                    estimate_x0: bool = True, residuals: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """``B (n, m)``, ``D (l, m)`` and one ``x0 (n,)`` per flight minimising the simulation error.
+
+    With ``residuals=True`` a fourth item is returned: the simulation errors ``y - yhat``
+    ``(N_used, l)`` of each flight (samples left out, see below, are not in them).
+
+    ``flights``: ``(u (N, m), y (N, l))`` each. ``feedthrough=False`` imposes ``D = 0``;
+    ``estimate_x0=False`` imposes ``x0 = 0``. A with poles outside the unit circle makes the
+    regressors grow without bound: such samples are left out (and logged), so the fit is then
+    only over the start of each flight.
+    """
+    n, ell = a.shape[0], c.shape[0]
+    m = flights[0][0].shape[1]
+    n_b, n_d = n * m, (ell * m if feedthrough else 0)
+    n_x = n if estimate_x0 else 0
+    n_par = n_b + n_d + n_x * len(flights)
+    rows, rhs, designs = [], [], []
+    for f_idx, (u, y) in enumerate(flights):
+        try:
+            resp, free = _modal_responses(a, c, u)
+        except np.linalg.LinAlgError:
+            resp, free = _recursive_responses(a, c, u)
+        n_samples = u.shape[0]
+        design = np.zeros((n_samples, ell, n_par))
+        design[:, :, :n_b] = resp.reshape(n_samples, ell, n_b)
+        if feedthrough:
+            for o in range(ell):
+                design[:, o, n_b + o * m:n_b + (o + 1) * m] = u
+        if estimate_x0:
+            x0 = n_b + n_d + n * f_idx
+            design[:, :, x0:x0 + n] = free
+        ok = np.isfinite(design).all(axis=(1, 2))
+        ok &= np.abs(design).max(axis=(1, 2), initial=0.0) < 1e12
+        if not ok.all():
+            log.info("output error: %d samples left out (A unstable: responses too large)",
+                     int((~ok).sum()))
+        rows.append(design[ok].reshape(-1, n_par))
+        rhs.append(y[ok].reshape(-1))
+        if residuals:
+            designs.append((design[ok], y[ok]))
+    # normal equations of the column-equilibrated design: (n_par, n_par), solved by SVD
+    # (rank-safe); forming them costs O(N l n_par^2), a tenth of an SVD of the design
+    gram = sum(r.T @ r for r in rows)
+    rhs_n = sum(r.T @ t for r, t in zip(rows, rhs, strict=True))
+    scale = np.sqrt(np.diag(gram)).copy()
+    scale[scale == 0] = 1.0
+    theta = np.linalg.lstsq(gram / np.outer(scale, scale), rhs_n / scale, rcond=None)[0] / scale
+    # parameter i * m + j is B[i, j]; n_b + o * m + j is D[o, j]
+    b = theta[:n_b].reshape(n, m)
+    d = theta[n_b:n_b + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
+    x0s = [theta[n_b + n_d + n * i:n_b + n_d + n * (i + 1)] if estimate_x0 else np.zeros(n)
+           for i in range(len(flights))]
+    if residuals:
+        errs = [y_ok - dsg @ theta for dsg, y_ok in designs]
+        return b, d, x0s, errs
+    return b, d, x0s

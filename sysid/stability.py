@@ -1,0 +1,100 @@
+"""Stability of an identified A: what the default does, and strict stability on request.
+
+A quadrotor's rate and attitude dynamics from motor commands are near-integrating: their true
+poles sit on the unit circle, so a finite-sample estimate puts them just inside or just outside.
+A pole at ``|z| = 1.008`` is physics plus variance; a model that *simulates* with it drifts off.
+The modes (``stability=``):
+
+* ``"auto"`` (default): poles with ``1 < |z| <= 1 + NEAR_BAND`` are estimation noise around an
+  integrator; they are moved radially onto ``|z| = MARGINAL_RADIUS`` (a time constant of 1000
+  samples: an integrator over any validation window). Poles further out are a genuinely
+  unstable plant (closed-loop identification exists for those) and are kept, with a warning.
+* ``"enforce"``: every pole strictly inside, as MATLAB's ``EnforceStability``: a pole outside
+  is reflected, :math:`z \\to 1/\\bar z`, and capped at ``MARGINAL_RADIUS``.
+* ``"free"``: A as the subspace step estimated it.
+
+A is changed in its real Schur basis (``A = Q T Q^T``; a real pole or a conjugate pair is a
+diagonal block of T), so C, and everything estimated after A (B, D, K by the method's own
+regression, or by output error), stay consistent: callers re-estimate them for the new A.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+
+from sysid.errors import ParameterError
+
+__all__ = ["MARGINAL_RADIUS", "NEAR_BAND", "STABILITY_MODES", "Stability", "stabilize"]
+
+log = logging.getLogger(__name__)
+
+Stability = Literal["auto", "enforce", "free"]
+STABILITY_MODES: tuple[str, ...] = ("auto", "enforce", "free")
+
+#: Radius a near-integrating or reflected pole is put at.
+MARGINAL_RADIUS = 0.999
+#: ``"auto"`` treats poles with ``1 < |z| <= 1 + NEAR_BAND`` as integrators plus noise.
+NEAR_BAND = 0.1
+
+
+def check_stability(stability: object) -> None:
+    """Raise :class:`ParameterError` unless ``stability`` is one of the modes."""
+    if stability not in STABILITY_MODES:
+        raise ParameterError(f"stability={stability!r}; use one of {STABILITY_MODES}")
+
+
+def _target_radius(radius: float, mode: str) -> float | None:
+    """New radius for a pole of ``radius``, or None to keep it."""
+    if mode == "free" or radius <= 1.0:
+        return None
+    if mode == "auto":
+        return MARGINAL_RADIUS if radius <= 1.0 + NEAR_BAND else None
+    return min(1.0 / radius, MARGINAL_RADIUS)
+
+
+def stabilize(a: np.ndarray, *, mode: Stability
+              ) -> tuple[np.ndarray, list[tuple[complex, complex]]]:
+    """``(A', moved)``: A with its poles treated as ``mode`` says (module docstring).
+
+    ``moved`` lists ``(old pole, new pole)`` for each pole changed (one entry per conjugate
+    pair, upper half plane). ``A'`` is A when nothing moved. For ``"enforce"`` a pole on the
+    unit circle (``|z| = 1``) is also pulled in to ``MARGINAL_RADIUS``.
+    """
+    check_stability(mode)
+    lam = np.linalg.eigvals(a)
+    if mode == "free" or lam.size == 0:
+        return a, []
+    limit = MARGINAL_RADIUS if mode == "enforce" else 1.0
+    if np.max(np.abs(lam)) <= limit:
+        return a, []
+    t, q = scipy.linalg.schur(a, output="real")
+    n = t.shape[0]
+    moved: list[tuple[complex, complex]] = []
+    i = 0
+    while i < n:
+        size = 2 if i + 1 < n and abs(t[i + 1, i]) > 0.0 else 1
+        blk = t[i:i + size, i:i + size]
+        pole = complex(np.linalg.eigvals(blk)[0])
+        radius = abs(pole)
+        new = _target_radius(radius, mode)
+        if mode == "enforce" and new is None and radius > MARGINAL_RADIUS:
+            new = MARGINAL_RADIUS
+        if new is not None:
+            scale = new / radius
+            t[i:i + size, i:i + size] = blk * scale
+            # scaling the block scales the coupling to later blocks consistently: keep T's
+            # upper part as it is (it only changes eigenvectors, not eigenvalues)
+            pole_up = complex(pole.real, abs(pole.imag))
+            moved.append((pole_up, pole_up * scale))
+        elif radius > 1.0:
+            log.warning("pole at |z| = %.3f kept: far outside the unit circle, a genuinely "
+                        "unstable plant rather than noise around an integrator "
+                        "(stability='enforce' moves it inside)", radius)
+        i += size
+    if not moved:
+        return a, []
+    return q @ t @ q.T, moved

@@ -1,0 +1,75 @@
+"""The number type and output-path rule both command lines share (cfcommon/cli.py)."""
+
+from __future__ import annotations
+
+import os
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from cfcommon.cli import FiniteFloat, check_output
+
+
+@click.command()
+@click.option("--limit", type=FiniteFloat(min=1.0), default=None)
+@click.option("--gap", type=FiniteFloat(min=0.0, min_open=True, max=10.0), default=None)
+def _cmd(limit: float | None, gap: float | None) -> None:
+    click.echo(f"{limit} {gap}")
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--limit", "nan"], "'nan' is not a finite number"),
+    (["--limit", "inf"], "'inf' is not a finite number"),
+    (["--limit", "-inf"], "not a finite number"),
+    (["--limit", "0.5"], "0.5 is below 1"),
+    (["--gap", "0"], "0 is not above 0"),
+    (["--gap", "11"], "11 is above 10"),
+    (["--gap", "x"], "'x' is not a number"),
+])
+def test_finite_float_refuses_nan_inf_and_out_of_range(args, words) -> None:
+    res = CliRunner().invoke(_cmd, args)
+    assert res.exit_code == 2 and words in res.output and "Traceback" not in res.output
+
+
+def test_finite_float_accepts_numbers() -> None:
+    res = CliRunner().invoke(_cmd, ["--limit", "300", "--gap", "1e-3"])
+    assert res.exit_code == 0 and res.output.strip() == "300.0 0.001"
+
+
+def test_check_output_rules(tmp_path) -> None:
+    session = tmp_path / "flight.h5"
+    session.write_bytes(b"flight data")
+    view = tmp_path / "view.rrd"
+    ok = check_output(view, option="--rrd", suffixes=(".rrd",), inputs=[session])
+    assert ok == view
+    cases = [
+        (session, {"suffixes": (".rrd",)}, "must end in .rrd"),
+        (session, {"suffixes": (".h5",), "inputs": [session], "overwrite": True},
+         "is an input of this command"),
+        (tmp_path / "no" / "v.rrd", {"suffixes": (".rrd",)}, "does not exist; create it"),
+        (tmp_path / "d.rrd", {"suffixes": (".rrd",)}, "is a folder"),
+    ]
+    (tmp_path / "d.rrd").mkdir()
+    for path, kw, words in cases:
+        with pytest.raises(click.BadParameter, match=words):
+            check_output(path, option="--out", **kw)
+    view.write_bytes(b"old view")
+    with pytest.raises(click.BadParameter, match="already exists; pass --force"):
+        check_output(view, option="--rrd", suffixes=(".rrd",), force_flag="--force")
+    assert check_output(view, option="--rrd", suffixes=(".rrd",), overwrite=True) == view
+    # the same file under another name is still the input
+    link = tmp_path / "alias.h5"
+    os.symlink(session, link)
+    with pytest.raises(click.BadParameter, match="is an input"):
+        check_output(link, option="--out", suffixes=(".h5",), inputs=[session], overwrite=True)
+    assert session.read_bytes() == b"flight data"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_check_output_refuses_read_only_folder(tmp_path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    with pytest.raises(click.BadParameter, match="not writable"):
+        check_output(ro / "v.rrd", option="--rrd", suffixes=(".rrd",))

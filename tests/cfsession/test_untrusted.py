@@ -1,0 +1,192 @@
+"""Session files from elsewhere: crafted ones are refused in one line, damaged ones never hang.
+
+Known truth: what each crafted file was made to do (read another file, follow a link, declare
+rows it does not store), and HDF5's own endless loop on a global heap object of size 0 (seen
+in the fuzz campaign: a flipped byte in a killed writer's file hung ``info`` for ever).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cfsession import open_session
+from cfsession.errors import SessionError
+from cfsession.schema import log_block_spec
+from cfsession.writer import SessionWriter, standard_streams
+from groundstation.cli import main
+
+
+def _write(path, *, close: bool = True, compress: bool = False):
+    gyro = log_block_spec(name="gyro", variables=[("gyro.x", "float")], period_s=0.02)
+    w = SessionWriter(path, streams=[gyro, *standard_streams()], metadata={"uri": "sim://0"},
+                      compress_on_close=compress)
+    for k in range(100):
+        w.append("gyro", (k * 0.02, 20 * k, float(k)))
+    w.event(t=0.0, text="hello")
+    w.flush(fsync=True)
+    if close:
+        w.close(summary={"ok": 1})
+    return w
+
+
+@pytest.fixture
+def session(tmp_path):
+    path = tmp_path / "s.h5"
+    _write(path)
+    return path
+
+
+def _refused(path, match: str) -> str:
+    with pytest.raises(SessionError, match=match) as info:
+        open_session(path)
+    msg = str(info.value)
+    assert "\n" not in msg and str(path) in msg
+    result = CliRunner().invoke(main, ["info", str(path)])
+    assert result.exit_code == 2 and result.output.strip().count("\n") == 0, result.output
+    return msg
+
+
+def test_external_storage_is_refused_not_read(session, tmp_path):
+    secret = tmp_path / "passwd"
+    secret.write_bytes(b"root:x:0:0:root:/root:/bin/bash\n" * 4)
+    with h5py.File(session, "a") as f:
+        dt = f["gyro/data"].dtype
+        del f["gyro/data"]
+        f["gyro"].create_dataset("data", shape=(4,), dtype=dt,
+                                 external=[(str(secret), 0, h5py.h5f.UNLIMITED)])
+    assert "passwd" in _refused(session, "data stored outside the file")
+
+
+def test_external_storage_on_a_fifo_is_refused_at_once(session, tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)  # reading it would block for ever
+    with h5py.File(session, "a") as f:
+        dt = f["events/data"].dtype
+        del f["events/data"]
+        f["events"].create_dataset("data", shape=(4,), dtype=dt,
+                                   external=[(str(fifo), 0, h5py.h5f.UNLIMITED)])
+    _refused(session, "data stored outside the file")
+
+
+def test_a_fifo_as_the_session_path_is_refused(tmp_path):
+    fifo = tmp_path / "s.h5"
+    os.mkfifo(fifo)
+    _refused(fifo, "not a regular file")
+
+
+@pytest.mark.parametrize("link", ["external", "soft", "loop"])
+def test_links_are_not_followed(session, tmp_path, link):
+    other = tmp_path / "other.h5"
+    _write(other)
+    with h5py.File(session, "a") as f:
+        if link == "external":
+            f["stolen"] = h5py.ExternalLink(str(other), "/gyro")
+        elif link == "soft":
+            f["alias"] = h5py.SoftLink("/gyro")
+        else:
+            f["gyro"]["loop"] = h5py.SoftLink("/gyro/loop")
+    _refused(session, "links to another file" if link == "external" else "soft link")
+
+
+def test_virtual_dataset_is_refused(session, tmp_path):
+    other = tmp_path / "other.h5"
+    _write(other)
+    with h5py.File(session, "a") as f:
+        dt = f["gyro/data"].dtype
+        layout = h5py.VirtualLayout(shape=(10,), dtype=dt)
+        layout[:] = h5py.VirtualSource(str(other), "gyro/data", shape=(10,))
+        del f["gyro/data"]
+        f["gyro"].create_virtual_dataset("data", layout)
+    _refused(session, "virtual dataset")
+
+
+@pytest.mark.parametrize("rows", [2**28, 2**40])
+def test_declared_rows_the_file_cannot_hold_are_refused(session, rows):
+    with h5py.File(session, "a") as f:
+        dt = f["gyro/data"].dtype
+        del f["gyro/data"]
+        f["gyro"].create_dataset("data", shape=(rows,), maxshape=(None,), dtype=dt,
+                                 chunks=(64,))
+    _refused(session, f"declares {rows} rows")
+
+
+@pytest.mark.parametrize("data", [
+    np.arange(5.0),  # not rows of fields
+    np.zeros(3, dtype=[("host_time", "S8"), ("level", "u1")]),  # text time
+    np.array([(0.0, "x")], dtype=[("host_time", "f8"), ("text", h5py.string_dtype())]),
+    np.zeros(3, dtype=[("host_time", "f8"), ("level", "u1")]),  # fields missing
+])
+def test_wrong_dtypes_are_refused(session, data):
+    with h5py.File(session, "a") as f:
+        del f["events/data"]
+        f["events"].create_dataset("data", data=data)
+    _refused(session, "stream 'events'")
+
+
+@pytest.mark.parametrize("version", [-1, 0, 2, 1.5, "1", [1, 1]])
+def test_schema_version_is_checked(session, version):
+    with h5py.File(session, "a") as f:
+        f.attrs["schema_version"] = version
+    _refused(session, "schema")
+
+
+def test_deep_json_and_wrongly_typed_attributes_are_ignored(session):
+    with h5py.File(session, "a") as f:
+        f.attrs["summary"] = "[" * 100_000 + "]" * 100_000
+        f.attrs["closed_cleanly"] = np.array([1, 1])
+        f["gyro"].attrs["period_s"] = "fast"
+        f["gyro/data"].attrs["units"] = 7
+    s = open_session(session)
+    assert s.json_meta("summary", {}) == {}
+    assert s["gyro"].period_s is None and s["gyro"].units == {"host_time": "",
+                                                              "fw_time_ms": "", "x": ""}
+    assert len(s["gyro"]) == 100 and not s.closed_cleanly
+    assert any("closed_cleanly" in p for p in s.problems)
+    result = CliRunner().invoke(main, ["info", str(session)])
+    assert result.exit_code == 0, result.output
+
+
+def test_killed_writer_file_is_read_without_changing_it(tmp_path):
+    path = tmp_path / "killed.h5"
+    w = _write(path, close=False)
+    before = path.read_bytes()
+    assert before[11] != 0  # superblock: still open for (SWMR) writing
+    s = open_session(path)
+    assert not s.closed_cleanly and len(s["gyro"]) == 100 and s.events()[0].text == "hello"
+    assert path.read_bytes() == before
+    w.close()
+
+
+def test_a_global_heap_that_hdf5_would_walk_for_ever_is_refused(tmp_path):
+    """A killed writer's file whose text heap says "free space of 0 bytes": HDF5 2.0 loops on
+    it for ever. Checked in a child process, so a regression fails rather than hangs."""
+    path = tmp_path / "killed.h5"
+    w = _write(path, close=False)
+    data = bytearray(path.read_bytes())
+    w.close()
+    at = data.find(b"GCOL")
+    p = at + 16  # first object: walk to the free-space object (index 0) and empty it
+    while int.from_bytes(data[p:p + 2], "little") != 0:
+        size = int.from_bytes(data[p + 8:p + 16], "little")
+        p += 16 + (size + 7) // 8 * 8
+    data[p + 8:p + 16] = bytes(8)
+    path.write_bytes(bytes(data))
+    code = textwrap.dedent(f"""
+        from cfsession.errors import SessionError
+        from cfsession import open_session
+        try:
+            open_session({str(path)!r})
+        except SessionError as exc:
+            print(exc)
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert "would be read for ever" in out.stdout, out

@@ -1,0 +1,54 @@
+"""Writing never follows a planted symlink, and a fast flight is flushed by flight time (#13)."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from cfsession import SessionError, SessionWriter, open_session
+from cfsession.schema import log_block_spec
+from cfsession.writer import standard_streams
+from groundstation.recorder import Recorder
+
+GYRO = log_block_spec(name="gyro", variables=[(f"gyro.{a}", "float") for a in "xyz"],
+                      period_s=0.02)
+
+
+def _rows(t0: float, n: int) -> list[tuple]:
+    return [(t0 + 0.02 * k, 1000 + 20 * k, 0.1, 0.2, 0.3) for k in range(n)]
+
+
+def test_the_clean_close_rewrite_does_not_follow_a_planted_symlink(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    out = tmp_path / "s.h5"
+    # the old, predictable name of the repack file
+    os.symlink(victim, tmp_path / "s.h5.repack")
+    with SessionWriter(out, streams=[GYRO, *standard_streams()]) as w:
+        w.extend("gyro", _rows(0.0, 50))
+    assert victim.read_text() == "precious"
+    assert len(open_session(out)["gyro"]) == 50
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".repack")] == ["s.h5.repack"]
+
+
+def test_a_symlink_at_the_session_path_is_refused(tmp_path):
+    target = tmp_path / "elsewhere.h5"
+    link = tmp_path / "s.h5"
+    os.symlink(target, link)  # dangling: exists() is False, a plain open would create target
+    with pytest.raises(SessionError, match="symbolic link"):
+        SessionWriter(link, streams=[GYRO, *standard_streams()])
+    assert not target.exists()
+
+
+def test_the_recorder_flushes_within_the_first_second_of_flight_time(tmp_path):
+    """At 20x a whole hover fits in one wall second: rows must reach the file by flight time,
+    not only after a wall-clock second (the writer's own interval is made huge here)."""
+    rec = Recorder(tmp_path / "fast.h5", flush_interval=1.0)
+    rec.begin(streams=[GYRO, *standard_streams()], metadata={})
+    rec._writer.flush_interval = 3600.0  # no wall-clock flush during this test
+    rec.rows("gyro", _rows(0.0, 40))    # 0.00 .. 0.78 s of flight
+    assert len(open_session(rec.path)["gyro"]) == 0
+    rec.rows("gyro", _rows(0.8, 20))    # .. 1.18 s: past the first second
+    assert len(open_session(rec.path)["gyro"]) == 60
+    rec.end(summary={"duration_s": 1.2})

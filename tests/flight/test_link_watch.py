@@ -1,0 +1,183 @@
+"""The runner watches the link and always delivers the stop setpoint before the link closes.
+
+Known truth: the simulated vehicle's own state. A stop setpoint stops the motors without locking
+the supervisor; the supervisor's watchdog (no setpoint for 2 s) stops them and locks it, so a
+vehicle stopped but not locked got the stop. Silence is made by the simulator: ``drop=1`` loses
+every log packet on the way down (the vehicle still hears the ground station); ``cut_link``
+silences both directions. ``udp://`` flies in real time against :class:`UdpServer`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import cflib.crtp
+import pytest
+from click.testing import CliRunner
+
+import groundstation.sim as gsim
+from cfsession import open_session
+from groundstation.cli import main
+from groundstation.flight import fly_plan
+from groundstation.flight.runner import LINK_SILENCE_S
+from groundstation.plan import Schedule, load_plan
+from groundstation.sim import UdpServer
+from tests.sim_crtp.helpers import free_udp_port
+
+from .checks import check_closed_with_stop
+from .conftest import wait_for_stop
+
+BLOCKS = ("motors", "acc", "gyro")
+
+
+def _safety(s):
+    return [e.text for e in s.events() if e.source == "safety" and e.level in ("error", "warning")]
+
+
+def _check_silence_abort(result, *, silenced_at_tick: int) -> None:
+    """Link loss found by the watch: cause, events, no descent, the missing packets counted."""
+    assert result.cause.startswith("link lost: no log packet for"), result.cause
+    s = check_closed_with_stop(result)
+    texts = _safety(s)
+    assert texts[0].startswith("link lost: no log packet") and any("watchdog" in t for t in texts)
+    assert "abort" not in [k.decode() for k in s["phases"].data["kind"]]  # no telemetry
+    ticks = s["setpoints"].data["tick"]
+    # 0.5 s of flight time at 10 Hz, plus the grace for cflib's threads and the silence's start
+    assert silenced_at_tick <= ticks.max() <= silenced_at_tick + round(LINK_SILENCE_S * 10) + 4
+    for name in BLOCKS:
+        b = result.summary["blocks"][name]
+        assert b["missing_at_end"] >= round(LINK_SILENCE_S / 0.02) - 5, (name, b)
+        assert b["dropped"] >= b["missing_at_end"] and b["expected"] >= b["received"] + (
+            b["missing_at_end"])
+        assert b["received"] == len(s[name])
+
+
+def test_log_silence_on_sim_is_link_loss_and_the_stop_reaches_the_vehicle(sim_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), sim_uri()
+
+    def silence(k: int) -> None:
+        if k == 40:  # in the hover: every log packet lost from now on, setpoints still arrive
+            gsim.instance(uri).set_faults(drop=1.0)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=silence)
+    _check_silence_abort(result, silenced_at_tick=40)
+    sim = wait_for_stop(uri)
+    assert not sim.vehicle.is_locked  # stopped by the stop setpoint, not by its watchdog
+
+
+def test_failing_abort_path_still_delivers_and_records_the_stop(sim_uri, tmp_path, monkeypatch):
+    """The plan raises, then the abort path raises too: the stop still reaches the vehicle."""
+    plan, uri = load_plan("hover-check"), sim_uri()
+
+    def broken(self, k):
+        raise RuntimeError("descent broken")
+
+    monkeypatch.setattr(Schedule, "abort_schedule", broken)
+
+    def hook(k: int) -> None:
+        if k == 40:
+            raise RuntimeError("injected fault")
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
+    assert result.cause == "runner error: RuntimeError: injected fault"
+    sim = wait_for_stop(uri)
+    assert not sim.vehicle.is_locked  # stopped by the stop setpoint, not by its watchdog
+    s = check_closed_with_stop(result)
+    texts = _safety(s)
+    assert "during the abort: runner error while stopping: RuntimeError: descent broken" in texts
+    stops = [e.text for e in s.events() if e.text.startswith("stop setpoint sent")]
+    assert stops == ["stop setpoint sent (last resort: runner error: RuntimeError: "
+                     "injected fault)"]
+
+
+# ---------------------------------------------------------------------------------- udp://
+
+
+
+@pytest.fixture
+def udp():
+    cflib.crtp.init_drivers()
+    server = UdpServer(port=free_udp_port(), seed=5)
+    yield server
+    server.close()
+
+
+def _when_airborne(sim: gsim.Simulator, after_s: float, action) -> threading.Thread:
+    """Run ``action()`` once the vehicle has flown ``after_s`` simulated seconds."""
+
+    def watch() -> None:
+        deadline = time.monotonic() + 30.0
+        while not sim.vehicle.is_flying and time.monotonic() < deadline:
+            time.sleep(0.01)
+        sim.clock.sleep_until(sim.clock.now() + after_s)
+        action()
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _stopped_by_the_ground_station(sim: gsim.Simulator, timeout_s: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        v = sim.vehicle
+        if v.stop_count >= 1 and not any(v.motors_pwm):
+            return not v.is_locked
+        time.sleep(0.01)
+    return False
+
+
+def test_udp_simulator_silenced_mid_flight_aborts_fly_with_exit_2(udp, tmp_path):
+    sim = udp.simulators[0]
+    watcher = _when_airborne(sim, 1.0, sim.cut_link)  # both directions silent for good
+    result = CliRunner().invoke(main, ["fly", "hover-check", "--uri", udp.uris[0],
+                                       "--out", str(tmp_path)])
+    watcher.join(timeout=5)
+    assert result.exit_code == 2, result.output
+    last = result.output.strip().splitlines()[-1]
+    assert last.startswith("error: flight aborted: link lost: no log packet for") and ".h5" in last
+    s = open_session(next(tmp_path.glob("*.h5")))
+    assert s.closed_cleanly and _safety(s)[0].startswith("link lost: no log packet")
+    assert s["setpoints"].data[-1]["thrust"] == 0
+    summary = s.json_meta("summary")
+    assert all(summary["blocks"][b]["missing_at_end"] > 0 for b in BLOCKS), summary["blocks"]
+    # Nothing reaches the vehicle any more: its own watchdog stops and locks it (2 s of its
+    # time; a generous wall deadline, the suite runs beside other work).
+    deadline = time.monotonic() + 30
+    while not sim.vehicle.is_locked and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert sim.vehicle.is_locked and not any(sim.vehicle.motors_pwm)
+
+
+def test_udp_telemetry_silence_aborts_and_the_stop_reaches_the_vehicle(udp, tmp_path):
+    sim = udp.simulators[0]
+    plan = load_plan("hover-check")
+    ticks: list[int] = []
+    watcher = _when_airborne(sim, 1.0, lambda: sim.set_faults(drop=1.0))
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=udp.uris[0], tick_hook=ticks.append)
+    watcher.join(timeout=5)
+    s = open_session(result.path)
+    silenced = int(s["setpoints"].data["tick"].max()) - round(LINK_SILENCE_S * 10) - 4
+    _check_silence_abort(result, silenced_at_tick=max(silenced, 0))
+    assert _stopped_by_the_ground_station(sim)
+
+
+def test_udp_failing_abort_path_still_delivers_the_stop(udp, tmp_path, monkeypatch):
+    sim = udp.simulators[0]
+
+    def broken(self, k):
+        raise RuntimeError("descent broken")
+
+    monkeypatch.setattr(Schedule, "abort_schedule", broken)
+
+    def hook(k: int) -> None:
+        if k == 30:
+            raise RuntimeError("injected fault")
+
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=udp.uris[0], tick_hook=hook)
+    assert result.cause == "runner error: RuntimeError: injected fault"
+    assert _stopped_by_the_ground_station(sim)
+    s = check_closed_with_stop(result)
+    assert any("descent broken" in t for t in _safety(s))

@@ -1,0 +1,100 @@
+"""Choosing past, future and order by held-out validation, on grids scaled to the data."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+import sysid
+from sysid.auto import default_grid, holdout, select
+from sysid.methods import get_method
+from tests.sysid.systems import closed_loop, open_loop, pbsid_example1, random_stable_system
+
+
+def _hover(seed: int, *, n: int = 650, dt: float = 0.01) -> sysid.IOData:
+    """As long as a 6.5 s hover at 100 Hz: 3 inputs, 4 outputs, 4 states."""
+    rng = np.random.default_rng(seed)
+    system = random_stable_system(n_states=4, n_inputs=3, n_outputs=4, rng=rng,
+                                  radius=(0.6, 0.95))
+    d = open_loop(system, n_samples=n, rng=rng, noise_std=0.05).data
+    return sysid.IOData(u=d.u, y=d.y, dt=dt)
+
+
+def test_default_grid_scales_with_rate_and_length() -> None:
+    short = default_grid([_hover(1)])  # 6.5 s at 100 Hz
+    assert short["pasts"][0] == 10  # 0.1 s
+    c = 3 + 4
+    assert short["pasts"][-1] + short["futures"][-1] <= 650 / (3 * c)  # 3 columns per row
+    assert short["futures"][0] == 6 and len(short["futures"]) >= 2
+    assert short["orders"] == list(range(2, 13))
+    long = default_grid([_hover(1, n=20000, dt=0.02)])  # 400 s at 50 Hz: the time caps bind
+    assert long["pasts"][-1] == 60 and long["futures"][-1] == 20  # 1.2 s, 0.4 s
+    with pytest.raises(sysid.DataError, match="identification samples are too few"):
+        default_grid([_hover(1, n=40)])
+
+
+def test_holdout_rule() -> None:
+    a, b = _hover(1), _hover(2, n=500)
+    ident, val, rule = holdout([[a, b]])
+    assert [d.n_samples for d in ident] == [455, 350] and [d.n_samples for d in val] == [195, 150]
+    np.testing.assert_array_equal(val[0].y, a.y[455:])
+    assert "last 30 %" in rule
+    ident, val, rule = holdout([[a], [b]])
+    assert ident == [a] and val == [b] and "last session" in rule
+
+
+def test_a_short_hover_identifies_with_no_knobs(caplog) -> None:
+    meth = get_method("iem")
+    with caplog.at_level(logging.WARNING):
+        sel = select([[_hover(1)]], method=meth, options=meth.options())
+    assert sel.best.stable and sel.best.score > 50
+    assert sel.best.past in sel.grid["pasts"] and sel.best.order in sel.grid["orders"]
+    top = sel.top(8)
+    assert top[0].score >= top[-1].score and sel.best in sel.result.rows
+    # the model returned is identified again on all the data, at the chosen horizons
+    assert sel.model.provenance["n_samples"] == [650]
+    assert (sel.model.provenance["past"], sel.model.provenance["future"]) == (
+        sel.best.past, sel.best.future)
+    assert not [r for r in caplog.records if r.name.startswith("sysid.iem")]  # grid is quiet
+
+
+def test_choice_finds_the_true_order_and_flags_the_edges() -> None:
+    rng = np.random.default_rng(0)
+    system = pbsid_example1()
+    groups = [[closed_loop(system, n_samples=2000, rng=rng).data],
+              [closed_loop(system, n_samples=1000, rng=rng).data]]
+    meth = get_method("iem")
+    sel = select(groups, method=meth, options=meth.options(), pasts=[4, 10], futures=[10],
+                 orders=range(2, 8))
+    assert sel.best.order == 4 and "last session" in sel.rule
+    assert sel.model.provenance["n_flights"] == 2  # both sessions identify the final model
+    edge = select(groups, method=meth, options=meth.options(), pasts=[4, 10], futures=[10],
+                  orders=[2, 3])
+    assert edge.best.order == 3
+    assert any(w.startswith("order 3 is the largest tried") for w in edge.warnings)
+
+
+def test_focus_is_chosen_on_held_out_data_when_not_given() -> None:
+    """Closed loop (PBSID Example 1): both focus grids run, the default (prediction) is kept
+    unless simulation beats it by more than 0.5 points; open loop with a colored input and an
+    undermodelled system: the score decides, and the note says which and why."""
+    rng = np.random.default_rng(3)
+    system = pbsid_example1()
+    groups = [[closed_loop(system, n_samples=2000, rng=rng).data],
+              [closed_loop(system, n_samples=1000, rng=rng).data]]
+    meth = get_method("iem")
+    sel = select(groups, method=meth, options=meth.options(), pasts=[10], futures=[10],
+                 orders=[4], choose_focus=True)
+    assert "prediction" in sel.focus_note and "simulation" in sel.focus_note
+    scores = sel.focus_scores
+    assert set(scores) == {"prediction", "simulation"}
+    chosen = sel.model.provenance["focus"]
+    if chosen == "simulation":
+        assert scores["simulation"] > scores["prediction"] + 0.5
+    else:
+        assert scores["simulation"] <= scores["prediction"] + 0.5
+    fixed = select(groups, method=meth, options=meth.options(), pasts=[10], futures=[10],
+                   orders=[4])
+    assert fixed.focus_note == "" and fixed.model.provenance["focus"] == "prediction"

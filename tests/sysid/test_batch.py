@@ -1,0 +1,103 @@
+"""`sysid batch`: one model per group, a summary row per group, failures and Ctrl-C kept."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import sysid
+import sysid.batch
+from sysid.cli import main
+from tests.sysid.flights import known_system, write_flight
+from tests.sysid.systems import pole_error
+
+FAST = ["--order", "4", "--past", "20", "--future", "10"]
+A, B = "radio://0/80/2M/E7E7E7E7E7", "radio://0/80/2M/E7E7E7E7E8"
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    """Two flights of vehicle A, one of B, one too short (vehicle C), one corrupt file."""
+    d = tmp_path_factory.mktemp("batch")
+    system = known_system()
+    paths = [write_flight(d / f"a{i}.h5", system=system, seed=30 + i, n=1500,
+                          metadata={"uri": A, "plan_name": "roll prbs"}).path for i in range(2)]
+    paths.append(write_flight(d / "b0.h5", system=system, seed=40, n=1500,
+                              metadata={"uri": B, "plan_name": "roll prbs"}).path)
+    paths.append(write_flight(d / "c0.h5", system=system, seed=41, n=60,
+                              phases=[(0.0, "excitation", "excitation")],
+                              metadata={"uri": "radio://0/80/2M/C"}).path)
+    junk = d / "junk.h5"
+    junk.write_bytes(b"not a session" * 100)
+    paths.append(junk)
+    return paths, system
+
+
+def run(*args: object) -> object:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_batch_by_vehicle_writes_models_and_a_summary_with_failed_rows(sessions, tmp_path):
+    paths, system = sessions
+    out = tmp_path / "models"
+    res = run("batch", *paths, "--out", out, "--group-by", "vehicle", *FAST)
+    assert res.exit_code == 0, res.output
+    table = {r["group"]: r for r in json.loads((out / "summary.json").read_text())}
+    a, b = table["radio-0-80-2M-E7E7E7E7E7"], table["radio-0-80-2M-E7E7E7E7E8"]
+    assert a["flights"] == 2 and len(a["sessions"]) == 2 and b["flights"] == 1
+    for row in (a, b):
+        assert row["error"] is None and row["order"] == 4 and row["past"] == 20
+        poles = np.array([re + 1j * im for re, im in row["poles"]])
+        assert pole_error(system.poles(), poles) < 0.05
+        assert min(row["validation_fit_percent"]) > 30
+        model = sysid.load_model(row["model"])
+        np.testing.assert_allclose(np.sort_complex(model.poles()), poles)
+    assert table["radio-0-80-2M-C"]["error"] and table["radio-0-80-2M-C"]["model"] is None
+    assert table["junk"]["error"] and table["junk"]["sessions"] == [str(paths[-1])]
+    with (out / "summary.csv").open() as fh:
+        rows = {r["group"]: r for r in csv.DictReader(fh)}
+    assert set(rows) == set(table)
+    assert rows["radio-0-80-2M-E7E7E7E7E7"]["order"] == "4"
+    assert rows["junk"]["error"] == table["junk"]["error"]
+    # not a terminal: plain progress lines, the last one at 100 %
+    assert "batch: 3/3 (100 %)" in res.stderr
+    # a second run into the same folder needs --force
+    again = run("batch", *paths[:1], "--out", out, *FAST)
+    assert again.exit_code == 2 and "--force" in again.stderr
+
+
+def test_batch_group_names_and_no_knobs_selection(sessions, tmp_path):
+    paths, _ = sessions
+    groups, bad = sysid.batch.group_sessions(
+        paths[:3], by="plan", read_meta=lambda p: {"plan_name": "roll prbs"})
+    assert list(groups) == ["roll-prbs"] and not bad
+    groups, _ = sysid.batch.group_sessions([paths[0], paths[0].with_name("x") / "a0.h5"],
+                                           by="session", read_meta=dict)
+    assert list(groups) == ["a0", "a0-2"]
+    out = tmp_path / "auto"
+    res = run("batch", paths[2], "--out", out, "--json")  # horizons and order chosen
+    assert res.exit_code == 0, res.output
+    [row] = json.loads(res.stdout)["groups"]
+    assert row["error"] is None and 2 <= row["order"] <= 12 and row["stable"]
+
+
+def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
+    paths, _ = sessions
+    real, calls = sysid.batch.identify_group, []
+
+    def interrupted(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sysid.batch, "identify_group", interrupted)
+    out = tmp_path / "stopped"
+    res = run("batch", *paths[:3], "--out", out, *FAST)
+    assert res.exit_code == 130 and "interrupted: 1 finished group" in res.stderr
+    [row] = json.loads((out / "summary.json").read_text())
+    assert row["group"] == "a0" and row["error"] is None and (out / "a0.h5").exists()

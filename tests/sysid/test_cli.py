@@ -1,0 +1,202 @@
+"""The sysid command line on session files of a known closed-loop system."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import sysid
+from sysid.cli import main, parse_grid
+from sysid.errors import ParameterError
+from sysid.validate import fit_percent
+from tests.sysid.flights import PWM_MID, held, known_system, write_flight
+from tests.sysid.systems import pole_error
+from tests.sysid.test_session_io import K0, N_EXC
+
+FAST = ["--order", "4", "--past", "20", "--future", "10"]
+
+
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    system = known_system()
+    return [write_flight(d / f"f{i}.h5", system=system, seed=10 + i) for i in range(2)]
+
+
+def run(*args: str) -> object:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_identify_recovers_the_closed_loop_poles(flights, tmp_path) -> None:
+    out = tmp_path / "m.h5"
+    res = run("identify", flights[0].path, *FAST, "--out", out, "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    poles = np.array([p["re"] + 1j * p["im"] for p in report["poles"]])
+    truth = flights[0].system.poles()
+    assert pole_error(truth, poles) < 0.03
+    assert report["stable"] and report["predictor_stable"]
+    assert min(report["fit_percent"]["1-step"].values()) > 50
+    model = sysid.load_model(out)
+    assert pole_error(truth, model.poles()) < 0.03
+    assert model.input_names[0] == "motor.m1" and model.output_units[-1] == "deg/s"
+    assert model.provenance["sources"] == [str(flights[0].path)]
+
+
+def test_identify_several_sessions_makes_one_model(flights, tmp_path) -> None:
+    out = tmp_path / "both.json"
+    res = run("identify", *(f.path for f in flights), *FAST, "--out", out)
+    assert res.exit_code == 0, res.output
+    assert "pole" in res.stdout and "simulation" in res.stdout
+    model = sysid.load_model(out)
+    assert model.provenance["n_flights"] == 2
+    assert pole_error(flights[0].system.poles(), model.poles()) < 0.03
+
+
+def test_compare_with_the_true_model_reaches_the_noise_limit(flights, tmp_path) -> None:
+    """The true system, in the session's units, fits as well as its noise-free output does."""
+    f = flights[1]
+    true_path = tmp_path / "true.h5"
+    f.system.save(true_path)
+    res = run("compare", true_path, f.path, "--window-s", "10", "--horizon", "1", "--json")
+    assert res.exit_code == 0, res.output
+    modes = {m["mode"]: m for m in json.loads(res.stdout)["modes"]}
+    sim = modes["simulation, 10 s windows"]["sessions"][0]["fit_percent"]
+    # noise-free response to the input as logged (dropped packets held), excitation samples
+    n = len(f.values["motors"])
+    u_logged = held(f.values["motors"], f.dropped["motors"], np.arange(n)) - PWM_MID
+    y_ref = f.system.simulate(u_logged)[K0:K0 + N_EXC]
+    y = np.hstack([held(f.values[s], f.dropped[s], K0 + np.arange(N_EXC)) for s in ("acc", "gyro")])
+    ideal = fit_percent(y - y.mean(0), y_ref - y_ref.mean(0))
+    got = np.array(list(sim.values()))
+    assert np.all(np.abs(got - ideal) < 2.0), (got, ideal)
+    # With the true K the one-step error is the innovation (std 0.05) unless packets were
+    # dropped (a held sample is an error of the signal's size): perfect log -> near 100 %.
+    clean = write_flight(tmp_path / "nodrop.h5", system=known_system(), seed=3, n_drop=0)
+    res = run("compare", true_path, clean.path, "--horizon", "1", "--json")
+    one_step = np.array(list(json.loads(res.stdout)["modes"][0]["overall"].values()))
+    assert np.all(one_step > 97.0), one_step
+
+
+def test_compare_table_per_session(flights, tmp_path) -> None:
+    path = tmp_path / "true.h5"
+    flights[0].system.save(path)
+    res = run("compare", path, flights[0].path, flights[1].path)
+    assert res.exit_code == 0, res.output
+    assert "f0.h5" in res.stdout and "f1.h5" in res.stdout and "all" in res.stdout
+
+
+def test_order_suggests_the_true_order(flights) -> None:
+    res = run("order", flights[0].path, "--past", "20", "--future", "10", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert report["suggested_order"] == 4
+    sv = np.array(report["singular_values"])
+    assert np.all(np.diff(sv) <= 0)
+
+
+def test_sweep_picks_the_true_order(flights) -> None:
+    res = run("sweep", flights[0].path, "--pasts", "15,20", "--futures", "10",
+              "--orders", "2:6:2", "--horizon", "1", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert report["n_models"] == 6 and report["best"]["order"] == 4
+    tops = [r["mean_fit_percent"] for r in report["top"]]
+    assert tops == sorted(tops, reverse=True)
+
+
+def test_sweep_saves_the_selected_model(flights, tmp_path) -> None:
+    out = tmp_path / "best.h5"
+    res = run("sweep", flights[0].path, "--pasts", "10,20", "--futures", "10",
+              "--orders", "3,4", "--out", out, "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    best = report["best"]
+    assert report["model"] == str(out) and "last 30 %" in report["rule"]
+    model = sysid.load_model(out)
+    assert (model.provenance["past"], model.provenance["future"], model.A.shape[0]) == (
+        best["past"], best["future"], best["order"])
+    # identified again on the whole session, not on the 70 % that took part in the sweep
+    assert model.provenance["n_samples"] == [N_EXC]
+    again = run("sweep", flights[0].path, "--pasts", "10", "--futures", "10", "--orders", "4",
+                "--out", out)
+    assert again.exit_code == 2 and "already exists" in again.stderr
+
+
+def test_export_round_trip(flights, tmp_path) -> None:
+    src = tmp_path / "m.h5"
+    flights[0].system.save(src)
+    for fmt in ("json", "mat"):
+        res = run("export", src, "--format", fmt)
+        assert res.exit_code == 0, res.output
+        back = sysid.load_model(src.with_suffix(f".{fmt}"))
+        np.testing.assert_allclose(back.A, flights[0].system.A)
+        assert back.output_names == flights[0].system.output_names
+    again = run("export", src, "--format", "json")
+    assert again.exit_code == 2 and "already exists" in again.stderr
+
+
+def test_parse_grid() -> None:
+    assert list(parse_grid(text="20:80:10", option="--pasts")) == [20, 30, 40, 50, 60, 70, 80]
+    assert list(parse_grid(text="6,8", option="--orders")) == [6, 8]
+    assert list(parse_grid(text="3:5", option="--orders")) == [3, 4, 5]
+    huge = parse_grid(text="1:100000000", option="--pasts")  # lazy: no list of 1e8 ints
+    assert isinstance(huge, range) and len(huge) == 100_000_000
+    for text in ("-2:1", "0:1", "0", "1,-3"):  # ranges are checked like single values
+        with pytest.raises(ParameterError, match="positive integers"):
+            parse_grid(text=text, option="--pasts")
+    with pytest.raises(ParameterError, match=">= 2"):
+        parse_grid(text="1:4", option="--futures", minimum=2)
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["identify", "{missing}"], ["no such file"]),
+    (["identify", "{text}"], ["not an HDF5 file"]),
+    (["identify", "{f0}", "--window", "hover"], ["no phase 'hover'"]),
+    (["identify", "{f0}", "--inputs", "baro"], ["no log stream or variable 'baro'"]),
+    (["identify", "{f0}", "--order", "400", "--past", "5", "--future", "3"], ["order"]),
+    (["identify", "{f0}", "--window", "a:b"], ["--window"]),
+    (["sweep", "{f0}", "--pasts", "80:20"], ["--pasts"]),
+    (["compare", "{missing}", "{f0}"], ["does not exist"]),
+    (["export", "{text}", "--format", "mat"], ["model file"]),
+    (["identify", "{f0}", *FAST, "--rrd", "{tmp}/x.rrd"], ["--rrd"]),
+])
+def test_user_mistakes_exit_2_with_one_line(flights, tmp_path, monkeypatch, args, words) -> None:
+    monkeypatch.setitem(sys.modules, "sysid.viz", None)  # as if viz were not installed
+    text = tmp_path / "notes.txt"
+    text.write_text("hello\n")
+    paths = {"missing": tmp_path / "nope.h5", "text": text, "f0": flights[0].path,
+             "tmp": tmp_path}
+    res = run(*[a.format(**paths) for a in args])
+    assert res.exit_code == 2, res.output
+    err = res.stderr.strip()
+    assert err.startswith("error:") and "\n" not in err and "Traceback" not in res.output, err
+    assert all(w in err for w in words), err
+
+
+def test_rrd_reports_are_written(flights, tmp_path) -> None:
+    from tests.viz.rrd import load
+
+    out = tmp_path / "id.rrd"
+    res = run("identify", flights[0].path, *FAST, "--rrd", out)
+    assert res.exit_code == 0, res.output
+    model = sysid.iem(sysid.session_io.load_session(flights[0].path, outputs=["acc.z", "gyro"]),
+                      order=4, past=20, future=10)
+    ents = load(out, sort_by=None)
+    poles = np.array(ents["/sysid/poles/A"].static["Points2D:positions"], dtype=float)
+    assert poles.shape == (4, 2)
+    np.testing.assert_allclose(np.sort_complex(poles[:, 0] + 1j * poles[:, 1]),
+                               np.sort_complex(model.poles()), atol=1e-6)
+    res = run("sweep", flights[0].path, "--pasts", "20", "--futures", "10", "--orders", "3,4",
+              "--rrd", tmp_path / "sw.rrd")
+    assert res.exit_code == 0 and "/sysid/sweep/poles/order_4" in load(tmp_path / "sw.rrd")
+
+
+@pytest.mark.parametrize("command", ["identify", "compare", "order", "sweep", "export"])
+def test_help_has_an_example(command) -> None:
+    res = run(command, "--help")
+    assert res.exit_code == 0 and "Example" in res.stdout

@@ -1,0 +1,36 @@
+"""Progress of sweep and batch: a bar with ETA on a terminal, ten plain lines otherwise."""
+
+from __future__ import annotations
+
+import io
+
+from sysid.cli_progress import progress
+
+
+class _Tty(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_plain_lines_every_tenth_when_not_a_terminal() -> None:
+    out = io.StringIO()
+    with progress("sweep", total=200, stream=out) as update:
+        for done in range(1, 201):
+            update(done)
+        update(200)  # a repeated final count prints nothing more
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 10
+    assert lines[0].startswith("sweep: 20/200 (10 %)") and "eta" in lines[0]
+    assert lines[-1].startswith("sweep: 200/200 (100 %)") and lines[-1].endswith("done")
+
+
+def test_a_bar_with_eta_on_a_terminal_and_nothing_when_quiet() -> None:
+    out = _Tty()
+    with progress("batch", total=4, stream=out) as update:
+        update(2)
+    text = out.getvalue()
+    assert "batch" in text and "2/4" in text and "eta" in text and "\n" in text
+    quiet = io.StringIO()
+    with progress("batch", total=4, stream=quiet, quiet=True) as update:
+        update(4)
+    assert quiet.getvalue() == ""

@@ -1,0 +1,86 @@
+"""`sysid resid`, `sysid compare --residuals` and the residual panels of the .rrd report."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import sysid
+from sysid.cli import main
+from tests.sysid.flights import known_system, write_flight
+from tests.viz.rrd import load
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    d = tmp_path_factory.mktemp("resid")
+    system = known_system()
+    flights = [write_flight(d / f"f{i}.h5", system=system, seed=20 + i) for i in range(2)]
+    model_path = d / "m.h5"
+    res = CliRunner().invoke(main, ["identify", str(flights[0].path), "--order", "4", "--past",
+                                    "20", "--future", "10", "--out", str(model_path)])
+    assert res.exit_code == 0, res.output
+    return flights, model_path
+
+
+def run(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_resid_json_matches_the_api(setup) -> None:
+    flights, model_path = setup
+    res = run("resid", model_path, flights[1].path, "--max-lag", "15", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert report["max_lag"] == 15 and len(report["outputs"]) == 4
+    out = report["outputs"][0]
+    assert len(out["autocorr"]) == 16 and len(out["inputs"][0]["crosscorr"]) == 31
+    assert out["autocorr"][0] == pytest.approx(1.0)
+    assert all(isinstance(o["white"], bool) for o in report["outputs"])
+
+
+def test_compare_residuals_prints_the_summary(setup) -> None:
+    flights, model_path = setup
+    res = run("compare", model_path, *(f.path for f in flights), "--residuals")
+    assert res.exit_code == 0, res.output
+    assert "residual analysis" in res.stdout and "white" in res.stdout
+
+
+def test_resid_writes_residual_panels(setup, tmp_path) -> None:
+    flights, model_path = setup
+    rrd = tmp_path / "r.rrd"
+    res = run("resid", model_path, flights[1].path, "--max-lag", "10", "--rrd", rrd)
+    assert res.exit_code == 0, res.output
+    ents = load(rrd, sort_by="lag")
+    model = sysid.load_model(model_path)
+    y, u = model.output_names[0], model.input_names[0]
+    auto = ents[f"/sysid/residuals/{y}/autocorr/value"].scalars()
+    upper = ents[f"/sysid/residuals/{y}/autocorr/upper"].scalars()
+    assert auto.shape == (11,) and auto[0] == pytest.approx(1.0)
+    assert np.allclose(upper, upper[0]) and 0 < upper[0] < 0.2
+    cross = ents[f"/sysid/residuals/{y}/cross/{u}/value"].scalars()
+    assert cross.shape == (21,) and np.all(np.abs(cross) < 1)
+    assert "/sysid/residuals/summary" in ents
+
+
+@pytest.mark.parametrize("args", [["--max-lag", "0"], ["--confidence", "2"],
+                                  ["--max-lag", "100000"]])
+def test_resid_bad_input_is_one_line(setup, args) -> None:
+    flights, model_path = setup
+    res = run("resid", model_path, flights[1].path, *args)
+    assert res.exit_code == 2
+    assert "Traceback" not in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_order_prints_information_criteria(setup) -> None:
+    flights, _ = setup
+    res = run("order", flights[0].path, "--past", "20", "--future", "10", "--show", "8",
+              "--json")
+    assert res.exit_code == 0, res.output
+    ic = json.loads(res.stdout)["information_criteria"]
+    assert ic["orders"] == list(range(1, 9)) and ic["chosen"]["bic"] == 4
+    table = run("order", flights[0].path, "--past", "20", "--future", "10", "--show", "8")
+    assert "AIC picks" in table.stdout and "*" in table.stdout

@@ -1,0 +1,296 @@
+"""The sysid command line refuses what would lose data or end in a traceback: outputs that are
+inputs, existing files without --force, non-finite numbers, unwritable places, sweeps that
+cannot work. Every refusal is one line on stderr with exit code 2, and inputs stay unchanged."""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner, Result
+
+import sysid
+from sysid import model_io
+from sysid.cli import main
+from sysid.errors import ModelFileError
+from tests.sysid.flights import known_system, write_flight
+
+FAST = ["--order", "4", "--past", "20", "--future", "10"]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("robust")
+    session = write_flight(d / "s.h5", system=known_system(), seed=4).path
+    model = d / "model.h5"
+    known_system().replace(input_names=[f"motor.m{i}" for i in range(1, 5)],
+                           output_names=[f"acc.{a}" for a in "xyz"] +
+                           [f"gyro.{a}" for a in "xyz"]).save(model)
+    return {"session": session, "model": model}
+
+
+def run(*args: object) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def one_line_error(res: Result, *words: str) -> str:
+    assert res.exit_code == 2, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    err = res.stderr.strip()
+    assert err.startswith("error:") and "\n" not in err, err
+    assert "Traceback" not in res.output, res.output
+    assert all(w in err for w in words), err
+    return err
+
+
+def snapshot(*paths: Path) -> dict[Path, bytes]:
+    return {p: p.read_bytes() for p in paths}
+
+
+# --------------------------------------------------------------------- no output over an input
+@pytest.mark.parametrize("args", [
+    ["identify", "{session}", *FAST, "--rrd", "{session}"],
+    ["identify", "{session}", *FAST, "--out", "{session}"],
+    ["identify", "{session}", *FAST, "--out", "{session}", "--force"],
+    ["compare", "{model}", "{session}", "--rrd", "{session}"],
+    ["compare", "{model}", "{session}", "--rrd", "{model}"],
+    ["compare", "{model}", "{session}", "--rrd", "{other}"],
+    ["sweep", "{session}", "--pasts", "20", "--futures", "10", "--orders", "4",
+     "--rrd", "{session}"],
+    ["export", "{model}", "--format", "json", "--out", "{model}"],
+    ["export", "{json_model}", "--format", "json", "--force"],
+])
+def test_outputs_never_replace_inputs_or_other_files(files, tmp_path, args) -> None:
+    other = tmp_path / "notes.txt"
+    other.write_text("keep me\n")
+    json_model = tmp_path / "m.json"
+    sysid.load_model(files["model"]).save(json_model)
+    paths = {**files, "other": other, "json_model": json_model}
+    before = snapshot(*paths.values())
+    one_line_error(run(*[a.format(**paths) for a in args]), "--")
+    assert snapshot(*paths.values()) == before
+
+
+def test_identify_out_needs_force_to_replace(files, tmp_path) -> None:
+    out = tmp_path / "m.json"
+    out.write_text("{}")
+    one_line_error(run("identify", files["session"], *FAST, "--out", out),
+                   "already exists", "--force")
+    assert out.read_text() == "{}"
+    res = run("identify", files["session"], *FAST, "--out", out, "--force")
+    assert res.exit_code == 0, res.output
+    assert sysid.load_model(out).n_states == 4
+
+
+def test_export_force_replaces_its_output(files, tmp_path) -> None:
+    out = tmp_path / "m.mat"
+    assert run("export", files["model"], "--format", "mat", "--out", out).exit_code == 0
+    one_line_error(run("export", files["model"], "--format", "mat", "--out", out),
+                   "already exists", "--force")
+    res = run("export", files["model"], "--format", "mat", "--out", out, "--force")
+    assert res.exit_code == 0, res.output
+    one_line_error(run("export", files["model"], "--format", "mat", "--out", tmp_path / "m.h5"),
+                   ".mat")
+
+
+def test_existing_rrd_view_is_replaced(files, tmp_path) -> None:
+    pytest.importorskip("sysid.viz")
+    view = tmp_path / "view.rrd"
+    view.write_bytes(b"old view")
+    res = run("compare", files["model"], files["session"], "--rrd", view)
+    assert res.exit_code == 0, res.output
+    assert view.read_bytes() != b"old view"
+
+
+# ------------------------------------------------------------------------------ no tracebacks
+@pytest.mark.parametrize(("args", "words"), [
+    (["compare", "{model}", "{session}", "--window-s", "nan"], ["--window-s", "finite"]),
+    (["compare", "{model}", "{session}", "--window-s", "inf"], ["--window-s", "finite"]),
+    (["sweep", "{session}", "--window-s", "nan"], ["--window-s"]),
+    (["sweep", "{session}", "--window-s", "-inf"], ["--window-s"]),
+    (["identify", "{session}", "--dt", "nan"], ["--dt"]),
+    (["identify", "{session}", "--dt", "inf"], ["--dt"]),
+    (["identify", "{session}", "--window", "nan:inf"], ["--window"]),
+    (["compare", "{model}", "{session}", "--rrd", "/proc/x.rrd"], ["/proc"]),
+    (["export", "{model}", "--format", "mat", "--out", "/nonexist3/x.mat"],
+     ["/nonexist3", "does not exist"]),
+    (["identify", "{session}", *FAST, "--out", "/nonexist3/x.mat"],
+     ["/nonexist3", "does not exist"]),
+    (["identify", "{session}", *FAST, "--out", "/nonexist2/m.h5"],
+     ["/nonexist2", "does not exist"]),
+    (["identify", "{session}", *FAST, "--out", "{tmp}"], ["--out"]),
+    (["identify", "{session}", "--future", "1"], ["--future"]),
+])
+def test_bad_values_are_one_line(files, tmp_path, args, words) -> None:
+    err = one_line_error(run(*[a.format(**files, tmp=tmp_path) for a in args]), *words)
+    assert "flags =" not in err
+
+
+def test_model_save_errors_are_plain(tmp_path) -> None:
+    """Written through the API too: one plain line, not HDF5's internal text."""
+    model = known_system()
+    (tmp_path / "dir.h5").mkdir()
+    for path, words in [(tmp_path / "missing" / "m.h5", "does not exist"),
+                        (tmp_path / "missing" / "m.mat", "does not exist"),
+                        (tmp_path / "dir.h5", "Is a directory")]:
+        with pytest.raises(ModelFileError, match=words) as info:
+            model_io.save(model, path)
+        assert "flags" not in str(info.value) and "\n" not in str(info.value)
+
+
+# --------------------------------------------------------------------------- honest messages
+def test_model_that_is_a_folder_or_no_model(files, tmp_path) -> None:
+    folder = tmp_path / "folder.h5"
+    folder.mkdir()
+    for cmd in (["compare", folder, files["session"]], ["export", folder, "--format", "json"]):
+        one_line_error(run(*cmd), "is a folder")
+    for name, text in (("empty.json", "{}"), ("list.json", "[]"),
+                       ("other.json", '{"format": "something"}')):
+        path = tmp_path / name
+        path.write_text(text)
+        err = one_line_error(run("compare", path, files["session"]), name,
+                             "not a sysid model file")
+        assert "to_dict" not in err
+    one_line_error(run("compare", files["session"], files["session"]), "s.h5",
+                   "not a sysid model file")
+
+
+def test_fine_dt_warns_about_upsampling(files, caplog) -> None:
+    with caplog.at_level(logging.WARNING, logger="sysid.session_io"):
+        res = run("order", files["session"], "--past", "10", "--future", "5", "--dt", "0.002",
+                  "--json")
+    assert res.exit_code == 0, res.output
+    assert any("10x finer than the logged period 0.02 s" in r.getMessage()
+               for r in caplog.records), caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="sysid.session_io"):
+        run("order", files["session"], "--past", "10", "--future", "5", "--json")
+    assert not any("finer" in r.getMessage() for r in caplog.records)
+
+
+# -------------------------------------------------------------------------------------- sweep
+def test_sweep_where_every_model_fails_says_why_and_exits_2(files, tmp_path,
+                                                            monkeypatch) -> None:
+    view = tmp_path / "v.rrd"
+    res = run("sweep", files["session"], "--pasts", "20", "--futures", "8,10", "--orders", "500",
+              "--rrd", view)
+    assert res.exit_code == 2, res.output
+    assert "2 of 2 models failed" in res.stdout and "2 x order=500" in res.stdout, res.stdout
+    assert "--rrd" in res.stderr and "not written" in res.stderr
+    assert res.stderr.strip().splitlines()[-1].startswith("error: none of the 2 models")
+    assert not view.exists()
+    res = run("sweep", files["session"], "--pasts", "20", "--futures", "10", "--orders", "500",
+              "--json")
+    assert res.exit_code == 2
+    report = json.loads(res.stdout)
+    assert report["n_failed"] == 1 and report["failures"][0]["count"] == 1
+    assert "order=500" in report["failures"][0]["error"]
+
+
+def test_sweep_with_some_failures_lists_them_and_succeeds(files) -> None:
+    res = run("sweep", files["session"], "--pasts", "20", "--futures", "2,10", "--orders", "7")
+    assert res.exit_code == 0, res.output
+    assert "1 of 2 models failed" in res.stdout and "order=7" in res.stdout
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--pasts", "-2:1"], ["--pasts", "positive"]),
+    (["--orders", "0:1"], ["--orders", "positive"]),
+    (["--futures", "1:5"], ["--futures", ">= 2"]),
+    (["--pasts", "5:1"], ["--pasts"]),
+    (["--pasts", "1:2:3:4"], ["--pasts"]),
+    (["--pasts", "5000"], ["--pasts", "past <= "]),
+    (["--pasts", "1:100000000"], ["--pasts", "past <= "]),
+    (["--futures", "2:100000000"], ["--futures", "future <= "]),
+    (["--pasts", "1:100", "--futures", "2:50", "--orders", "1:40"], ["models, more than"]),
+    (["--workers", "100"], ["--workers"]),
+])
+def test_sweep_grid_is_checked_before_running(files, args, words) -> None:
+    one_line_error(run("sweep", files["session"], *args), *words)
+
+
+def test_usage_errors_are_one_line(files) -> None:
+    one_line_error(run("identify", files["session"], "--no-such-option"), "--no-such-option")
+    one_line_error(run("sweep", files["session"], "--workers", "0"), "--workers")
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("whole_group", [False, True], ids=["parent", "process-group"])
+def test_ctrl_c_stops_a_parallel_sweep(files, whole_group) -> None:
+    """SIGINT to the parent (or to the whole group, as a terminal's Ctrl-C) ends a parallel
+    sweep within seconds, with its workers; it used to hang waiting for them."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    exe = Path(sys.executable).with_name("sysid")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-c",
+                                           "from sysid.cli import main; main()"]
+    proc = subprocess.Popen([*cmd, "sweep", str(files["session"]), "--pasts", "10:60:2",
+                             "--futures", "5:20", "--orders", "4,8", "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, preexec_fn=_default_sigint)
+    try:
+        workers = _wait_for_children(proc.pid, n=2, timeout=30)
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.5)  # let the workers take their first pairs
+        t0 = time.monotonic()
+        if whole_group:
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+        assert time.monotonic() - t0 < 10
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode != 0
+    assert b"Traceback" not in err, err.decode()
+    time.sleep(0.5)
+    assert not [pid for pid in workers if Path(f"/proc/{pid}").exists()
+                and "Z" not in _proc_state(pid)], "workers left running"
+
+
+def _proc_state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return "Z"
+
+
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT as a terminal gives it. A test run started in the
+    background of a non-interactive shell ignores SIGINT, children inherit that, and Python
+    then never raises KeyboardInterrupt."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _wait_for_children(pid: int, *, n: int, timeout: float) -> list[int]:
+    """Pids of ``pid``'s children once it has ``n`` of them (Linux /proc), or after ``timeout``."""
+    import time
+
+    if not Path("/proc/self/stat").exists():
+        time.sleep(3)
+        return []
+    end = time.monotonic() + timeout
+    kids: list[int] = []
+    while time.monotonic() < end:
+        kids = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if int(fields[1]) == pid:
+                kids.append(int(stat.parent.name))
+        if len(kids) >= n:
+            return kids
+        time.sleep(0.1)
+    return kids

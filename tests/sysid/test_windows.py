@@ -1,0 +1,140 @@
+"""Default windows (excitation, else airborne segments), per-session and phase-relative
+windows, the logged rate as default grid, and anti-aliased decimation."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from sysid.cli import main
+from sysid.errors import DataError, ParameterError
+from sysid.session_io import (
+    PhaseRelative,
+    load_experiments,
+    load_session,
+    load_sessions,
+    parse_window,
+)
+
+# the session writer as flights.py imports it (its package moves in the layout change)
+from tests.sysid.flights import (
+    SessionWriter,
+    known_system,
+    log_block_spec,
+    standard_streams,
+    write_flight,
+)
+
+# an imported log: ground, airborne, ground, airborne, ground (host seconds)
+AIRBORNE = [(0.0, "ground-0", "ground"), (4.0, "airborne-1", "airborne"),
+            (22.0, "ground-1", "ground"), (26.0, "airborne-2", "airborne"),
+            (46.0, "ground-2", "ground")]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("win")
+    system = known_system()
+    return {"recorded": write_flight(d / "rec.h5", system=system, seed=1).path,
+            "imported": write_flight(d / "imp.h5", system=system, seed=2,
+                                     phases=AIRBORNE).path,
+            "imported2": write_flight(d / "imp2.h5", system=system, seed=3,
+                                      phases=AIRBORNE).path,
+            "log": write_flight(d / "log.h5", system=system, seed=4,
+                                phases=[(0.0, "log", "log")]).path}
+
+
+def test_parse_window_forms() -> None:
+    assert parse_window("auto") == "auto" and parse_window("all") is None
+    assert parse_window("hover") == "hover" and parse_window("1.5:4") == (1.5, 4.0)
+    assert parse_window("airborne-1@0.5:3") == PhaseRelative("airborne-1", 0.5, 3.0)
+    assert parse_window("airborne-1@2:") == PhaseRelative("airborne-1", 2.0, None)
+    for bad in ("a:b", "x@1", "@1:2", "3:1", "p@2:1", "1:inf"):
+        with pytest.raises(ParameterError):
+            parse_window(bad)
+
+
+def test_auto_is_the_excitation_else_each_airborne_segment(files) -> None:
+    rec = load_experiments(files["recorded"], dt=0.02)
+    assert len(rec) == 1 and rec[0].n_samples == load_session(files["recorded"]).n_samples
+    imp = load_experiments(files["imported"], dt=0.02)
+    assert [e.source.rsplit("#", 1)[1] for e in imp] == ["airborne-1", "airborne-2"]
+    # 18 s and 20 s on a 0.02 s grid (phases are [start, end); a sample or two of edge)
+    assert abs(imp[0].n_samples - 900) <= 2 and abs(imp[1].n_samples - 1000) <= 2
+    one = load_session(files["imported"], window="airborne-2")
+    np.testing.assert_allclose(imp[1].u, one.u)
+    with pytest.raises(DataError, match=r"no excitation or airborne-N phase .*\['log'\]"):
+        load_experiments(files["log"])
+    with pytest.raises(DataError, match="selects 2 experiments"):
+        load_session(files["imported"], window="auto")
+
+
+def test_phase_relative_and_per_session_windows(files) -> None:
+    rel = load_session(files["imported"], window=PhaseRelative("airborne-2", 2.0, 12.0))
+    absolute = load_session(files["imported"], window=(28.0, 38.0))
+    np.testing.assert_allclose(rel.y, absolute.y)
+    to_end = load_session(files["imported"], window=PhaseRelative("airborne-2", 10.0))
+    assert abs(to_end.n_samples - 500) <= 2
+    groups = load_sessions([files["imported"], files["recorded"]],
+                           windows={"imp.h5": PhaseRelative("airborne-1", 0.0, 5.0)})
+    assert [len(g) for g in groups] == [1, 1]
+    assert abs(groups[0][0].n_samples - 250) <= 2 and groups[1][0].n_samples == 2000
+    with pytest.raises(ParameterError, match="no such session"):
+        load_sessions([files["imported"]], windows={"other.h5": None})
+
+
+def test_grid_is_the_logged_rate_and_faster_streams_are_anti_aliased(tmp_path, caplog):
+    """A 40 Hz tone logged at 100 Hz held onto a 50 Hz grid aliases to 10 Hz at full size;
+    the anti-alias filter removes it and keeps a 1 Hz signal."""
+    path = tmp_path / "fast.h5"
+    n = 3000
+    t = np.arange(n) * 0.01
+    slow = np.sin(2 * np.pi * 1.0 * t)
+    tone = np.sin(2 * np.pi * 40.0 * t)
+    specs = [log_block_spec(name="cmd", variables=[("ctl.u", "float")], period_s=0.01),
+             log_block_spec(name="out", variables=[("ctl.y", "float")], period_s=0.01)]
+    with SessionWriter(path, streams=[*specs, *standard_streams()], metadata={}) as w:
+        w.phase(t=0.0, phase_id=0, name="excitation", kind="excitation")
+        for spec, values in (("cmd", slow + tone), ("out", np.cos(2 * np.pi * 1.3 * t))):
+            w.extend(spec, [(float(t[k]) + 0.002, 1000 + 10 * k, float(values[k]))
+                            for k in range(n)])
+        w.close(duration_s=float(t[-1]) + 0.01)
+    native = load_session(path, inputs=["cmd"], outputs=["out"], dt=None, detrend=None)
+    assert native.dt == pytest.approx(0.01) and native.n_samples >= n - 2
+    with caplog.at_level(logging.WARNING, logger="sysid.session_io"):
+        fifty = load_session(path, inputs=["cmd"], outputs=["out"], dt=0.02, detrend=None)
+    assert any("anti-alias" in r.getMessage() and "100 Hz" in r.getMessage()
+               for r in caplog.records), caplog.text
+    u = fifty.u[100:-100, 0]  # away from the filter's edge transients
+    spec = np.abs(np.fft.rfft(u * np.hanning(u.size))) / (u.size / 4)
+    freqs = np.fft.rfftfreq(u.size, 0.02)
+    at = {f: spec[np.argmin(np.abs(freqs - f))] for f in (1.0, 10.0)}
+    assert at[1.0] > 0.9 and at[10.0] < 0.01, at  # held without the filter: ~1.0 at 10 Hz
+
+
+def test_identify_with_no_knobs_on_imported_airborne_segments(files, tmp_path) -> None:
+    """No horizons nor order given: chosen on held-out data of the airborne segments."""
+    out = tmp_path / "m.h5"
+    res = CliRunner().invoke(main, ["identify", str(files["imported"]), "--validate",
+                                    str(files["imported2"]), "--out", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads(res.stdout)
+    sel = rep["selection"]
+    assert "last 30 %" in sel["rule"] and len(rep["experiments"]) == 2
+    assert (rep["past"], rep["future"], rep["order"]) == (
+        sel["chosen"]["past"], sel["chosen"]["future"], sel["chosen"]["order"])
+    assert len(sel["grid"]["pasts"]) > 1 and len(sel["grid"]["orders"]) > 1
+    assert rep["order"] == 4  # the simulated vehicle's order
+    assert sel["candidates"][0]["score_percent"] >= sel["candidates"][-1]["score_percent"]
+    assert rep["stable"] and sel["chosen"]["score_percent"] > 50
+    assert rep["dt_s"] == pytest.approx(0.02)  # the logged rate
+    assert [m["mode"] for m in rep["validation"]] == [
+        "validation: simulation, 2 s windows", "validation: 1-step prediction"]
+    assert min(rep["validation"][1]["fit_percent"].values()) > 50
+    text = CliRunner().invoke(main, ["compare", str(out), str(files["imported2"]),
+                                     "--horizon", "1"])
+    assert text.exit_code == 0 and "imp2.h5#airborne-2" in text.stdout, text.output

@@ -1,0 +1,129 @@
+"""The commands the README and docs/*.md show are real: every ``groundstation``/``sysid`` line
+of their shell blocks parses against the command line as it is (sub-command, options, values),
+and the ones that need no hardware, viewer, network or long run are run, in a scratch folder
+holding the files the examples name (``flight.h5``, ``sessions/prbs-3axis-A.h5`` and ``-B``),
+and must succeed."""
+
+from __future__ import annotations
+
+import glob
+import re
+import shlex
+from pathlib import Path
+
+import click
+import pytest
+from click.testing import CliRunner
+
+import groundstation.sim as gsim
+from groundstation.cli import main as gs_main
+from sysid.cli import main as sysid_main
+from tests.sysid.flights import known_system, write_flight
+from tests.viz.sessions import write_session
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+MAINS = {"groundstation": gs_main, "sysid": sysid_main}
+_FENCE = re.compile(r"^```(\w*)\s*$")
+
+
+def commands(path: Path) -> list[list[str]]:
+    """Command lines (as argv) of the shell blocks of ``path``; ``a & b`` gives two."""
+    out, lang = [], None
+    for line in path.read_text().splitlines():
+        m = _FENCE.match(line.strip())
+        if m:
+            lang = None if lang is not None else m.group(1)
+            continue
+        if lang not in ("", "sh", "bash", "shell", "console"):
+            continue
+        for part in line.split(" & "):
+            if part.strip().split(" ", 1)[0] in MAINS:
+                out.append(shlex.split(part, comments=True))
+    return out
+
+
+ALL = [(p.name, argv) for p in DOCS for argv in commands(p)]
+
+
+def _runnable(argv: list[str]) -> bool:
+    """Needs no hardware, viewer, network or long run: decided by what the command does."""
+    words = argv[:3]
+    if "--help" in argv or "--view" in argv:
+        return False
+    if words[:2] == ["groundstation", "fly"]:
+        uri = argv[argv.index("--uri") + 1] if "--uri" in argv else ""
+        return uri.startswith("sim://") and argv[2] == "hover-check"
+    if words[:2] == ["groundstation", "replay"]:
+        return "--rrd" in argv  # otherwise it opens a viewer
+    return words[:2] in (["groundstation", "plan"], ["groundstation", "info"],
+                         ["groundstation", "export"],
+                         ["sysid", "order"], ["sysid", "identify"], ["sysid", "compare"],
+                         ["sysid", "export"])
+
+
+def _parse(argv: list[str]) -> None:
+    """Parse ``argv`` as the CLI would, without running it (unknown options, bad values and
+    missing sub-commands raise)."""
+    if "--help" in argv:  # harmless: run it
+        res = CliRunner().invoke(MAINS[argv[0]], argv[1:])
+        assert res.exit_code == 0 and "Usage" in res.output, res.output
+        return
+    cmd: click.Command = MAINS[argv[0]]
+    ctx = click.Context(cmd, info_name=argv[0])
+    rest = argv[1:]
+    while isinstance(cmd, click.Group):
+        name, sub, rest = cmd.resolve_command(ctx, rest)
+        assert sub is not None, argv
+        cmd = sub
+        ctx = click.Context(cmd, parent=ctx, info_name=name)
+    cmd.make_context(ctx.info_name, list(rest), parent=ctx.parent)
+
+
+def test_the_docs_show_commands():
+    names = {argv[1] for _, argv in ALL}
+    assert {"fly", "info", "replay", "export", "identify", "compare", "order", "sweep"} <= names
+    assert sum(_runnable(argv) for _, argv in ALL) >= 15
+
+
+@pytest.mark.parametrize(("doc", "argv"), ALL, ids=[f"{d}: {' '.join(a)[:60]}" for d, a in ALL])
+def test_documented_command_parses(doc, argv):
+    _parse(argv)
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory):
+    d = tmp_path_factory.mktemp("docs")
+    (d / "sessions").mkdir()
+    system = known_system()
+    for name, seed in (("A", 1), ("B", 2)):
+        write_flight(d / "sessions" / f"prbs-3axis-{name}.h5", system=system, seed=seed)
+    write_session(d / "flight.h5")
+    return d
+
+
+@pytest.mark.parametrize("doc", [p for p in DOCS if any(_runnable(a) for a in commands(p))],
+                         ids=lambda p: p.name)
+def test_documented_commands_run(doc, scratch, tmp_path, monkeypatch):
+    """Each doc's runnable examples, in order, in a copy of the scratch folder."""
+    for f in scratch.rglob("*.h5"):
+        target = tmp_path / f.relative_to(scratch)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(f.read_bytes())
+    monkeypatch.chdir(tmp_path)
+    ran = 0
+    try:
+        for argv in commands(doc):
+            if not _runnable(argv):
+                continue
+            args = [a for arg in argv[1:]
+                    for a in (sorted(glob.glob(arg)) or [arg] if "*" in arg else [arg])]
+            inputs = [a for a in args if a.endswith(".h5") and "-" not in a[:1]]
+            if any(not Path(a).exists() for a in inputs if a not in ("model.h5",)):
+                continue  # names a file no example here makes (e.g. a folder of uSD logs)
+            res = CliRunner().invoke(MAINS[argv[0]], args)
+            assert res.exit_code == 0, f"{doc.name}: {' '.join(argv)}\n{res.output}"
+            ran += 1
+    finally:
+        gsim.close_all()
+    assert ran >= 1
