@@ -2,8 +2,9 @@
 
 Flies the thesis' ``prbs-3axis`` plan and a second realisation of it (every PRBS advanced in its
 m-sequence, see :func:`groundstation.plan.variants.advance_prbs`) on two simulated Crazyflies
-through the real cflib stack, records both sessions, identifies an 8th-order model with IEM from
-the first flight's excitation phase, and validates it on the second flight the way a quadrotor
+through the real cflib stack, records both sessions, identifies a model with IEM from the first
+flight's excitation phase (past, future and order chosen by validation on the last 30 % of that
+phase, :mod:`sysid.auto`, unless given), and validates it on the second flight the way a quadrotor
 model must be validated: simulation over short windows (initial state estimated per window) and
 k-step-ahead prediction through the innovation form (see ``docs/sysid.md``).
 """
@@ -52,20 +53,24 @@ def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> Fl
               help="Folder for the session and model files (default: a new temporary folder).")
 @click.option("--speed", type=FiniteFloat(min=1, max=100), default=10.0, show_default=True,
               help="Simulation speed factor (the 112 s plan takes 112/speed s).")
-@click.option("--order", type=click.IntRange(1, 40), default=8, show_default=True)
-@click.option("--past", type=click.IntRange(1, 500), default=60, show_default=True)
-@click.option("--future", type=click.IntRange(1, 200), default=17, show_default=True)
+@click.option("--order", type=click.IntRange(1, 40), default=None,
+              help="Model order (default: chosen by validation; the thesis used 8).")
+@click.option("--past", type=click.IntRange(1, 500), default=None,
+              help="Past horizon, samples (default: chosen by validation; the thesis used 60).")
+@click.option("--future", type=click.IntRange(2, 200), default=None,
+              help="Future horizon, samples (default: chosen by validation; the thesis used 17).")
 @click.option("--advance", type=click.IntRange(1, 1_000_000), default=500, show_default=True,
               help="Chips the validation flight's PRBS is advanced in its m-sequence.")
-def command(out: Path | None, speed: float, order: int, past: int, future: int,
-            advance: int) -> None:
+def command(out: Path | None, speed: float, order: int | None, past: int | None,
+            future: int | None, advance: int) -> None:
     """Fly two PRBS flights on the simulator, identify a model from one, validate on the other.
 
     \b
     The whole loop of the thesis, with the real cflib stack against the simulated Crazyflie:
       1. fly prbs-3axis (roll/pitch ±25 deg, yaw rate ±50 deg/s) on sim://0
       2. fly it again with the PRBS advanced by --advance chips on sim://1
-      3. identify with IEM (order 8, past 60, future 17) from flight 1's excitation phase
+      3. identify with IEM from flight 1's excitation phase; past, future and order are
+         chosen by validation on its last 30 % (--order 8 --past 60 --future 17: the thesis)
       4. print the poles and the fits on flight 2: 2 s windowed simulation and k-step prediction
 
     \b
@@ -74,8 +79,10 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
       groundstation info demo-out/prbs-3axis-*.h5
       groundstation replay demo-out/prbs-3axis-*.h5 --rrd flight.rrd
     """
-    from sysid import compare, iem
+    from sysid import compare
+    from sysid.auto import select
     from sysid.cli_support import poles_rich_table
+    from sysid.methods import get_method
     from sysid.session_io import load_session
 
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
@@ -94,11 +101,17 @@ def command(out: Path | None, speed: float, order: int, past: int, future: int,
         console.print(f"  recorded {result.path} ({s.get('duration_s', float('nan')):.1f} s)")
         paths.append(result.path)
 
-    with console.status("identifying with IEM ..."):
+    with console.status("identifying with IEM (choosing past, future and order) ..."):
         t0 = time.perf_counter()
         ident = load_session(paths[0], window="excitation")
-        model = iem(ident, order=order, past=past, future=future)
+        iem = get_method("iem")
+        given = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
+                 if v is not None}
+        chosen = select([[ident]], method=iem, options=iem.options(), **given)
+        model = chosen.model
+        order, past, future = chosen.best.order, chosen.best.past, chosen.best.future
         seconds = time.perf_counter() - t0
+    console.print(f"chosen: {chosen.rule}; " + (", ".join(chosen.warnings) or "inside the grid"))
     console.print(f"IEM: order {order}, past {past}, future {future}, "
                   f"{ident.n_samples} samples, {seconds:.2f} s; stable: {model.is_stable}, "
                   f"predictor stable: {model.predictor_is_stable}")

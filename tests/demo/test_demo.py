@@ -31,16 +31,20 @@ def test_demo_flies_identifies_and_validates(tmp_path):
     # the validation flight flew a different PRBS realisation
     assert ident.meta["plan_text"] != val.meta["plan_text"]
     model = load_model(summary["model"])
-    assert model.A.shape == (8, 8) and model.B.shape == (8, 4) and model.C.shape == (6, 8)
+    n = summary["order"]  # chosen by validation on the last 30 % of flight 1
+    assert model.A.shape == (n, n) and model.B.shape == (n, 4) and model.C.shape == (6, n)
+    assert "chosen:" in res.output
     for row in pole_cells(pole_rows(model.poles(), dt=model.dt)):  # the one pole formatter
         assert re.search(r"\s+".join(map(re.escape, row)), res.output), row
     # the default model is stable by default (issue 10): rate dynamics integrate, so poles sit
     # at |z| ~ 1, but none beyond 1.01 (the old default refinement put them at 1.02-1.05)
     assert max(abs(p) for p in model.poles()) <= 1.01
-    # The simulated vehicle's rate dynamics are captured: one-step prediction of the gyro on
-    # the held-out flight (channels 3..5) well above chance. Measured over 7 runs (two flights
-    # each, hosts loaded): 57-91 % per channel, mean 61-83 %; the flights (and so the model)
-    # vary with host timing, hence a floor on the mean and a low one per channel.
+    # The simulated vehicle's rate dynamics are captured on the held-out flight (gyro channels
+    # 3..5). Measured over 6 runs on a loaded host, horizons and order chosen by validation:
+    # 1-step 86-91 %, 2 s windowed simulation 51-76 % per channel (with the thesis' fixed
+    # 8/60/17 the same flights gave -10..78 % 1-step: why the demo chooses by validation).
     gyro_1step = summary["fits"]["1-step prediction"][3:]
-    assert sum(gyro_1step) / 3 > 50.0 and min(gyro_1step) > 15.0, gyro_1step
+    gyro_sim = summary["fits"]["simulation, 2 s windows"][3:]
+    assert min(gyro_1step) > 70.0, gyro_1step
+    assert min(gyro_sim) > 30.0, gyro_sim
     assert summary["predictor_stable"]

@@ -251,20 +251,30 @@ def udp_simulator(rng: random.Random, work: Path) -> str:
     server, errors, client = _udp_server()
     endpoint = server.endpoints[0]
     addr = ("127.0.0.1", endpoint.port)
-    foreign = endpoint.foreign
+    foreign, received = endpoint.foreign, endpoint.datagrams
+    n_sent = rng.randrange(1, 40)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
         n_other = 0
-        for _ in range(rng.randrange(1, 40)):
+        for _ in range(n_sent):
             intrude = rng.random() < 0.1
             n_other += intrude
             (other if intrude else client).sendto(_datagram(rng), addr)
     client.sendto(b"\xff", addr)
-    while client.recv(64) != b"\xff":  # the vehicle's replies to the client come first
-        pass
+    # Every datagram of this case handled before judging it (a reply byte 0xff from the vehicle
+    # is no marker: an empty link packet looks the same), with a generous deadline.
+    deadline = time.monotonic() + 5.0
+    while endpoint.datagrams - received < n_sent + 1 and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert endpoint.datagrams - received >= n_sent + 1, "the server stopped receiving"
     assert endpoint._thread.is_alive() and server.simulators[0].running, "server died"
     assert not errors.records, errors.records[0]
-    assert endpoint.foreign - foreign <= n_other, "a client datagram was taken as foreign"
-    return "intruded" if n_other else "ok"
+    if endpoint.client is None or endpoint.client[1] == client.getsockname()[1]:
+        assert endpoint.foreign - foreign <= n_other, "a client datagram was taken as foreign"
+        return "intruded" if n_other else "ok"
+    # The client (kept across cases) was silent past CLIENT_SILENCE_S on a busy host, so an
+    # intruder legitimately took the free link; the client is then foreign until it frees again.
+    assert n_other, "the link changed hands with no other sender"
+    return "taken over"
 
 
 TARGETS: dict[str, Target] = {"session": session_reader, "udp": udp_simulator}
