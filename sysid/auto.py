@@ -38,6 +38,7 @@ from sysid.grid import pair_flights
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult, SweepRow, sweep
+from sysid.validate import SIMULATION_WINDOW_S
 
 __all__ = ["HOLDOUT_FRACTION", "Plan", "Selection", "default_grid", "finish", "focus_order",
            "holdout", "max_blocks", "pick_focus", "plan", "select"]
@@ -52,7 +53,7 @@ PAST_S = (0.1, 1.2)
 FUTURE_S = (0.06, 0.4)
 ORDERS = (2, 12)
 #: Simulation window of the score, seconds (shortened to the shortest validation record).
-SCORE_WINDOW_S = 2.0
+SCORE_WINDOW_S = SIMULATION_WINDOW_S
 
 
 @dataclass(frozen=True, eq=False)

@@ -230,7 +230,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         cost = report.get("cost_points")
         con.print(f"stability={report['mode']}: pole(s) moved {radii}; "
                   f"{report['measure']} fit on these data "
-                  + ("unchanged" if cost is None else f"{-cost:+.2f} points"))
+                  + ("not measurable: the free model diverges" if cost is None
+                     else f"{-cost:+.2f} points"))
     con.print(fit_table(console=con, title="fit on the identification data [%]",
                         names=model.output_names,
                         rows=[(f"simulation, {window_s:g} s windows", sim.fit),

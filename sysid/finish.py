@@ -124,27 +124,36 @@ def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,
     """``model`` with ``provenance["stability"]``: the poles moved and the fit it cost.
 
     The cost is measured on the identification data with the measure the focus optimises
-    (one-step prediction or simulation from a least-squares x0), against the same model with
-    ``stability="free"`` (``free``, scaled units).
+    (one-step prediction, or simulation over :data:`~sysid.validate.SIMULATION_WINDOW_S`
+    windows, each from a least-squares x0), against the same model with ``stability="free"``
+    (``free``, scaled units). ``cost_points`` is None when the free model's fit is not finite
+    or below -100 % on every channel (it diverges: the move costs nothing measurable).
     """
-    from sysid.validate import compare  # validate imports nothing of the methods
+    # validate imports nothing of the methods
+    from sysid.validate import SIMULATION_WINDOW_S, compare
 
     free_model = build_model(a=free.a, b=free.b, c=free.c, d=free.d, k=free.k,
                              noise_cov=free.noise_cov, u_scale=products.u_scale,
                              y_scale=products.y_scale, template=products.flights[0],
                              provenance={})
     horizon = 1 if model.provenance.get("focus", "prediction") == "prediction" else None
+    flights = list(products.flights)
+    window = None
+    if horizon is None:
+        window = min(SIMULATION_WINDOW_S, min(fl.n_samples for fl in flights) * model.dt)
     with np.errstate(all="ignore"):
-        fit = np.asarray(compare(model, list(products.flights), horizon=horizon, warn=False))
-        fit_free = np.asarray(compare(free_model, list(products.flights), horizon=horizon,
+        fit = np.asarray(compare(model, flights, horizon=horizon, window=window, warn=False))
+        fit_free = np.asarray(compare(free_model, flights, horizon=horizon, window=window,
                                       warn=False))
     fit_free = np.where(np.isfinite(fit_free), fit_free, np.nan)
-    cost = float(np.nanmean(fit_free - fit)) if np.isfinite(fit_free).any() else None
+    measurable = np.isfinite(fit_free).any() and np.nanmax(fit_free) > -100.0
+    cost = float(np.nanmean(fit_free - fit)) if measurable else None
     report = {
         "mode": model.provenance.get("stability"),
         "moved": [{"from": [p.real, p.imag], "to": [q.real, q.imag], "radius_from": abs(p),
                    "radius_to": abs(q)} for p, q in fin.moved],
-        "measure": "1-step prediction" if horizon == 1 else "simulation",
+        "measure": ("1-step prediction" if horizon == 1
+                    else f"simulation ({window:g} s windows)"),
         "fit_percent": fit.tolist(), "fit_percent_free": fit_free.tolist(),
         "cost_points": cost,
     }

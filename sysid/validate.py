@@ -45,6 +45,7 @@ from sysid.errors import DataError, DimensionError, HorizonError
 from sysid.model import StateSpaceModel
 
 __all__ = [
+    "SIMULATION_WINDOW_S",
     "CompareResult",
     "compare",
     "estimate_x0",
@@ -54,6 +55,10 @@ __all__ = [
     "simulate_windows",
     "stable_predictor",
 ]
+
+#: Simulation window (s) for near-integrating models: long enough to show the dynamics, short
+#: enough that an integrator's drift from the initial state does not decide the fit.
+SIMULATION_WINDOW_S = 2.0
 
 log = logging.getLogger(__name__)
 

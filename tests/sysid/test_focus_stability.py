@@ -183,3 +183,21 @@ def test_to_control_accepts_session_channel_names():
     assert isinstance(sys_c, control.StateSpace) and sys_c.dt == 0.02
     assert sys_c.input_labels[0] == "motor_m1" and sys_c.output_labels[3] == "gyro_x"
     np.testing.assert_allclose(sys_c.A, m.A)
+
+
+def test_stability_cost_in_simulation_focus_is_measured_over_windows():
+    """A pole just outside the circle (an integrator's estimate) moved by ``stability="auto"``:
+    its cost in simulation focus is measured over short windows, a figure of a few points, not
+    the whole-record simulation of the unstable free model (which made it 1e6 points)."""
+    rng = np.random.default_rng(3)
+    a = np.array([[1.004, 0.0], [0.0, 0.8]])
+    system = sysid.StateSpaceModel(A=a, B=np.array([[0.1], [1.0]]), C=np.array([[1.0, 1.0]]),
+                                   D=np.zeros((1, 1)), dt=0.02)
+    u = np.sign(rng.standard_normal((3000, 1)))
+    y = system.simulate(u)
+    data = IOData(u=u, y=y + 0.01 * y.std() * rng.standard_normal(y.shape), dt=0.02)
+    model = sysid.iem(data, order=2, past=10, future=10, focus="simulation")
+    report = model.provenance["stability"]
+    assert report["moved"] and max(abs(model.poles())) <= MARGINAL_RADIUS + 1e-9
+    assert report["measure"] == "simulation (2 s windows)"
+    assert report["cost_points"] is not None and abs(report["cost_points"]) < 50.0
