@@ -239,21 +239,27 @@ def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
            keep_models: bool = False, choose_focus: bool = False) -> Selection:
     """Choose past, future and order (module docstring) and identify the chosen model on all
     the data: :func:`plan`, :func:`sysid.sweep.sweep`, :func:`finish`. With
-    ``choose_focus`` the grid runs for both focus choices and :func:`pick_focus` decides."""
+    ``choose_focus`` the grid runs for both focus choices and :func:`pick_focus` decides.
+    ``progress(done, total)`` counts models over every focus run."""
     p = plan(groups, pasts=pasts, futures=futures, orders=orders, validation=validation)
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
+    per_run = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
+    total = per_run * len(variants)
     selections = []
-    for opts in variants:
+    for i, opts in enumerate(variants):
+        report = None if progress is None else (
+            lambda done, _n, i=i: progress(i * per_run + done, total))
         result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
-                       window=p.window_s, workers=workers, progress=progress,
+                       window=p.window_s, workers=workers, progress=report,
                        keep_models=keep_models)
         try:
             selections.append(finish(p, result, method=method, options=opts))
-        except DataError:
-            if len(variants) == 1:
-                raise
+        except DataError as exc:
+            log.info("selection: focus %s: %s", opts.focus, exc)
     if not selections:
-        raise DataError("no model of the grid is stable, with either focus; give horizons "
-                        "and an order, other channels or a longer window")
+        raise DataError(f"none of the {total} models of the grid is stable"
+                        + (", with either focus" if choose_focus else "")
+                        + "; give horizons and an order (--past/--future/--order), other "
+                          "channels or a longer window")
     return pick_focus(selections) if choose_focus else selections[0]

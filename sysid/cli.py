@@ -9,7 +9,6 @@ and progress are for people (progress goes to stderr).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import logging
 import sys
@@ -27,11 +26,10 @@ from sysid.auto import (
     Selection,
     default_grid,
     finish,
-    focus_order,
     holdout,
     max_blocks,
-    pick_focus,
     plan,
+    select,
 )
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
 from sysid.cli_progress import progress
@@ -271,37 +269,19 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
 
 def _choose(groups: list[list[Any]], *, meth: Method, options: Any, past: int | None,
             future: int | None, order: int | None, workers: int, quiet: bool,
-            keep_models: bool = False, validation: list[Any] | None = None,
-            grid: dict[str, Any] | None = None, choose_focus: bool = False) -> Selection:
-    """Horizons and order by validation (:mod:`sysid.auto`), with a progress bar; with
-    ``choose_focus`` the grid runs for each focus and the focus is chosen the same way
-    (:func:`sysid.auto.pick_focus`)."""
-    given = dict(grid or {})
-    for key, value in (("pasts", past), ("futures", future), ("orders", order)):
-        if value is not None:
-            given[key] = [value]
-    p = plan(groups, validation=validation, **given)
-    variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
-                if choose_focus else [options])
-    total = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
-    selections = []
+            choose_focus: bool = False) -> Selection:
+    """Horizons and order by validation (:func:`sysid.auto.select`) with a progress bar; the
+    given ones are fixed."""
+    given = {key: [value] for key, value in (("pasts", past), ("futures", future),
+                                              ("orders", order)) if value is not None}
     with Progress("choosing horizons, order" + (" and focus" if choose_focus else ""),
                   BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=Console(stderr=True), disable=quiet) as bar:
-        task = bar.add_task("choose", total=total * len(variants))
-        for i, opts in enumerate(variants):
-            result = run_sweep(
-                p.ident, **p.grid, method=meth, options=opts, validation=p.val,
-                window=p.window_s, workers=workers, keep_models=keep_models,
-                progress=lambda done, _total, i=i: bar.update(task, completed=i * total + done))
-            try:
-                selections.append(finish(p, result, method=meth, options=opts))
-            except DataError:
-                continue
-    if not selections:
-        raise DataError(f"none of the {total * len(variants)} models of the grid is stable; "
-                        "give --past/--future/--order, other channels or a longer window")
-    return pick_focus(selections) if choose_focus else selections[0]
+        task = bar.add_task("choose", total=None)
+        return select(groups, method=meth, options=options, workers=workers,
+                      choose_focus=choose_focus, **given,
+                      progress=lambda done, total: bar.update(task, completed=done,
+                                                              total=total))
 
 
 def _selection_json(sel: Selection) -> dict[str, Any]:
