@@ -119,6 +119,13 @@ def _one_line(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
+def _log_unexpected(group: str, exc: Exception) -> None:
+    """A failure that is not a user error (a bug, a lost worker) keeps its traceback in the log."""
+    if not isinstance(exc, (SysIdError, SessionFileError, OSError, ValueError,
+                            np.linalg.LinAlgError)):
+        log.error("group %s failed unexpectedly", group, exc_info=exc)
+
+
 def identify_group(groups: list[list[IOData]], *, method: Method, options: Options,
                    grid: dict[str, list[int]], workers: int = 1) -> dict[str, Any]:
     """Select and identify one group's model (:func:`sysid.auto.select`); runs anywhere."""
@@ -176,11 +183,15 @@ def run_batch(
     def finish(row: BatchRow, t0: float, outcome: dict[str, Any] | BaseException) -> None:
         nonlocal done
         row.seconds = time.perf_counter() - t0
+        if not isinstance(outcome, BaseException):
+            path = out_dir / f"{row.group}.h5"
+            try:
+                outcome["model"].save(path)
+            except Exception as exc:  # e.g. the disk is full: this group fails, the rest go on
+                outcome = exc
         if isinstance(outcome, BaseException):
             row.error = _one_line(outcome)
         else:
-            path = out_dir / f"{row.group}.h5"
-            outcome["model"].save(path)
             row.past, row.future, row.order = outcome["past"], outcome["future"], outcome["order"]
             row.poles = list(np.sort_complex(outcome["model"].poles()))
             row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
@@ -208,8 +219,8 @@ def run_batch(
                     futures[fut] = name
                     pending[name] = (row, t0)
                     continue
-            except (SysIdError, SessionFileError, OSError, ValueError,
-                    np.linalg.LinAlgError) as exc:
+            except Exception as exc:  # a failed group is a row, never the end of the batch
+                _log_unexpected(name, exc)
                 outcome = exc
             finish(row, t0, outcome)
         if futures:
@@ -219,7 +230,8 @@ def run_batch(
                 row, t0 = pending.pop(futures[fut])
                 try:
                     result = fut.result()
-                except (SysIdError, OSError, ValueError, np.linalg.LinAlgError) as exc:
+                except Exception as exc:  # also a worker lost on the cluster (KilledWorker)
+                    _log_unexpected(futures[fut], exc)
                     result = exc
                 finish(row, t0, result)
     except BaseException:

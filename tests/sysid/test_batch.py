@@ -101,3 +101,29 @@ def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
     assert res.exit_code == 130 and "interrupted: 1 finished group" in res.stderr
     [row] = json.loads((out / "summary.json").read_text())
     assert row["group"] == "a0" and row["error"] is None and (out / "a0.h5").exists()
+
+
+def test_an_unexpected_failure_is_a_row_and_the_batch_goes_on(sessions, tmp_path, monkeypatch,
+                                                              caplog):
+    """Not only user errors: a bug in one group (here a KeyError, as a loader meeting an odd
+    channel raised) or a lost cluster worker is that group's failed row, with its traceback
+    in the log; the other groups are identified."""
+    paths, _ = sessions
+    real, calls = sysid.batch.identify_group, []
+
+    def buggy(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyError("gyro.q")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sysid.batch, "identify_group", buggy)
+    out = tmp_path / "buggy"
+    with caplog.at_level("ERROR", logger="sysid.batch"):
+        res = run("batch", *paths[:3], "--out", out, *FAST)
+    rows = {r["group"]: r for r in json.loads((out / "summary.json").read_text())}
+    assert set(rows) == {"a0", "a1", "b0"}, res.output
+    assert "gyro.q" in rows["a0"]["error"] and "\n" not in rows["a0"]["error"]
+    assert rows["a1"]["error"] is None and (out / "a1.h5").exists()
+    assert rows["b0"]["error"] is None and (out / "b0.h5").exists()
+    assert any(r.exc_info for r in caplog.records)
