@@ -2,17 +2,28 @@
 # Build the Crazyflie firmware's software-in-the-loop executable `cf2` (GPL-3.0, CrazySim's
 # sitl-release) into $OUT (default .sitl/) from the pinned snapshot in $SITL_SRC (default
 # ../shared/sitl). It runs as its own process: nothing of it enters the Python package.
-# A second call costs nothing once $OUT/cf2 is there (remove $OUT to rebuild).
+# A second call costs nothing while $OUT/cf2 is there and built from the same snapshot and patches
+# ($OUT/cf2.key); a changed snapshot or patch rebuilds it.
 # Patches: the snapshot's stabilizer-ticktype.patch (start-up hang), then tools/sitl-*.patch
 # (sitl-socketlink-nodrop.patch: the socket link dropped ~5 % of cflib's requests, which hangs
-# cflib's UDP driver, as it never resends).
+# cflib's UDP driver, as it never resends; sitl-socketlink-loopback.patch: the firmware's socket
+# binds 127.0.0.1, not every interface).
 set -eu
 HERE=$(cd "$(dirname "$0")" && pwd)
 SRC=${SITL_SRC:-../shared/sitl}
 OUT=${SITL_OUT:-.sitl}
 JOBS=${SITL_JOBS:-2}
 BIN="$OUT/cf2"
-if [ -x "$BIN" ]; then
+# The cache key: the snapshot (size and time, not read) and every patch (read: they are small).
+key() {
+    stat -c '%s %Y' "$SRC/crazyflie-firmware-sitl.tar.xz" 2>/dev/null || echo none
+    cat "$SRC/stabilizer-ticktype.patch" "$HERE"/sitl-*.patch 2>/dev/null | cksum
+}
+if [ "${1:-}" = "--key" ]; then  # print the cache key (for the tests)
+    key
+    exit 0
+fi
+if [ -x "$BIN" ] && [ "$(key)" = "$(cat "$BIN.key" 2>/dev/null)" ]; then
     exit 0
 fi
 need() {  # need TOOL DEBIAN-PACKAGE
@@ -60,5 +71,6 @@ echo "make sitl: building the firmware (log: $LOG)"
 ) > "$LOG" 2>&1 || { echo "make sitl: the firmware build failed; see $LOG" >&2; exit 1; }
 cp "$WORK/crazyflie-firmware/sitl_make/build/cf2" "$BIN.tmp"
 mv "$BIN.tmp" "$BIN"
+key > "$BIN.key"
 rm -rf "$WORK"
 echo "make sitl: built $BIN"

@@ -131,3 +131,29 @@ def test_missing_firmware_is_one_line():
     assert r.stderr.strip().splitlines() == [
         "error: no SITL firmware at /nonexistent/cf2; build it with `make sitl` "
         "(or set CF_SITL_FIRMWARE)"]
+
+
+def _udp_sockets(pid: int) -> list[str]:
+    """Local addresses (hex ``ADDR:PORT`` of /proc/net/udp) of the UDP sockets ``pid`` holds."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        with contextlib.suppress(OSError):
+            link = os.readlink(f"/proc/{pid}/fd/{fd}")
+            if link.startswith("socket:["):
+                inodes.add(link[8:-1])
+    with open(f"/proc/{pid}/net/udp") as f:
+        rows = [line.split() for line in f.readlines()[1:]]
+    return [row[1] for row in rows if row[9] in inodes]
+
+
+def test_firmware_sockets_are_on_loopback_only():
+    """The firmware's own CRTP socket binds 127.0.0.1 (tools/sitl-socketlink-loopback.patch):
+    upstream binds every interface and answers whoever sent last."""
+    proc, _, fw_pid = _start(free_udp_port())
+    try:
+        addresses = _udp_sockets(fw_pid)
+        assert addresses, "the firmware holds no UDP socket"
+        assert all(a.startswith("0100007F:") for a in addresses), addresses  # 127.0.0.1
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
