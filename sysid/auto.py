@@ -38,7 +38,7 @@ from sysid.grid import pair_flights
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult, SweepRow, sweep
-from sysid.validate import SIMULATION_WINDOW_S
+from sysid.validate import SIMULATION_WINDOW_S, simulation_window
 
 __all__ = ["HOLDOUT_FRACTION", "Plan", "Selection", "default_grid", "finish", "focus_order",
            "holdout", "max_blocks", "pick_focus", "plan", "select"]
@@ -52,7 +52,8 @@ COLUMNS_PER_ROW = 3.0
 PAST_S = (0.1, 1.2)
 FUTURE_S = (0.06, 0.4)
 ORDERS = (2, 12)
-#: Simulation window of the score, seconds (shortened to the shortest validation record).
+#: Simulation window of the score, seconds (at least 20 samples, at most the shortest
+#: validation record: :func:`sysid.validate.simulation_window`).
 SCORE_WINDOW_S = SIMULATION_WINDOW_S
 
 
@@ -183,10 +184,10 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"],
             "orders": sorted(orders) if orders else auto["orders"]}
-    shortest = min(d.n_samples for d in val) * val[0].dt
+    shortest = min(d.n_samples for d in val)
     capped = not pasts and grid["pasts"][-1] < round(PAST_S[1] / ident[0].dt)
     return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
-                window_s=min(SCORE_WINDOW_S, shortest), capped=capped,
+                window_s=simulation_window(dt=ident[0].dt, n_samples=shortest), capped=capped,
                 given_validation=bool(validation))
 
 

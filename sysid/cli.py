@@ -34,7 +34,6 @@ from sysid.auto import (
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
 from sysid.cli_progress import progress
 from sysid.cli_support import (
-    DEFAULT_WINDOW_S,
     JSON_OPTION,
     MODEL_SUFFIXES,
     RRD_OPTION,
@@ -66,7 +65,7 @@ from sysid.residuals import residuals
 from sysid.session_io import read_metadata
 from sysid.stability import STABILITY_MODES
 from sysid.sweep import sweep as run_sweep
-from sysid.validate import compare
+from sysid.validate import compare, simulation_window
 
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
@@ -181,14 +180,14 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
     # model, so the fit is over short windows (initial state estimated per window).
-    window_s = min(DEFAULT_WINDOW_S, min(d.n_samples for d in flights) * model.dt)
+    window_s = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights))
     sim = compare(model, flights, window=window_s, warn=False)
     pred = compare(model, flights, horizon=1, warn=False)
     checks = []
     if validate:
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
                            inputs=model.input_names, outputs=model.output_names)
-        v_win = min(DEFAULT_WINDOW_S, min(d.n_samples for d in val) * model.dt)
+        v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val))
         checks = [(f"validation: simulation, {v_win:g} s windows",
                    compare(model, val, window=v_win, warn=False)),
                   ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]

@@ -26,13 +26,13 @@ from cfcommon.cli import (
     output_console,
     output_table,
 )
-from sysid.auto import SCORE_WINDOW_S
 from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import MissingDependencyError, ParameterError, SysIdError
 from sysid.model import StateSpaceModel
 from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
 from sysid.session_io import AUTO, SessionFileError, Window, load_sessions, parse_window
+from sysid.validate import simulation_window
 
 __all__ = [
     "JSON_OPTION",
@@ -285,16 +285,15 @@ JSON_OPTION = click.option("--json", "as_json", is_flag=True, help="Print the re
 
 #: A model with a pole at least this far out integrates over any validation window.
 INTEGRATING_RADIUS = 0.995
-#: Window of the default comparison of an integrating model (seconds): the same 2 s window
-#: the no-knobs selection scores with.
-DEFAULT_WINDOW_S = SCORE_WINDOW_S
 
 
 def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
-    """``(label, compare keywords)`` when the user chose no mode: whole-record simulation,
-    or 2 s windowed simulation for a model with a pole at ``|z| >= INTEGRATING_RADIUS``
-    (simulating a whole flight through an integrator measures only its drift)."""
+    """``(label, compare keywords)`` when the user chose no mode: whole-record simulation, or
+    windowed simulation (:func:`sysid.validate.simulation_window`, 2 s) for a model with a pole
+    at ``|z| >= INTEGRATING_RADIUS`` (simulating a whole flight through an integrator measures
+    only its drift)."""
     radius = float(np.max(np.abs(model.poles()), initial=0.0))
     if radius >= INTEGRATING_RADIUS:
-        return (f"simulation, {DEFAULT_WINDOW_S:g} s windows", {"window": DEFAULT_WINDOW_S})
+        window = simulation_window(dt=model.dt)
+        return (f"simulation, {window:g} s windows", {"window": window})
     return ("simulation", {})

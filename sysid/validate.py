@@ -45,6 +45,7 @@ from sysid.errors import DataError, DimensionError, HorizonError
 from sysid.model import StateSpaceModel
 
 __all__ = [
+    "MIN_WINDOW_SAMPLES",
     "SIMULATION_WINDOW_S",
     "CompareResult",
     "compare",
@@ -53,12 +54,22 @@ __all__ = [
     "observability_matrix",
     "predict",
     "simulate_windows",
+    "simulation_window",
     "stable_predictor",
 ]
 
 #: Simulation window (s) for near-integrating models: long enough to show the dynamics, short
 #: enough that an integrator's drift from the initial state does not decide the fit.
 SIMULATION_WINDOW_S = 2.0
+#: ... but never fewer samples than this (slowly sampled data: dt = 1 s makes 2 s two samples).
+MIN_WINDOW_SAMPLES = 20
+
+
+def simulation_window(*, dt: float, n_samples: int | None = None) -> float:
+    """Seconds of the default simulation window: :data:`SIMULATION_WINDOW_S`, at least
+    :data:`MIN_WINDOW_SAMPLES` samples of ``dt``, at most the record (``n_samples``, if known)."""
+    samples = max(round(SIMULATION_WINDOW_S / dt), MIN_WINDOW_SAMPLES)
+    return (samples if n_samples is None else min(samples, n_samples)) * dt
 
 log = logging.getLogger(__name__)
 

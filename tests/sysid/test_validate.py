@@ -204,3 +204,14 @@ def test_modal_simulation_equals_the_sample_loop() -> None:
         got = validate._run_states(A=a, Bu=bu, x0=x0)
         np.testing.assert_allclose(got, loop, rtol=1e-9, atol=1e-9 * np.abs(loop).max())
     assert validate._run_states_modal(A=cases[1], Bu=bu, x0=x0) is None
+
+
+def test_default_simulation_window_is_2_s_with_a_floor_in_samples():
+    """2 s at flight rates; never fewer than 20 samples (DaISy sets have dt = 1 s, where 2 s is
+    two samples: x0 fitted exactly, or too few rows to fit it at all); never past the record."""
+    from sysid.validate import MIN_WINDOW_SAMPLES, simulation_window
+
+    assert simulation_window(dt=0.02) == pytest.approx(2.0)
+    assert simulation_window(dt=0.01, n_samples=150) == pytest.approx(1.5)
+    assert simulation_window(dt=1.0) == MIN_WINDOW_SAMPLES == 20
+    assert simulation_window(dt=1.0, n_samples=12) == 12
