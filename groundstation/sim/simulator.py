@@ -283,6 +283,7 @@ class Simulator:
 
     def _process_rx(self) -> None:
         peer, rx = self.peer, self._rx
+        self._check_cut()  # a cut due now drops this batch too, also while time is held
         while rx:
             token, header, data = rx.popleft()
             if token == -1:
