@@ -37,5 +37,7 @@ clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache *.egg-info
 
 FUZZ_CASES ?= 2000
-fuzz: $(STAMP)  ## bigger fuzz campaign: every target, FUZZ_CASES cases each, seed from the date
+# Bigger fuzz campaign (tests/fuzz/harness.py): the session reader, the UDP simulator and the
+# importers, FUZZ_CASES cases each, seed from the date; a case past 10 s is a hang.
+fuzz: $(STAMP)
 	$(BIN)/python -m tests.fuzz.harness --cases $(FUZZ_CASES)

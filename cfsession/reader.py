@@ -1,9 +1,14 @@
 """Reading session files, including ones left behind by a crashed writer.
 
 :func:`open_session` loads every stream into memory (a flight is a few MB) and returns a
-:class:`Session`. A file whose writer died is opened in SWMR-read mode; rows that were allocated
-but never written (NaN ``host_time``) are dropped; a stream whose chunks cannot all be read is
-read as far as it goes and listed in :attr:`Session.problems`.
+:class:`Session`. Every file is opened through :func:`cfsession.guard.open_untrusted`, read-only
+and never in SWMR mode (where HDF5 retries a bad checksum for over a minute). A file whose writer
+died (its superblock still flagged open for writing) is read into memory, at most
+:data:`~cfsession.guard.MAX_UNCLEAN_BYTES`, and that private copy, its flags cleared, is opened
+in the ordinary mode; the file on disk is not changed, and :attr:`Session.problems` says the data
+end at the last flush. Rows that were allocated but never written (NaN ``host_time``) are
+dropped; a stream whose chunks cannot all be read is read as far as it goes and listed in
+:attr:`Session.problems`.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ import time
 import click
 
 from cfcommon.cli import FiniteFloat
-from groundstation.sim.udp import UdpServer, is_loopback
+from groundstation.sim.udp import UdpServer
 
 __all__ = ["command"]
 
@@ -53,13 +53,13 @@ def command(port: int, count: int, host: str, allow_remote: bool, seed: int,
         scf = SyncCrazyflie('udp://127.0.0.1:19850', cf=Crazyflie()); scf.open_link(); \\
         print(scf.cf.param.get_value('pm.lowVoltage')); scf.close_link()"
     """
-    if allow_remote and not is_loopback(host.strip() or "0.0.0.0"):
-        click.echo(f"warning: serving on {host.strip() or '0.0.0.0'}: any machine that reaches "
-                   "it can fly the simulated vehicle", err=True)
+    # The host rule (groundstation.sim.client_policy.check_host) is the servers': a host other
+    # machines reach without --allow-remote is a one-line error, with it a logged warning.
     if firmware:
         from groundstation.sim.sitl_serve import serve_firmware
 
-        serve_firmware(host=host, port=port, vehicles=count, seed=seed, duration_s=duration)
+        serve_firmware(host=host, port=port, vehicles=count, seed=seed, duration_s=duration,
+                       allow_remote=allow_remote)
         return
     with UdpServer(host=host, port=port, count=count, seed=seed,
                    allow_remote=allow_remote) as server:

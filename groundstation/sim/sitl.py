@@ -8,9 +8,13 @@ CRTP over that UDP socket (see ``shared/sitl/README.md``). :class:`SitlVehicle` 
 * **physics**: a 1 kHz real-time loop that takes the firmware's motor commands, steps
   :class:`~groundstation.sim.physics_peer.PhysicsPeer` (the ``sim://`` rigid body, battery and
   sensors) and sends the IMU (1 kHz), barometer (50 Hz) and external pose (200 Hz);
-* **relay**: cflib's UDP protocol on ``udp://HOST:PORT``: every other packet of the firmware goes
-  to whoever sent the last packet; every packet of that client goes to the firmware; a single
-  ``0xFF`` byte is cflib's scan probe and is answered with ``0xFF``.
+* **relay**: cflib's UDP protocol on ``udp://HOST:PORT``, with the simulator's client policy
+  (:mod:`groundstation.sim.client_policy`): one client at a time, the first address to send a
+  non-null packet, until it disconnects or goes silent for 1 s of wall-clock time; its packets go
+  to the firmware and every other packet of the firmware goes to it. Datagrams of anyone else
+  are ignored, counted in ``foreign`` and logged once; a single ``0xFF`` byte is cflib's scan
+  probe and is answered with ``0xFF`` whoever sends it. The relay binds 127.0.0.1 unless told
+  otherwise; an address other machines reach needs ``allow_remote`` and logs a warning.
 
 The firmware process dies with its parent (``PR_SET_PDEATHSIG``), so a killed ground station
 leaves no orphan; :meth:`SitlVehicle.close` stops it otherwise.
@@ -30,6 +34,7 @@ import time
 from pathlib import Path
 
 from groundstation.errors import GroundStationError, LinkError
+from groundstation.sim.client_policy import ClientLink, check_host
 from groundstation.sim.physics_peer import (
     BARO_EVERY,
     GYRO_BIAS_FOUND,
@@ -52,8 +57,6 @@ log = logging.getLogger(__name__)
 FIRMWARE_ENV = "CF_SITL_FIRMWARE"
 """Environment variable naming the ``cf2`` executable (default: ``.sitl/cf2`` of the checkout)."""
 _HANDSHAKE = b"\xf3"
-_PROBE = b"\xff"
-_MAX_DATAGRAM = 31
 _ACC_SCALE_STEPS = 1000   # IMU samples the firmware averages for its accelerometer scale
 _MAX_LAG_S = 0.05         # behind the wall clock by more than this: slip instead of bursting
 _HOLD_AFTER_STEPS = 8     # IMU samples without a motor command (normal: 1-3) before holding
@@ -105,16 +108,20 @@ def _bind(host: str, port: int, what: str) -> socket.socket:
 class SitlVehicle:
     """One firmware process, its physics peer and its cflib relay on ``udp://host:port``.
 
-    Starts at once; :meth:`wait_ready` returns when the firmware has calibrated its sensors (about
-    3 s) and raises :class:`FirmwareError` if it exits or does not answer. Use as a context
-    manager or call :meth:`close`.
+    The relay serves one client at a time (``client``; others counted in ``foreign``) and binds
+    a ``host`` other machines reach only with ``allow_remote``. Starts at once;
+    :meth:`wait_ready` returns when the firmware has calibrated its sensors (about 3 s) and
+    raises :class:`FirmwareError` if it exits or does not answer. Use as a context manager or
+    call :meth:`close`.
     """
 
     def __init__(self, *, firmware: Path, host: str = "127.0.0.1", port: int = 19850,
-                 seed: int = 0, handshake_timeout_s: float = 10.0) -> None:
+                 seed: int = 0, handshake_timeout_s: float = 10.0,
+                 allow_remote: bool = False) -> None:
+        host = check_host(host, allow_remote=allow_remote,
+                          what=f"the vehicle on udp port {port}")
         self.host, self.port = host, port
         self.peer = PhysicsPeer(seed=seed)
-        self.client: tuple[str, int] | None = None
         self.slips = 0            # times the loop fell > 50 ms behind the wall clock
         self.held_s = 0.0         # time the physics waited for a lagging firmware
         self.relayed = [0, 0]         # packets firmware -> client, client -> firmware
@@ -124,7 +131,13 @@ class SitlVehicle:
         self._bias_step: int | None = None
         self.proc: subprocess.Popen | None = None
         self.relay = _bind(host, port, "cflib")
-        self.sock = _bind("127.0.0.1", 0, "the firmware")
+        # The firmware runs in real time: the client's silence is measured by the wall clock.
+        self.link = ClientLink(self.relay, name=f"sitl {port}", clock=time.monotonic)
+        try:
+            self.sock = _bind("127.0.0.1", 0, "the firmware")
+        except BaseException:
+            self.relay.close()
+            raise
         try:
             self._start(firmware, handshake_timeout_s)
         except BaseException:
@@ -175,6 +188,16 @@ class SitlVehicle:
     def uri(self) -> str:
         """cflib's URI of this vehicle, e.g. ``udp://127.0.0.1:19850``."""
         return f"udp://{self.host}:{self.port}"
+
+    @property
+    def client(self) -> tuple[str, int] | None:
+        """The address the relay serves (None: the link is free)."""
+        return self.link.client
+
+    @property
+    def foreign(self) -> int:
+        """Datagrams the relay ignored because they came from another address than the client's."""
+        return self.link.foreign
 
     @property
     def alive(self) -> bool:
@@ -237,10 +260,8 @@ class SitlVehicle:
                 motor = True
             elif data == GYRO_BIAS_FOUND:
                 self._bias_step = step
-            elif self.client is not None:
-                with contextlib.suppress(OSError):
-                    self.relay.sendto(data, self.client)
-                    self.relayed[0] += 1
+            elif self.link.send(data):
+                self.relayed[0] += 1
 
     def _physics(self) -> None:
         peer, sock, fw = self.peer, self.sock, self.fw_addr
@@ -293,24 +314,11 @@ class SitlVehicle:
                 log.error("sitl %d: physics loop stopped: %s", self.port, exc)
 
     def _relay(self) -> None:
-        relay, sock = self.relay, self.sock
+        link, sock = self.link, self.sock
         while not self._stop.is_set():
-            try:
-                data, addr = relay.recvfrom(2048)
-            except TimeoutError:
+            data = link.receive()
+            if data is None:
                 continue
-            except OSError as exc:
-                if self._stop.is_set():
-                    return
-                log.debug("sitl %d: relay receive error %s", self.port, exc)
-                continue
-            if not data or len(data) > _MAX_DATAGRAM:
-                continue
-            if data == _PROBE:  # cflib's scan probe (and null packet): answer, keep the link
-                with contextlib.suppress(OSError):
-                    relay.sendto(_PROBE, addr)
-                continue
-            self.client = addr
             with contextlib.suppress(OSError):
                 sock.sendto(data, self.fw_addr)
                 self.relayed[1] += 1
@@ -319,13 +327,17 @@ class SitlVehicle:
 class SitlServer:
     """``vehicles`` firmware instances on ``udp://host:port`` .. ``port + vehicles - 1``.
 
-    Binds 127.0.0.1 unless ``host`` says otherwise; every vehicle runs in real time (about a
-    tenth of a core each for the physics loop). Raises :class:`FirmwareError` when the firmware
-    is missing or does not start; use as a context manager or call :meth:`close`.
+    Binds 127.0.0.1 unless ``host`` says otherwise (an address other machines reach, ``""``
+    and ``0.0.0.0`` included, needs ``allow_remote=True`` and logs a warning); every vehicle
+    runs in real time (about a tenth of a core each for the physics loop) and serves one client
+    at a time. Raises :class:`FirmwareError` when the firmware is missing or does not start; use
+    as a context manager or call :meth:`close`.
     """
 
     def __init__(self, *, host: str = "127.0.0.1", port: int = 19850, vehicles: int = 1,
-                 seed: int = 0, firmware: Path | None = None) -> None:
+                 seed: int = 0, firmware: Path | None = None, allow_remote: bool = False) -> None:
+        # Refuse a host before looking for the firmware; each vehicle warns about its own port.
+        host = check_host(host, allow_remote=allow_remote, what="the vehicle", warn=False)
         if not 1 <= vehicles <= 10:
             raise LinkError(f"--vehicles {vehicles} is out of range; serve 1 to 10 vehicles")
         if not 1 <= port <= 65535 - vehicles + 1:
@@ -335,7 +347,7 @@ class SitlServer:
         try:
             for i in range(vehicles):
                 self.vehicles.append(SitlVehicle(firmware=fw, host=host, port=port + i,
-                                                 seed=seed + i))
+                                                 seed=seed + i, allow_remote=allow_remote))
         except BaseException:
             self.close()
             raise

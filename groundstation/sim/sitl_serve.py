@@ -33,8 +33,12 @@ def _terminate_as_exception() -> Iterator[None]:
             signal.signal(s, handler)
 
 
-def serve_firmware(*, host: str, port: int, vehicles: int, seed: int, duration_s: float) -> None:
+def serve_firmware(*, host: str, port: int, vehicles: int, seed: int, duration_s: float,
+                   allow_remote: bool = False) -> None:
     """Start ``vehicles`` firmware instances, print their URIs once calibrated, serve.
+
+    Each vehicle serves one client at a time; a ``host`` other machines reach needs
+    ``allow_remote`` (:class:`~groundstation.errors.LinkError` otherwise, before anything starts).
 
     Ends on Ctrl-C, SIGTERM, SIGHUP, when the parent process dies (checked every 0.2 s; the
     firmware processes die with this one through ``PR_SET_PDEATHSIG``), after ``duration_s``
@@ -43,7 +47,8 @@ def serve_firmware(*, host: str, port: int, vehicles: int, seed: int, duration_s
     parent = os.getppid()
     with _terminate_as_exception():
         try:
-            with SitlServer(host=host, port=port, vehicles=vehicles, seed=seed) as server:
+            with SitlServer(host=host, port=port, vehicles=vehicles, seed=seed,
+                            allow_remote=allow_remote) as server:
                 server.wait_ready()
                 for v in server.vehicles:
                     click.echo(f"Crazyflie firmware (SITL, pid {v.proc.pid}) on {v.uri}")

@@ -4,15 +4,16 @@ The wire protocol is cflib's UDP driver (cflib >= 0.1.32, ``cflib/crtp/udpdriver
 packet per datagram, byte 0 the header, then 0-30 payload bytes; no handshake, no checksum. A
 single ``0xFF`` byte is the scan probe (and a null packet) and is answered with ``0xFF``.
 
-Vehicle ``i`` listens on ``port + i`` and runs in real time. It serves one client at a time:
-the first address to send a non-null packet owns the link until it disconnects (a send to it
-fails: its port is gone) or goes silent for :data:`CLIENT_SILENCE_S` of simulation time (the
-firmware's link-down timeout); datagrams from any other address are ignored, counted in
-``foreign`` and logged once, so nobody else on the machine can fly or listen to the vehicle.
-Probes are answered whoever sends them (a scan still finds a vehicle in use). Empty, oversized
-(> 31 bytes) and malformed datagrams are ignored; a client that goes silent leaves the vehicle to
-its supervisor watchdog (and, after 1 s, to the firmware's link-down log reset), exactly as a
-real one.
+Vehicle ``i`` listens on ``port + i`` and runs in real time. Who may talk to it is
+:mod:`groundstation.sim.client_policy`, shared with the relay to the real firmware
+(``groundstation sim --firmware``): one client at a time, the first address to send a non-null
+packet, until it disconnects (a packet sent to it bounces: its port is gone) or goes silent for
+:data:`CLIENT_SILENCE_S` of simulation time (the firmware's link-down timeout); datagrams from
+any other address are ignored, counted in ``foreign`` and logged once, so nobody else on the
+machine can fly or listen to the vehicle. Probes are answered whoever sends them (a scan still
+finds a vehicle in use). Empty, oversized (> 31 bytes) and malformed datagrams are ignored; a
+client that goes silent leaves the vehicle to its supervisor watchdog (and, after 1 s, to the
+firmware's link-down log reset), exactly as a real one.
 
 The server binds 127.0.0.1 by default. Any other address (``""`` and ``0.0.0.0`` included: every
 interface) lets other machines fly the vehicle, so it needs ``allow_remote=True`` (the CLI's
@@ -21,24 +22,21 @@ interface) lets other machines fly the vehicle, so it needs ``allow_remote=True`
 
 from __future__ import annotations
 
-import contextlib
-import logging
 import socket
 import threading
 
 from groundstation.errors import LinkError
+from groundstation.sim.client_policy import (
+    CLIENT_SILENCE_S,
+    MAX_DATAGRAM,
+    ClientLink,
+    check_host,
+    is_loopback,
+)
 from groundstation.sim.crtp import LINK_TIMEOUT_MS
 from groundstation.sim.simulator import Simulator
 
 __all__ = ["CLIENT_SILENCE_S", "MAX_DATAGRAM", "UdpServer", "is_loopback"]
-
-logger = logging.getLogger(__name__)
-
-MAX_DATAGRAM = 31  # header + 30 payload bytes
-CLIENT_SILENCE_S = LINK_TIMEOUT_MS / 1000.0
-"""Simulation seconds without a datagram after which the client's link is free for another."""
-_LOOPBACK = ("127.", "localhost", "::1")
-_PROBE = b"\xff"
 
 
 class _Endpoint:
@@ -54,75 +52,44 @@ class _Endpoint:
             raise LinkError(f"cannot listen on udp://{host}:{port} ({exc.strerror}); "
                             "choose another --port or --host") from None
         self.sock.settimeout(0.2)
-        self.client: tuple[str, int] | None = None
-        self.client_seen_s = 0.0  # simulation time of the client's last datagram
-        self.datagrams = 0
-        self.ignored = 0
-        self.foreign = 0  # datagrams from an address other than the client's
-        self._warned = False
+        # The silence that frees the link is measured in simulation time.
+        self.link = ClientLink(self.sock, name=f"udp {port}", clock=lambda: self.sim.published_s)
         self.sim = Simulator(address=f"udp:{port}", speed=speed, seed=seed, sink=self._send,
                              linger=False, link_timeout_ms=LINK_TIMEOUT_MS)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, name=f"sim-udp-{port}", daemon=True)
         self._thread.start()
 
+    # The link's state and counters, as the endpoint's (tests and the fuzz harness read them).
+    @property
+    def client(self) -> tuple[str, int] | None:
+        return self.link.client
+
+    @property
+    def client_seen_s(self) -> float:
+        """Simulation time of the client's last datagram."""
+        return self.link.client_seen_s
+
+    @property
+    def datagrams(self) -> int:
+        return self.link.datagrams
+
+    @property
+    def ignored(self) -> int:
+        return self.link.ignored
+
+    @property
+    def foreign(self) -> int:
+        """Datagrams from an address other than the client's."""
+        return self.link.foreign
+
     def _send(self, header: int, payload: bytes) -> None:
-        client = self.client
-        if client is None:
-            return
-        try:
-            self.sock.sendto(bytes([header]) + payload, client)
-        except OSError as exc:  # e.g. the client's port is gone (ICMP unreachable)
-            logger.debug("udp %d: send to %s failed: %s", self.port, client, exc)
-            self._release(client, why=f"send failed: {exc.strerror or exc}")
-
-    def _release(self, client: tuple[str, int], *, why: str) -> None:
-        if self.client == client:
-            self.client = None
-            logger.info("udp %d: client %s:%d gone (%s); the link is free", self.port,
-                        *client, why)
-
-    def _accept(self, addr: tuple[str, int]) -> bool:
-        """Whether a packet from ``addr`` is the client's (taking a free link first)."""
-        now = self.sim.published_s
-        silent = now - self.client_seen_s > CLIENT_SILENCE_S
-        if self.client is not None and self.client != addr and silent:
-            self._release(self.client, why=f"silent for {now - self.client_seen_s:.1f} s")
-        if self.client is None:
-            self.client = addr
-            logger.info("udp %d: serving %s:%d", self.port, *addr)
-        if self.client != addr:
-            self.foreign += 1
-            if not self._warned:
-                self._warned = True
-                logger.warning("udp %d: ignoring datagrams from %s:%d while serving %s:%d "
-                               "(counted, not logged again)", self.port, *addr, *self.client)
-            return False
-        self.client_seen_s = now
-        return True
+        self.link.send(bytes([header]) + payload)
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            try:
-                data, addr = self.sock.recvfrom(2048)
-            except TimeoutError:
-                continue
-            except OSError as exc:  # closed, or an ICMP error reported on the socket
-                if self._stop.is_set():
-                    break
-                logger.debug("udp %d: receive error %s", self.port, exc)
-                if isinstance(exc, ConnectionRefusedError) and self.client is not None:
-                    self._release(self.client, why="port unreachable")
-                continue
-            self.datagrams += 1
-            if not data or len(data) > MAX_DATAGRAM:
-                self.ignored += 1
-                continue
-            if data == _PROBE:  # scan probe / null packet: answer, do not take the link
-                with contextlib.suppress(OSError):
-                    self.sock.sendto(_PROBE, addr)
-                continue
-            if self._accept(addr):
+            data = self.link.receive()
+            if data is not None:
                 self.sim.submit(header=data[0], data=data[1:])
 
     def close(self) -> None:
@@ -130,11 +97,6 @@ class _Endpoint:
         self._thread.join(timeout=2)
         self.sim.close()
         self.sock.close()
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` names this machine only (127.x.x.x, localhost, ::1)."""
-    return host.lower().startswith(_LOOPBACK)
 
 
 class UdpServer:
@@ -148,13 +110,7 @@ class UdpServer:
 
     def __init__(self, *, host: str = "127.0.0.1", port: int = 19850, count: int = 1,
                  seed: int = 0, speed: float = 1.0, allow_remote: bool = False) -> None:
-        host = host.strip() or "0.0.0.0"
-        if not is_loopback(host):
-            if not allow_remote:
-                raise LinkError(f"--host {host} would let other machines fly the simulated "
-                                "vehicle; pass --allow-remote to mean it, or serve 127.0.0.1")
-            logger.warning("serving on %s: any machine that reaches it can fly the simulated "
-                           "vehicle (one client at a time)", host)
+        host = check_host(host, allow_remote=allow_remote)
         if not 1 <= count <= 10:
             raise LinkError(f"--count {count} is out of range; serve 1 to 10 vehicles")
         if not 1 <= port <= 65535 - count + 1:

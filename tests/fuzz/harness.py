@@ -13,7 +13,7 @@ holds a global lock, so a hang cannot be timed out inside one process.
 Add a target: write ``def my_target(rng, work) -> str`` and add it to :data:`TARGETS`.
 
     python -m tests.fuzz.harness --target session --cases 2000 --seed 7
-    make fuzz          # every target, FUZZ_CASES each (default 2000), seed from the date
+    make fuzz          # every target (session, udp, importers), FUZZ_CASES each, seed from the date
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import logging
 import os
 import random
 import select
+import shutil
 import socket
 import struct
 import subprocess
@@ -277,7 +278,25 @@ def udp_simulator(rng: random.Random, work: Path) -> str:
     return "taken over"
 
 
-TARGETS: dict[str, Target] = {"session": session_reader, "udp": udp_simulator}
+# ------------------------------------------------------------------------- importers
+
+
+def importers(rng: random.Random, work: Path) -> str:
+    """A mutated cfclient CSV or uSD log through ``groundstation import`` (the cases of
+    ``tests/importers/fuzz.py``): a readable, cleanly closed session or one error line."""
+    from tests.importers.fuzz import case
+
+    folder = Path(tempfile.mkdtemp(dir=work))
+    try:
+        src, outcome = case(rng.getrandbits(32), rng.randrange(2), folder)  # index 1: uSD
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    assert not outcome.problem, f"{src.name}: {outcome.problem}"
+    return "imported" if outcome.ok else "refused"
+
+
+TARGETS: dict[str, Target] = {"session": session_reader, "udp": udp_simulator,
+                              "importers": importers}
 
 
 # ------------------------------------------------------------------------- running

@@ -1,6 +1,7 @@
-"""``groundstation sim --firmware``: the real firmware served on loopback, answering cflib's scan
-probe, and no firmware process left behind after Ctrl-C, SIGTERM, a killed server or a dead
-parent. Skipped when ``make sitl`` has not built the firmware."""
+"""``groundstation sim --firmware``: the real firmware served on loopback to one client at a time,
+answering cflib's scan probe, refusing a host others reach without --allow-remote, and no
+firmware process left behind after Ctrl-C, SIGTERM, a killed server or a dead parent. Skipped
+when ``make sitl`` has not built the firmware."""
 
 from __future__ import annotations
 
@@ -10,13 +11,20 @@ import queue
 import re
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
 import time
 
 import pytest
+from cflib.crtp.crtpstack import CRTPPacket, CRTPPort
 
+from groundstation.flight.link import install_drivers
+from groundstation.sim.crtp import crtp_header
+from groundstation.sim.sitl import SitlVehicle
+
+from ..sim_crtp.helpers import connect
 from .backend import firmware_or_skip, free_udp_port
 
 CLI = [sys.executable, "-c", "from groundstation.cli import main; main()"]
@@ -157,3 +165,74 @@ def test_firmware_sockets_are_on_loopback_only():
     finally:
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
+
+
+CLIENT, INTRUDER = 0xC1, 0x1D  # echo marks (cflib's own pings: 0x00)
+
+
+def _echo_payload(mark: int, i: int) -> bytes:
+    """A link echo payload shaped as cflib's ping ('<Bd'), which it parses and ignores."""
+    return struct.pack("<Bd", mark, i)
+
+
+def test_a_second_socket_cannot_reach_the_firmware_while_cflib_holds_the_link(caplog):
+    """Another socket on the machine can neither fly the real firmware nor take its replies; the
+    cflib client keeps the link, and reconnecting at once from a new port works."""
+    echo, commander = crtp_header(15, 0), bytes([crtp_header(3, 0)])
+    install_drivers()
+    with SitlVehicle(firmware=firmware_or_skip(), port=free_udp_port()) as v:
+        v.wait_ready(timeout_s=60)
+        with connect(v.uri) as scf, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+            cf = scf.cf
+            echoes: list[bytes] = []
+
+            def on_link_packet(pk: CRTPPacket) -> None:
+                if pk.channel == 0 and len(pk.data) == 9:  # echoes (channel 3: null packets)
+                    echoes.append(bytes(pk.data))
+
+            cf.add_port_callback(CRTPPort.LINKCTRL, on_link_packet)
+            mine = cf.link.socket.getsockname()
+            assert v.client == mine
+            sent = [0]  # packets cflib sends (its own 10 Hz pings included)
+            send = cf.link.send_packet
+            cf.link.send_packet = lambda pk: (sent.__setitem__(0, sent[0] + 1), send(pk))
+            pwm_max, to_firmware = 0, v.relayed[1]
+            for i in range(20):  # the intruder: an echo, an unlock, then full thrust and roll
+                other.sendto(bytes([echo]) + _echo_payload(INTRUDER, i), ("127.0.0.1", v.port))
+                other.sendto(commander + struct.pack("<fffH", 0, 0, 0, 0), ("127.0.0.1", v.port))
+                other.sendto(commander + struct.pack("<fffH", 20, 0, 0, 60000),
+                             ("127.0.0.1", v.port))
+                cf.send_packet(CRTPPacket(echo, _echo_payload(CLIENT, i)))  # keeps the link
+                time.sleep(0.1)
+                pwm_max = max(pwm_max, *v.peer.pwm)
+            deadline = time.monotonic() + 10.0
+            while _echo_payload(CLIENT, 19) not in echoes and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert _echo_payload(CLIENT, 19) in echoes  # the relay works for the client
+            assert not [e for e in echoes if e[0] == INTRUDER]
+            assert pwm_max == 0 and not any(v.peer.pwm)
+            # Only cflib's packets went to the firmware, not the intruder's 60 (a margin of 5 for
+            # a packet in flight when the counts were read).
+            assert v.relayed[1] - to_firmware <= sent[0] + 5
+            assert v.client == mine and v.foreign >= 45  # of 60 (a loaded kernel drops a few)
+            other.settimeout(0.5)
+            with pytest.raises(TimeoutError):  # no reply went to the intruder
+                other.recv(64)
+            other.settimeout(10.0)
+            other.sendto(b"\xff", ("127.0.0.1", v.port))  # a scan probe is still answered
+            assert other.recv(64) == b"\xff"
+        with connect(v.uri) as scf:  # at once, from a new port: the closed client bounces
+            assert float(scf.cf.param.get_value("pid_rate.roll_kp")) > 0
+            assert v.client == scf.cf.link.socket.getsockname()
+    warnings = [r for r in caplog.records if "ignoring datagrams" in r.getMessage()]
+    assert len(warnings) == 1  # logged once, counted after
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", ""])
+def test_a_host_others_reach_needs_allow_remote_in_one_line(host):
+    r = subprocess.run([*CLI, "sim", "--firmware", "--host", host], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines() == [
+        "error: --host 0.0.0.0 would let other machines fly the vehicle; pass --allow-remote "
+        "to mean it, or serve 127.0.0.1"]
