@@ -3,7 +3,9 @@
 A session file comes from anywhere (a colleague, a crashed writer, a download), so the reader
 opens it only through :func:`open_untrusted` and checks every object before reading it
 (:func:`check_dataset`, :func:`hard_links`, :func:`read_attrs`); anything refused is one
-:class:`~cfsession.errors.SessionError` line.
+:class:`~cfsession.errors.SessionError` line. The same checks serve any HDF5 file from
+elsewhere (``sysid`` model files: ``kind`` names the file in messages; :func:`check_storage`
+is the part of :func:`check_dataset` that holds for every dataset).
 
 **Files not closed cleanly.** A writer that died leaves the superblock's status flags set
 (file open for writing, SWMR writing). HDF5 reads such a file only in SWMR mode, where a
@@ -16,10 +18,10 @@ the file on disk is never changed. A stored end of file beyond the real size is 
 
 **What is refused** (before any data is read): a path that is not a regular file; soft and
 external links; datasets with external storage (they read other files: ``/etc/passwd``, a FIFO
-that blocks for ever) and virtual datasets; stream datasets that are not one-dimensional, whose
-fields are not numbers or fixed-length text, or whose declared rows exceed what the file could
-hold (chunked: the allocated chunks plus slack; contiguous: its storage; any: more than
-:data:`MAX_EXPANSION` times the file size); more than :data:`MAX_OBJECTS` streams or
+that blocks for ever) and virtual datasets; datasets whose declared size exceeds what the file
+could hold (chunked: the allocated chunks plus slack; contiguous: its storage; any: more than
+:data:`MAX_EXPANSION` times the file size); stream datasets that are not one-dimensional or
+whose fields are not numbers or fixed-length text; more than :data:`MAX_OBJECTS` streams or
 attributes; attributes larger than :data:`MAX_ATTR_BYTES`.
 """
 
@@ -39,7 +41,8 @@ import numpy as np
 from cfsession.errors import SessionError
 
 __all__ = ["MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
-           "check_dataset", "hard_links", "open_untrusted", "read_attrs"]
+           "check_dataset", "check_storage", "file_size", "hard_links", "open_untrusted",
+           "read_attrs", "short_error"]
 
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 MAX_UNCLEAN_BYTES = 1 << 30
@@ -133,22 +136,23 @@ def _heap_loop(data: bytes | mmap.mmap) -> int | None:
     return None
 
 
-def open_untrusted(path: Path) -> tuple[h5py.File, bool]:
+def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, bool]:
     """Open ``path`` read-only without SWMR; returns the file and whether its superblock says
-    it was closed cleanly. One-line :class:`SessionError` when it cannot be opened."""
+    it was closed cleanly. One-line :class:`SessionError` when it cannot be opened (``kind``:
+    what the file should be, for the message)."""
     try:
         st = path.stat()
         if path.is_dir():
-            raise SessionError(f"{path}: is a folder, not a session file")
+            raise SessionError(f"{path}: is a folder, not a {kind} file")
         if not path.is_file():
             raise SessionError(f"{path}: not a regular file (a device, FIFO or socket), so not a "
-                               "flight session")
+                               f"{kind} file")
         with open(path, "rb") as fh:
             head = fh.read(48)
     except OSError as exc:
         raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if head[:8] != _SIGNATURE:
-        raise SessionError(f"{path}: not an HDF5 file, so not a flight session")
+        raise SessionError(f"{path}: not an HDF5 file, so not a {kind} file")
     sb = _superblock(head)
     if sb is not None and sb[1] > st.st_size:
         raise SessionError(f"{path}: damaged beyond repair (truncated at {st.st_size} of "
@@ -174,11 +178,11 @@ def open_untrusted(path: Path) -> tuple[h5py.File, bool]:
     except SessionError:
         raise
     except Exception as exc:  # h5py: OSError; the file-object driver passes others through
-        raise SessionError(f"{path}: damaged beyond repair ({_short(exc)})") from None
+        raise SessionError(f"{path}: damaged beyond repair ({short_error(exc)})") from None
 
 
-def _short(exc: BaseException) -> str:
-    """The first line of an HDF5 error, without its internals."""
+def short_error(exc: BaseException) -> str:
+    """The first line of an (HDF5) error, without its internals: text for a one-line message."""
     msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     first = msg.split("(")[0].strip() or type(exc).__name__
     return first[:200]
@@ -187,12 +191,13 @@ def _short(exc: BaseException) -> str:
 # ---------------------------------------------------------------------- objects
 
 
-def hard_links(group: h5py.Group, *, where: str) -> Iterator[tuple[str, Any]]:
+def hard_links(group: h5py.Group, *, where: str,
+               kind: str = "session") -> Iterator[tuple[str, Any]]:
     """``(name, object)`` for each member of ``group``; a soft or external link, or more than
     :data:`MAX_OBJECTS` members, is a one-line :class:`SessionError`."""
     names = list(group.keys())
     if len(names) > MAX_OBJECTS:
-        raise SessionError(f"{where}: {len(names)} objects, more than a session has "
+        raise SessionError(f"{where}: {len(names)} objects, more than a {kind} has "
                            f"({MAX_OBJECTS})")
     for name in names:
         link = group.get(name, getlink=True)
@@ -200,18 +205,19 @@ def hard_links(group: h5py.Group, *, where: str) -> Iterator[tuple[str, Any]]:
             raise SessionError(f"{where}: {name!r} links to another file "
                                f"({link.filename}); refusing to follow it")
         if isinstance(link, h5py.SoftLink):
-            raise SessionError(f"{where}: {name!r} is a soft link ({link.path}); session files "
+            raise SessionError(f"{where}: {name!r} is a soft link ({link.path}); {kind} files "
                                "have none, refusing to follow it")
         yield name, group[name]
 
 
-def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str]) -> dict[str, Any]:
+def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],
+               kind: str = "session") -> dict[str, Any]:
     """The attributes of ``obj`` that can be read; one too large or unreadable is skipped
     and listed in ``problems``."""
     attrs = obj.attrs
     names = list(attrs.keys())
     if len(names) > MAX_OBJECTS:
-        raise SessionError(f"{where}: {len(names)} attributes, more than a session has "
+        raise SessionError(f"{where}: {len(names)} attributes, more than a {kind} has "
                            f"({MAX_OBJECTS})")
     out: dict[str, Any] = {}
     for name in names:
@@ -222,7 +228,7 @@ def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str]) -> dict[s
                 continue
             out[name] = attrs[name]
         except Exception as exc:
-            problems.append(f"{where}: attribute {name!r} unreadable ({_short(exc)})")
+            problems.append(f"{where}: attribute {name!r} unreadable ({short_error(exc)})")
     return out
 
 
@@ -230,15 +236,44 @@ def _field_ok(dt: np.dtype) -> bool:
     return dt.subdtype is None and (dt.kind in "biuf" or (dt.kind == "S" and dt.itemsize > 0))
 
 
-def check_dataset(ds: h5py.Dataset, *, where: str, file_size: int) -> None:
-    """Refuse, in one line, a stream dataset that reads elsewhere or more than the file holds
-    (see the module docstring)."""
+def _extent(shape: tuple[int, ...]) -> str:
+    return f"{shape[0]} rows" if len(shape) == 1 else f"shape {shape}"
+
+
+def check_storage(ds: h5py.Dataset, *, where: str, file_size: int) -> None:
+    """Refuse, in one line, a dataset of any kind that reads elsewhere (virtual, external
+    storage) or declares more than the file could hold (see the module docstring): checked
+    before it is read, so nothing is allocated for a crafted shape."""
     dcpl = ds.id.get_create_plist()
     if ds.is_virtual:
         raise SessionError(f"{where}: a virtual dataset (reads other files); refusing it")
     if dcpl.get_external_count():
         name = dcpl.get_external(0)[0].decode(errors="replace")
         raise SessionError(f"{where}: data stored outside the file ({name}); refusing to read it")
+    shape = ds.shape or ()
+    itemsize = ds.dtype.itemsize
+    items = int(np.prod(shape, dtype=object))
+    nbytes = items * itemsize
+    if nbytes > MAX_EXPANSION * max(file_size, 1024):
+        raise SessionError(f"{where}: declares {_extent(shape)} ({nbytes} bytes), more than a "
+                           f"{file_size}-byte file can hold")
+    if ds.chunks is not None:
+        chunk = int(np.prod(ds.chunks, dtype=object))
+        if chunk * itemsize > MAX_CHUNK_BYTES:
+            raise SessionError(f"{where}: chunks of {_extent(ds.chunks)} ({chunk * itemsize} "
+                               f"bytes), more than {MAX_CHUNK_BYTES >> 20} MiB; refusing them")
+        stored = (ds.id.get_num_chunks() + _CHUNK_SLACK) * chunk
+        if items > stored:
+            raise SessionError(f"{where}: declares {_extent(shape)} but stores at most {stored}")
+    elif dcpl.get_layout() == h5py.h5d.CONTIGUOUS and nbytes > ds.id.get_storage_size():
+        raise SessionError(f"{where}: declares {_extent(shape)} but stores "
+                           f"{ds.id.get_storage_size() // max(itemsize, 1)}")
+
+
+def check_dataset(ds: h5py.Dataset, *, where: str, file_size: int) -> None:
+    """Refuse, in one line, a stream dataset that reads elsewhere or more than the file holds
+    (:func:`check_storage`), or that is not rows of named number or text fields."""
+    check_storage(ds, where=where, file_size=file_size)
     dt = ds.dtype
     if dt.names is None or not dt.names:
         raise SessionError(f"{where}: dtype {dt}, not a session stream (rows of named fields)")
@@ -252,21 +287,6 @@ def check_dataset(ds: h5py.Dataset, *, where: str, file_size: int) -> None:
         raise SessionError(f"{where}: rows of {dt.itemsize} bytes; not a session stream")
     if ds.ndim != 1:
         raise SessionError(f"{where}: shape {ds.shape}; session streams are one-dimensional")
-    rows = ds.shape[0]
-    nbytes = rows * dt.itemsize
-    if nbytes > MAX_EXPANSION * max(file_size, 1024):
-        raise SessionError(f"{where}: declares {rows} rows ({nbytes} bytes), more than a "
-                           f"{file_size}-byte file can hold")
-    if ds.chunks is not None:
-        chunk = ds.chunks[0]
-        if chunk * dt.itemsize > MAX_CHUNK_BYTES:
-            raise SessionError(f"{where}: chunks of {chunk} rows; not a session stream")
-        stored = (ds.id.get_num_chunks() + _CHUNK_SLACK) * chunk
-        if rows > stored:
-            raise SessionError(f"{where}: declares {rows} rows but stores at most {stored}")
-    elif dcpl.get_layout() == h5py.h5d.CONTIGUOUS and nbytes > ds.id.get_storage_size():
-        raise SessionError(f"{where}: declares {rows} rows but stores "
-                           f"{ds.id.get_storage_size() // max(dt.itemsize, 1)}")
 
 
 def file_size(f: h5py.File, path: Path) -> int:

@@ -4,30 +4,56 @@ HDF5 layout (root attributes ``format``, ``version``, ``dt`` with ``dt_unit = "s
 ``provenance`` as a JSON string, channel names/units as JSON lists): one dataset per matrix
 ``A, B, C, D, K`` (and ``noise_cov`` when known), each with attributes ``row_units`` and
 ``col_units`` (JSON lists; state coordinates are ``"state"``).
+
+**Model files come from anywhere**, so :func:`load` reads each format into one plain dict
+and checks it before a model is made: the format name; a version from 1 to
+:data:`~sysid.model.FORMAT_VERSION` (none is refused); every matrix present, real, finite,
+two-dimensional, at most :data:`MAX_DIMENSION` a side and of the shape the others imply
+(``A (n, n)``, ``B (n, m)``, ``C (l, n)``, ``D (l, m)``, ``K (n, l)``, ``noise_cov (l, l)``);
+``dt`` positive seconds; names and units lists of text, one per channel; provenance an object.
+HDF5 is opened through the session reader's guard (:mod:`cfsession.guard`: no external storage,
+which reads other files or blocks on a FIFO, no links, virtual datasets or sizes the file cannot
+hold), each matrix's type and shape checked before it is read. JSON and MAT are read once, from
+a regular file of at most :data:`MAX_FILE_BYTES`; a MAT file must be what :func:`save` writes:
+MATLAB 5, uncompressed (an element may inflate a thousandfold), only numbers, text and cells of
+those (scipy's reader recurses in C through nested cells: 9 MB of them crash the interpreter).
+Anything refused is one :class:`~sysid.errors.ModelFileError` line.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import logging
+import math
 import os
 import re
+import stat
+import struct
+from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.io
 
-from sysid.errors import ModelFileError, SysIdError
+from sysid.errors import ModelFileError
 
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
 
-__all__ = ["load", "save"]
+__all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "load", "save"]
 
 log = logging.getLogger(__name__)
 
 _H5 = (".h5", ".hdf5")
+MAX_DIMENSION = 2000
+"""Most states, inputs or outputs a model file may have (a 2000 x 2000 matrix is 32 MB)."""
+MAX_FILE_BYTES = 128 << 20
+"""Largest JSON or MAT model file read (a 2000-state JSON model is about 90 MB)."""
+_SHAPES = {"A": "nn", "B": "nm", "C": "ln", "D": "lm", "K": "nl", "noise_cov": "ll"}
+_LABELS = {"input_names": "m", "output_names": "l", "input_units": "m", "output_units": "l"}
+_COUNTS = {"n": "states", "m": "inputs", "l": "outputs"}
+_KINDS = {"b": "true/false values", "S": "text", "U": "text", "O": "objects", "V": "records"}
 
 
 def _units(model: StateSpaceModel) -> dict[str, tuple[list[str], list[str]]]:
@@ -71,38 +97,202 @@ def _os_reason(exc: OSError) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+# ------------------------------------------------------------------------------- loading
 def load(path: Path) -> StateSpaceModel:
-    """Read a model file written by :func:`save`."""
-    from sysid.model import FORMAT, StateSpaceModel
+    """Read a model file written by :func:`save`; anything else is one
+    :class:`ModelFileError` line (see the module docstring)."""
+    from sysid.model import StateSpaceModel
 
     if path.is_dir():
         raise ModelFileError(f"model file {str(path)!r} is a folder; pass a model file "
                              "(.h5, .json or .mat)")
-    if not path.is_file():
+    if not path.exists():
         raise ModelFileError(f"model file {str(path)!r} does not exist; check the path")
+    if not path.is_file():
+        raise ModelFileError(f"model file {str(path)!r} is not a regular file (a device, FIFO "
+                             "or socket); pass a model file (.h5, .json or .mat)")
     suffix = path.suffix.lower()
-    readers = {**dict.fromkeys(_H5, _load_h5), ".mat": _load_mat,
-               ".json": lambda p: json.loads(p.read_text())}
+    readers = {**dict.fromkeys(_H5, _load_h5), ".mat": _load_mat, ".json": _load_json}
     if suffix not in readers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
-    not_model = (f"{str(path)!r} is not a sysid model file; pass a file written by "
-                 "`sysid identify --out` or model.save")
     try:
-        d = readers[suffix](path)
-        if not isinstance(d, dict) or d.get("format") != FORMAT:
-            fmt = d.get("format") if isinstance(d, dict) else None
-            raise ModelFileError(not_model + ("" if fmt is None else f" (its format is {fmt!r},"
-                                              f" not {FORMAT!r})"))
-        return StateSpaceModel.from_dict(d)
-    except SysIdError:
+        return StateSpaceModel(**_checked(readers[suffix](path), path=path))
+    except ModelFileError:
         raise
-    except KeyError as exc:
-        raise ModelFileError(f"{not_model} (no {exc})") from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError, scipy.io.matlab.MatReadError,
-            IndexError, TypeError, ValueError) as exc:
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ModelFileError(f"{str(path)!r} is not a readable sysid model ({reason}); "
-                             "pass a file written by model.save") from exc
+    except Exception as exc:  # whatever a crafted file makes a parser raise: never a traceback
+        log.debug("reading model file %s", path, exc_info=True)
+        from cfsession.guard import short_error
+
+        raise _unreadable(path, short_error(exc)) from None
+
+
+def _unreadable(path: Path, reason: str) -> ModelFileError:
+    return ModelFileError(f"{str(path)!r} is not a readable sysid model ({reason}); pass a "
+                          "file written by `sysid identify --out` or model.save")
+
+
+def _brief(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _scalar(value: object) -> object:
+    """A one-element array (MAT, HDF5) or numpy scalar as a Python value; else ``value``."""
+    if isinstance(value, np.ndarray) and value.size == 1:
+        value = value.reshape(-1)[0]
+    if isinstance(value, bytes):
+        return value.decode()
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _checked(d: object, *, path: Path) -> dict[str, Any]:
+    """The keyword arguments of :class:`~sysid.model.StateSpaceModel` that ``d`` (a file's
+    contents) holds, checked as the module docstring says; else :class:`ModelFileError`."""
+    from sysid.model import FORMAT, FORMAT_VERSION
+
+    fmt = _scalar(d.get("format")) if isinstance(d, dict) else None
+    if not isinstance(d, dict) or not isinstance(fmt, str) or fmt != FORMAT:
+        raise ModelFileError(f"{str(path)!r} is not a sysid model file; pass a file written by "
+                             "`sysid identify --out` or model.save" +
+                             ("" if fmt is None else f" (its format is {_brief(fmt)}, "
+                              f"not {FORMAT!r})"))
+    version = _scalar(d.get("version"))
+    if isinstance(version, float) and version.is_integer():
+        version = int(version)  # MATLAB keeps numbers as double
+    if type(version) is not int or not 1 <= version <= FORMAT_VERSION:
+        if type(version) is int and version > FORMAT_VERSION:
+            raise ModelFileError(f"{str(path)!r}: model format version {version} is newer than "
+                                 f"{FORMAT_VERSION}; upgrade sysid to read it")
+        got = "no format version" if version is None else f"format version {_brief(version)}"
+        raise _unreadable(path, f"{got}; this sysid reads versions 1 to {FORMAT_VERSION}")
+    missing = [k for k in (*"ABCDK", "dt", *_LABELS, "provenance") if k not in d]
+    if missing:
+        raise _unreadable(path, f"no {', '.join(missing)}")
+    mats = {name: _matrix(name, d[name], path=path) for name in _SHAPES
+            if d.get(name) is not None}
+    labels: dict[str, tuple[str, ...]] = {}
+    for key in _LABELS:
+        if not isinstance(d[key], list | tuple) or not all(isinstance(s, str) for s in d[key]):
+            raise _unreadable(path, f"{key} is {_brief(d[key])}, not a list of text")
+        labels[key] = tuple(d[key])
+    sizes = _sizes(mats, labels)
+    dims = ", ".join(f"{v} {_COUNTS[k]}" for k, v in sizes.items())
+    for name, arr in mats.items():
+        want = tuple(sizes[k] for k in _SHAPES[name])
+        if arr.ndim == 1 and 0 in want:
+            mats[name] = arr = arr.reshape(want)
+        if arr.shape != want:
+            raise _unreadable(path, f"matrix {name!r} has shape {arr.shape}; it must be "
+                              f"({', '.join(_SHAPES[name])}) = {want} ({dims})")
+    for key, k in _LABELS.items():
+        if len(labels[key]) != sizes[k]:
+            raise _unreadable(path, f"{key} has {len(labels[key])} entries; the model has "
+                              f"{sizes[k]} {_COUNTS[k]} ({dims})")
+    dt, unit = _scalar(d["dt"]), _scalar(d.get("dt_unit", "s"))
+    if isinstance(dt, bool) or not isinstance(dt, int | float) or not math.isfinite(dt) or dt <= 0:
+        raise _unreadable(path, f"dt is {_brief(dt)}; it must be the sample period in seconds")
+    if not isinstance(unit, str) or unit != "s":
+        raise _unreadable(path, f"dt_unit is {_brief(unit)}; sysid models keep dt in seconds")
+    if not isinstance(d["provenance"], dict):
+        raise _unreadable(path, f"provenance is {_brief(d['provenance'])}, not a JSON object")
+    return {**mats, **labels, "dt": float(dt), "provenance": d["provenance"]}
+
+
+def _sizes(mats: dict[str, np.ndarray], labels: dict[str, tuple[str, ...]]) -> dict[str, int]:
+    """States ``n``, inputs ``m`` and outputs ``l``: for each, the size most matrices and
+    label lists agree on (so an error names the one that differs; a tie goes to the first of
+    A, B, C, D, K)."""
+    votes: dict[str, list[int]] = {"n": [], "m": [], "l": []}
+    for name, arr in mats.items():
+        if arr.ndim == 2:  # JSON writes an empty matrix as []
+            for k, size in zip(_SHAPES[name], arr.shape, strict=True):
+                votes[k].append(size)
+    for key, k in _LABELS.items():
+        votes[k].append(len(labels[key]))
+    return {k: Counter(v).most_common(1)[0][0] for k, v in votes.items()}
+
+
+def _matrix_type(name: str, *, dtype: np.dtype, shape: tuple[int, ...], path: Path) -> None:
+    """Refuse a matrix that is not real numbers, two-dimensional (or an empty list) and at
+    most :data:`MAX_DIMENSION` on a side; HDF5 calls this before reading the data."""
+    if dtype.kind == "c":
+        raise _unreadable(path, f"matrix {name!r} is complex ({dtype}); a sysid model's "
+                          "matrices are real")
+    if dtype.kind not in "iuf" or dtype.subdtype is not None:
+        raise _unreadable(path, f"matrix {name!r} holds {_KINDS.get(dtype.kind, dtype)}, "
+                          "not numbers")
+    if len(shape) != 2 and shape != (0,):
+        raise _unreadable(path, f"matrix {name!r} has shape {shape}; it must be "
+                          "two-dimensional")
+    if max(shape, default=0) > MAX_DIMENSION:
+        raise _unreadable(path, f"matrix {name!r} has shape {shape}; a sysid model has at most "
+                          f"{MAX_DIMENSION} states, inputs and outputs")
+
+
+def _matrix(name: str, value: object, *, path: Path) -> np.ndarray:
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError):  # ragged lists
+        raise _unreadable(path, f"matrix {name!r} is not a table of numbers") from None
+    _matrix_type(name, dtype=arr.dtype, shape=arr.shape, path=path)
+    arr = arr.astype(float)
+    if not np.isfinite(arr).all():
+        raise _unreadable(path, f"matrix {name!r} contains NaN or inf")
+    return arr
+
+
+def _read_bounded(path: Path) -> bytes:
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO is refused
+    without blocking)."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise _unreadable(path, "not a regular file")
+        data = fh.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:
+        raise _unreadable(path, f"larger than {MAX_FILE_BYTES} bytes, more than a model takes")
+    return data
+
+
+def _load_json(path: Path) -> object:
+    return json.loads(_read_bounded(path))
+
+
+def _load_h5(path: Path) -> dict[str, Any]:
+    """The raw contents of an HDF5 model, read through :mod:`cfsession.guard` (see the module
+    docstring): every object is checked before it is read."""
+    import h5py
+
+    from cfsession.errors import SessionError
+    from cfsession.guard import check_storage, file_size, hard_links, open_untrusted, read_attrs
+
+    where, kind = str(path), "sysid model"
+    try:
+        f, _clean = open_untrusted(path, kind=kind)
+        with f:
+            problems: list[str] = []
+            attrs = read_attrs(f, where=where, problems=problems, kind=kind)
+            if "format" not in attrs:  # e.g. a session file
+                return {}
+            if problems:
+                raise SessionError(problems[0])
+            d: dict[str, Any] = {k: _scalar(v) for k, v in attrs.items()
+                                 if k in ("format", "version", "dt", "dt_unit")}
+            for key in ("provenance", *_LABELS):
+                if key in attrs:
+                    d[key] = json.loads(_scalar(attrs[key]))
+            size = file_size(f, path)
+            for name, obj in hard_links(f, where=where, kind=kind):
+                if name not in _SHAPES:
+                    continue
+                if not isinstance(obj, h5py.Dataset):
+                    raise _unreadable(path, f"matrix {name!r} is a group, not a dataset")
+                check_storage(obj, where=f"matrix {name!r}", file_size=size)
+                _matrix_type(name, dtype=obj.dtype, shape=obj.shape or (), path=path)
+                d[name] = obj[()]
+    except SessionError as exc:
+        raise _unreadable(path, str(exc).removeprefix(f"{where}: ")) from None
+    return d
 
 
 def _save_h5(model: StateSpaceModel, path: Path) -> None:
@@ -127,22 +317,6 @@ def _save_h5(model: StateSpaceModel, path: Path) -> None:
             ds.attrs["col_units"] = json.dumps(units[name][1])
 
 
-def _load_h5(path: Path) -> dict:
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        if "format" not in f.attrs:  # e.g. a session file
-            return {}
-        d: dict = {"format": str(f.attrs["format"]), "version": int(f.attrs["version"]),
-                   "dt": float(f.attrs["dt"]),
-                   "provenance": json.loads(f.attrs["provenance"])}
-        for attr in ("input_names", "output_names", "input_units", "output_units"):
-            d[attr] = json.loads(f.attrs[attr])
-        for name in ("A", "B", "C", "D", "K"):
-            d[name] = f[name][()]
-        d["noise_cov"] = f["noise_cov"][()] if "noise_cov" in f else None
-    return d
-
 
 def _save_mat(model: StateSpaceModel, path: Path) -> None:
     from scipy.io import savemat
@@ -161,23 +335,85 @@ def _save_mat(model: StateSpaceModel, path: Path) -> None:
         savemat(fh, mdict)
 
 
-def _load_mat(path: Path) -> dict:
+# MAT-file element types and array classes (MATLAB 5 format): what _check_mat lets through
+_MI_UINT32, _MI_MATRIX = 6, 14
+_MX_CELL, _MX_CHAR = 1, 4
+_MX_NUMBERS = range(6, 16)  # double, single, int8 ... uint64
+
+
+def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int, int]:
+    """``(type, payload start, payload bytes, next position)`` of the MAT element at ``pos``."""
+    if pos + 8 > end:
+        raise ValueError(f"MAT element at byte {pos} is cut off")
+    word, nbytes = struct.unpack_from(order + "II", data, pos)
+    if word >> 16:  # small data element: type and size in one word, data in the next four
+        return word & 0xFFFF, pos + 4, word >> 16, pos + 8
+    after = pos + 8 + nbytes + (-nbytes % 8)
+    if pos + 8 + nbytes > end:
+        raise ValueError(f"MAT element at byte {pos} declares {nbytes} bytes past the end")
+    return word, pos + 8, nbytes, min(after, end)
+
+
+def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool) -> int:
+    """Check the array element at ``pos`` (numbers, text, or at top level a cell of those);
+    the position after it."""
+    kind, start, nbytes, after = _mat_tag(data, pos, order, end)
+    if kind != _MI_MATRIX:  # 15 (compressed) included
+        raise ValueError(f"MAT element of type {kind} at byte {pos}; sysid writes uncompressed "
+                         "arrays only")
+    if nbytes == 0:
+        return after
+    kind, flags, size, p = _mat_tag(data, start, order, start + nbytes)
+    if kind != _MI_UINT32 or size < 4:
+        raise ValueError(f"MAT array at byte {pos} has no array flags")
+    cls = struct.unpack_from(order + "I", data, flags)[0] & 0xFF
+    if not (cls == _MX_CHAR or cls in _MX_NUMBERS or (cls == _MX_CELL and not in_cell)):
+        raise ValueError(f"MAT array of class {cls} at byte {pos}; sysid writes numbers, text "
+                         "and cells of text only")
+    if cls == _MX_CELL:
+        for _ in range(2):  # dimensions, name
+            p = _mat_tag(data, p, order, start + nbytes)[3]
+        while p < start + nbytes:
+            p = _mat_array(data, p, order, end=start + nbytes, in_cell=True)
+    return after
+
+
+def _check_mat(data: bytes) -> None:
+    """Refuse (``ValueError``) a MAT file that scipy would inflate or recurse through: see the
+    module docstring. Nesting is at most one cell deep, so this recursion is bounded too."""
+    order = {b"IM": "<", b"MI": ">"}.get(data[126:128])
+    if len(data) < 128 or order is None:
+        raise ValueError("not a MATLAB 5 .mat file")
+    pos = 128
+    while pos < len(data):
+        pos = _mat_array(data, pos, order, end=len(data), in_cell=False)
+
+
+def _load_mat(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
 
-    m = loadmat(path, squeeze_me=False)
+    data = _read_bounded(path)
+    _check_mat(data)
+    m = loadmat(io.BytesIO(data), squeeze_me=False)
     if "format" not in m:
         return {}
 
-    def strings(key: str) -> list[str]:
-        return [str(np.asarray(s).reshape(-1)[0]) if np.asarray(s).size else ""
-                for s in np.asarray(m[key]).reshape(-1)]
+    def strings(key: str) -> object:
+        """A cell of texts as a list; anything else as is (refused by :func:`_checked`)."""
+        cells = np.asarray(m[key]).reshape(-1)
+        texts = [np.asarray(s).reshape(-1) for s in cells] if cells.dtype.kind == "O" else []
+        if len(texts) != cells.size or any(t.size and t.dtype.kind != "U" for t in texts):
+            return m[key]
+        return [str(t[0]) if t.size else "" for t in texts]
 
-    d: dict = {"format": str(m["format"][0]), "version": int(np.asarray(m["version"]).item()),
-               "dt": float(np.asarray(m["Ts"]).item()),
-               "provenance": json.loads(str(m["provenance"][0]))}
-    for name in ("A", "B", "C", "D", "K"):
-        d[name] = np.asarray(m[name], dtype=float)
-    d["noise_cov"] = np.asarray(m["noise_cov"], dtype=float) if "noise_cov" in m else None
-    d["input_names"], d["output_names"] = strings("InputName"), strings("OutputName")
-    d["input_units"], d["output_units"] = strings("InputUnit"), strings("OutputUnit")
+    d: dict[str, Any] = {"format": m["format"], "version": m.get("version")}
+    for key, name in (("dt", "Ts"), ("dt_unit", "Ts_unit"), *((k, k) for k in _SHAPES)):
+        if name in m:
+            d[key] = m[name]
+    if "provenance" in m:
+        d["provenance"] = json.loads(_scalar(m["provenance"]))
+    for key, name in (("input_names", "InputName"), ("output_names", "OutputName"),
+                      ("input_units", "InputUnit"), ("output_units", "OutputUnit")):
+        if name in m:
+            d[key] = strings(name)
     return d
