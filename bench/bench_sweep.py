@@ -22,6 +22,7 @@ import numpy as np
 
 import sysid
 from sysid.grid import pair_flights
+from sysid.methods import DEFAULT_METHOD, get_method
 from sysid.sweep import sweep
 from tests.sysid.systems import open_loop, random_stable_system
 
@@ -36,18 +37,19 @@ WINDOW_S = 2.0
 def _independent(data: sysid.IOData, val: sysid.IOData, pairs: list[tuple[int, int]], *,
                  method: str, **options: object) -> tuple[float, dict[tuple[int, int], np.ndarray]]:
     fits = {}
+    meth = get_method(method)
+    opts = meth.options(**options)
     t0 = time.perf_counter()
     for p, f in pairs:
         own = pair_flights([data], past=p, future=f, past_max=max(PASTS),
                            future_max=max(FUTURES))
-        fn = sysid.iem if method == "iem" else sysid.po_moesp
-        model = fn(list(own), order=ORDER, past=p, future=f, **options)
+        model = meth.identify(list(own), order=ORDER, past=p, future=f, options=opts)
         fits[(p, f)] = sysid.compare(model, val, window=WINDOW_S, warn=False).fit
     return time.perf_counter() - t0, fits
 
 
 def _run(data: sysid.IOData, val: sysid.IOData, *, label: str, workers: int, subset: int,
-         method: str = "iem", **options: object) -> bool:
+         method: str = DEFAULT_METHOD, **options: object) -> bool:
     n_pairs = len(PASTS) * len(FUTURES)
     cpu0, t0 = os.times(), time.perf_counter()
     result = sweep(data, pasts=PASTS, futures=FUTURES, orders=[ORDER], validation=val,

@@ -20,7 +20,9 @@ scored by simulation over windows of ``min(2 s, shortest validation record)`` on
 data, ranked by the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious
 best stable model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
 grid (largest or smallest past, future or order tried, when more than one was) is flagged.
-The chosen horizons and order are then identified again on all the data.
+The chosen horizons and order are then identified again on all the data. ``sysid identify``
+(without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
+same data and grid they choose the same past, future, order and focus.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import dataclasses
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -40,8 +43,9 @@ from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import SIMULATION_WINDOW_S, simulation_window
 
-__all__ = ["HOLDOUT_FRACTION", "Plan", "Selection", "default_grid", "finish", "focus_order",
-           "holdout", "max_blocks", "pick_focus", "plan", "select"]
+__all__ = ["HOLDOUT_FRACTION", "NoStableModel", "Plan", "Selection", "default_grid", "finish",
+           "focus_order", "holdout", "max_blocks", "n_runs", "pick_focus", "plan", "select",
+           "select_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -65,15 +69,22 @@ class Selection:
     result: SweepResult
     model: StateSpaceModel
     rule: str
-    window_s: float
+    window_s: float | None
     warnings: tuple[str, ...]
     grid: dict[str, list[int]]
     focus_note: str = ""
     focus_scores: dict[str, float] | None = None
 
     def top(self, count: int = 8) -> list[SweepRow]:
-        """The best ``count`` models by score (the chosen one included)."""
-        return self.result.ranked()[:count]
+        """The best ``count`` models by score, and the chosen one after them when it is not
+        among them (a smaller order within 0.5 points of the best can rank lower)."""
+        rows = self.result.ranked()[:count]
+        return rows if any(r is self.best for r in rows) else [*rows, self.best]
+
+    @property
+    def scoring(self) -> str:
+        """How the candidates were scored (:attr:`sysid.sweep.SweepResult.scoring`)."""
+        return self.result.scoring
 
 
 def holdout(groups: Sequence[Sequence[IOData]], *, fraction: float = HOLDOUT_FRACTION
@@ -98,8 +109,6 @@ def holdout(groups: Sequence[Sequence[IOData]], *, fraction: float = HOLDOUT_FRA
 
 
 def _part(d: IOData, start: int, stop: int) -> IOData:
-    import dataclasses
-
     return dataclasses.replace(d, u=d.u[start:stop], y=d.y[start:stop])
 
 
@@ -168,6 +177,11 @@ class Plan:
     capped: bool
     given_validation: bool
 
+    @property
+    def n_models(self) -> int:
+        """Models of the grid: pasts x futures x orders."""
+        return len(self.grid["pasts"]) * len(self.grid["futures"]) * len(self.grid["orders"])
+
 
 def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = None,
          futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
@@ -207,7 +221,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
                                past_max=p.grid["pasts"][-1], future_max=p.grid["futures"][-1])
         model = method.identify(list(trimmed), order=best.order, past=best.past,
                                 future=best.future, options=options)
-    return Selection(best=best, result=result, model=model, rule=p.rule, window_s=p.window_s,
+    return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
                      warnings=tuple(warnings), grid=p.grid)
 
 
@@ -233,34 +247,67 @@ def pick_focus(selections: Sequence[Selection], *, tol: float = 0.5) -> Selectio
         str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
 
 
+class NoStableModel(DataError):
+    """:func:`select` found no stable model (with either focus); ``results`` holds the sweep
+    of each focus run (the method's default focus first) and ``plan`` the data and grid, so
+    a caller can still report the grid and why its models failed."""
+
+    def __init__(self, message: str, *, plan: Plan, results: Sequence[SweepResult]) -> None:
+        super().__init__(message)
+        self.plan = plan
+        self.results = tuple(results)
+
+
+def n_runs(options: Options, *, choose_focus: bool) -> int:
+    """How many times :func:`select_plan` runs the grid: once per focus it tries."""
+    return len(focus_order(options.focus)) if choose_focus else 1
+
+
 def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
            pasts: Sequence[int] | None = None, futures: Sequence[int] | None = None,
            orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
            workers: int = 1, progress: Callable[[int, int], None] | None = None,
-           keep_models: bool = False, choose_focus: bool = False) -> Selection:
+           keep_models: bool = False, choose_focus: bool = False, horizon: int | None = None,
+           window: float | None = None, client: Any | None = None) -> Selection:
     """Choose past, future and order (module docstring) and identify the chosen model on all
-    the data: :func:`plan`, :func:`sysid.sweep.sweep`, :func:`finish`. With
-    ``choose_focus`` the grid runs for both focus choices and :func:`pick_focus` decides.
-    ``progress(done, total)`` counts models over every focus run."""
+    the data: :func:`plan`, then :func:`select_plan` (the other keywords are its own)."""
     p = plan(groups, pasts=pasts, futures=futures, orders=orders, validation=validation)
+    return select_plan(p, method=method, options=options, workers=workers, progress=progress,
+                       keep_models=keep_models, choose_focus=choose_focus, horizon=horizon,
+                       window=window, client=client)
+
+
+def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
+                progress: Callable[[int, int], None] | None = None, keep_models: bool = False,
+                choose_focus: bool = False, horizon: int | None = None,
+                window: float | None = None, client: Any | None = None) -> Selection:
+    """The selection on the data and grid of ``p``: :func:`sysid.sweep.sweep`, then
+    :func:`finish`. With ``choose_focus`` the grid runs for both focus choices and
+    :func:`pick_focus` decides. ``progress(done, total)`` counts models over every focus run
+    (``total`` is ``p.n_models * n_runs(...)``). ``horizon`` (k-step prediction) or ``window``
+    (simulation windows, s) replace the score's default (simulation over ``p.window_s``);
+    ``client`` (Dask) runs the sweeps on a cluster. Raises :class:`NoStableModel` when no
+    model of the grid is stable."""
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
-    per_run = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
+    per_run = p.n_models
     total = per_run * len(variants)
-    selections = []
+    score_window = None if horizon is not None else p.window_s if window is None else window
+    selections, results = [], []
     for i, opts in enumerate(variants):
         report = None if progress is None else (
             lambda done, _n, i=i: progress(i * per_run + done, total))
         result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
-                       window=p.window_s, workers=workers, progress=report,
-                       keep_models=keep_models)
+                       horizon=horizon, window=score_window, workers=workers, progress=report,
+                       keep_models=keep_models, client=client)
+        results.append(result)
         try:
             selections.append(finish(p, result, method=method, options=opts))
         except DataError as exc:
             log.info("selection: focus %s: %s", opts.focus, exc)
     if not selections:
-        raise DataError(f"none of the {total} models of the grid is stable"
-                        + (", with either focus" if choose_focus else "")
-                        + "; give horizons and an order (--past/--future/--order), other "
-                          "channels or a longer window")
+        raise NoStableModel(f"none of the {total} models of the grid is stable"
+                            + (", with either focus" if choose_focus else "")
+                            + "; give horizons and an order (--past/--future/--order), other "
+                              "channels or a longer window", plan=p, results=results)
     return pick_focus(selections) if choose_focus else selections[0]

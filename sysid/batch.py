@@ -127,12 +127,15 @@ def _log_unexpected(group: str, exc: Exception) -> None:
 
 
 def identify_group(groups: list[list[IOData]], *, method: Method, options: Options,
-                   grid: dict[str, list[int]], workers: int = 1) -> dict[str, Any]:
-    """Select and identify one group's model (:func:`sysid.auto.select`); runs anywhere."""
+                   grid: dict[str, list[int]], workers: int = 1,
+                   choose_focus: bool = False) -> dict[str, Any]:
+    """Select and identify one group's model (:func:`sysid.auto.select`, with the focus
+    chosen too when ``choose_focus``, as ``sysid identify`` does); runs anywhere."""
     from sysid.sweep import one_blas_thread
 
     with one_blas_thread():  # the same bits locally and on a Dask worker (sysid.sweep)
-        sel = select(groups, method=method, options=options, workers=workers, **grid)
+        sel = select(groups, method=method, options=options, workers=workers,
+                     choose_focus=choose_focus, **grid)
     return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
             "order": sel.best.order, "fit": [float(f) for f in sel.best.fit],
             "score": sel.best.score, "stable": sel.model.is_stable}
@@ -169,6 +172,7 @@ def run_batch(
     load: Callable[[list[Path]], list[list[IOData]]], method: Method, options: Options,
     grid: dict[str, list[int]], workers: int = 1, client: Any | None = None,
     rows: list[BatchRow] | None = None, progress: Callable[[int, int], None] | None = None,
+    choose_focus: bool = False,
 ) -> list[BatchRow]:
     """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
     group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
@@ -212,10 +216,11 @@ def run_batch(
                 row.flights = sum(len(g) for g in data)
                 if client is None:
                     outcome: dict[str, Any] | BaseException = identify_group(
-                        data, method=method, options=options, grid=grid, workers=workers)
+                        data, method=method, options=options, grid=grid, workers=workers,
+                        choose_focus=choose_focus)
                 else:
                     fut = client.submit(identify_group, data, method=method, options=options,
-                                        grid=grid, pure=False)
+                                        grid=grid, choose_focus=choose_focus, pure=False)
                     futures[fut] = name
                     pending[name] = (row, t0)
                     continue

@@ -19,18 +19,9 @@ from typing import Any
 import click
 import numpy as np
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
 from cfcommon.cli import FiniteFloat, check_output, output_table
-from sysid.auto import (
-    Selection,
-    default_grid,
-    finish,
-    holdout,
-    max_blocks,
-    plan,
-    select,
-)
+from sysid.auto import default_grid
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
 from sysid.cli_progress import progress
 from sysid.cli_support import (
@@ -45,8 +36,6 @@ from sysid.cli_support import (
     experiment_label,
     fit_table,
     fits_json,
-    grid_max,
-    grid_min,
     load_flights,
     load_groups,
     parse_grid,
@@ -56,15 +45,15 @@ from sysid.cli_support import (
     session_options,
     write_rrd,
 )
-from sysid.errors import DataError, HorizonError, ParameterError, SysIdError
+from sysid.cli_sweep import choose, print_selection, selection_json, sweep_command
+from sysid.errors import DataError, ParameterError
 from sysid.finish import FOCUS_MODES
-from sysid.methods import METHODS, Method, get_method
+from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.model import load_model
-from sysid.order import information_criteria, singular_values
+from sysid.order import information_criteria, singular_values, suggest_order
 from sysid.residuals import residuals
 from sysid.session_io import read_metadata
 from sysid.stability import STABILITY_MODES
-from sysid.sweep import sweep as run_sweep
 from sysid.validate import compare, simulation_window
 
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
@@ -73,8 +62,29 @@ log = logging.getLogger(__name__)
 
 #: Largest order `sysid order` scores by information criteria (one model per order).
 _IC_MAX_ORDER = 12
-#: Largest sweep grid accepted (models); the thesis' coarse-to-fine search was 756 models.
-MAX_SWEEP_MODELS = 100_000
+
+
+class MethodChoice(click.Choice):
+    """``--method``: a name of the registry (:data:`sysid.methods.METHODS`; ``po_moesp`` as
+    the function is named works too). An unknown name is :func:`sysid.methods.get_method`'s
+    one line, which lists the registered names."""
+
+    name = "method"
+
+    def __init__(self) -> None:
+        super().__init__(sorted(METHODS))
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> str:
+        try:
+            return get_method(value).name
+        except ParameterError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+METHOD_OPTION = click.option(
+    "--method", type=MethodChoice(), default=DEFAULT_METHOD, show_default=True,
+    help="; ".join(f"{name}: {m.description}" for name, m in METHODS.items()) + ".")
 FOCUS_OPTION = click.option(
     "--focus", type=click.Choice(list(FOCUS_MODES)), default=None,
     help="prediction: closed-loop-consistent one-step predictor (default for iem); "
@@ -87,15 +97,17 @@ FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
 
 
-def _option_values(*, feedthrough: bool | None, focus: str | None, stability: str
-                   ) -> dict[str, Any]:
-    """Method options given on the command line (the method's defaults for the others)."""
+def _method(name: str, *, feedthrough: bool | None = None, focus: str | None = None,
+            stability: str) -> tuple[Method, Options]:
+    """The registered method ``name`` and its options as given on the command line (the
+    method's defaults for the others)."""
+    meth = get_method(name)
     values: dict[str, Any] = {"stability": stability}
     if feedthrough is not None:
         values["feedthrough"] = feedthrough
     if focus is not None:
         values["focus"] = focus
-    return values
+    return meth, meth.options(**values)
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -115,7 +127,7 @@ def main(verbose: int) -> None:
 
 @main.command()
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@METHOD_OPTION
 @click.option("--order", type=click.IntRange(min=1),
               help="Model order (default: chosen by validation).")
 @click.option("--past", type=click.IntRange(min=1),
@@ -162,9 +174,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
                      overwrite=force, force_flag="--force")
     check_rrd(rrd, inputs=(*sessions, *validate))
-    meth = get_method(method)
-    options = meth.options(**_option_values(feedthrough=feedthrough, focus=focus,
-                                            stability=stability))
+    meth, options = _method(method, feedthrough=feedthrough, focus=focus, stability=stability)
     groups = load_groups(sessions, opts=opts)
     flights = [e for g in groups for e in g]
     selection = None
@@ -173,9 +183,10 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
             model = meth.identify(flights, order=order, past=past, future=future,
                                   options=options)
     else:
-        selection = _choose(groups, meth=meth, options=options, past=past, future=future,
-                            order=order, workers=workers, quiet=as_json,
-                            choose_focus=focus is None)
+        given = {key: [value] for key, value in (("pasts", past), ("futures", future),
+                                                  ("orders", order)) if value is not None}
+        selection = choose(groups, method=meth, options=options, grid=given, workers=workers,
+                           choose_focus=focus is None, quiet=as_json)
         model = selection.model
         order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
@@ -207,7 +218,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
             "predictor_stable": model.predictor_is_stable,
             "fit_percent": {"simulation": fits_json(sim), "1-step": fits_json(pred)},
             "simulation_window_s": window_s,
-            "selection": _selection_json(selection) if selection else None,
+            "selection": selection_json(selection) if selection else None,
             "validation": [{"mode": label, "fit_percent": fits_json(r)} for label, r in checks],
             "focus": model.provenance.get("focus"),
             "stability": model.provenance.get("stability"),
@@ -215,7 +226,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         return
     con = console()
     if selection is not None:
-        _print_selection(con, selection)
+        print_selection(con, selection)
     con.print(poles_rich_table(
         model, title=f"{method} order {order}, past {past}, future {future}: poles", console=con))
     con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
@@ -264,60 +275,6 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
         yield client
     finally:
         client.close()
-
-
-def _choose(groups: list[list[Any]], *, meth: Method, options: Any, past: int | None,
-            future: int | None, order: int | None, workers: int, quiet: bool,
-            choose_focus: bool = False) -> Selection:
-    """Horizons and order by validation (:func:`sysid.auto.select`) with a progress bar; the
-    given ones are fixed."""
-    given = {key: [value] for key, value in (("pasts", past), ("futures", future),
-                                              ("orders", order)) if value is not None}
-    with Progress("choosing horizons, order" + (" and focus" if choose_focus else ""),
-                  BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=Console(stderr=True), disable=quiet) as bar:
-        task = bar.add_task("choose", total=None)
-        return select(groups, method=meth, options=options, workers=workers,
-                      choose_focus=choose_focus, **given,
-                      progress=lambda done, total: bar.update(task, completed=done,
-                                                              total=total))
-
-
-def _selection_json(sel: Selection) -> dict[str, Any]:
-    return {"rule": sel.rule, "score": "mean of per-channel fits floored at 0 %, simulation "
-            f"over {sel.window_s:g} s windows of the validation data",
-            "grid": sel.grid, "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
-            "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
-            "focus_scores": sel.focus_scores,
-            "candidates": [r.to_record() for r in sel.top(8)]}
-
-
-def _print_selection(con: Console, sel: Selection) -> None:
-    names = sel.model.output_names
-    table = output_table("past", "future", "order", "score [%]", *names, "stable", console=con,
-                         title=f"best candidates of {len(sel.result.rows)} (fit [%], "
-                               f"simulation over {sel.window_s:g} s windows of held-out data)")
-    for r in sel.top(8):
-        style = "bold" if r is sel.best else None
-        table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.1f}",
-                      *[f"{f:.1f}" if abs(f) < 1e4 else "diverged" for f in r.fit],
-                      str(r.stable), style=style)
-    con.print(table)
-    dt = sel.model.dt
-    con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
-              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}")
-    con.print(f"chosen: past {sel.best.past} ({sel.best.past * dt:.2f} s), future "
-              f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}: the "
-              "smallest order within 0.5 points of the best stable score (score = mean fit "
-              "with each channel floored at 0 %)")
-    if sel.focus_note:
-        con.print(sel.focus_note)
-    for w in sel.warnings:
-        con.print(f"[yellow]warning: {w}[/]")
-    bad = [n for i, n in enumerate(names) if max(r.fit[i] for r in sel.top(8)) <= 0]
-    if bad:
-        con.print(f"[yellow]no candidate predicts {', '.join(bad)} (fit <= 0 %): consider "
-                  "dropping it from --outputs[/]")
 
 
 @main.command("compare")
@@ -433,7 +390,7 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
 
 @main.command()
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@METHOD_OPTION
 @click.option("--past", type=click.IntRange(min=1),
               help="Past horizon, samples (default: the largest of the scaled default grid).")
 @click.option("--future", type=click.IntRange(min=2),
@@ -444,56 +401,77 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
 @JSON_OPTION
 def order(session: Path, method: str, past: int | None, future: int | None, show: int,
           as_json: bool, **opts: Any) -> None:
-    """Singular values of the order-selection SVD and a suggested order (largest gap), and
-    AIC/AICc/BIC of the models of orders 1..min(--show, 12) (docs/sysid.md).
+    """Singular values of the order-selection SVD, AIC/AICc/BIC of the models of orders
+    1..min(--show, 12), the order each rule picks and a suggestion naming its rule
+    (docs/sysid.md).
 
-    The suggestion is the n maximising log10(s_n / s_n+1) among the first --show values.
-    Without --past/--future the horizons are the largest of the default grid (1.2 s and
-    0.4 s, or what the data allow; docs/sysid.md).
+    The values and models are those of --method (the registry of sysid identify), and no
+    order is scored or suggested beyond what it identifies at these horizons. The gap rule
+    picks the n maximising log10(s_n / s_n+1) among the first --show values. It is the
+    suggestion when clear: n >= 2 and a drop of at least a factor of 2 (0.3 decades). A
+    largest gap right after s_1 is degenerate (one dominant direction), a smaller one no cut:
+    BIC's order is suggested then. Validation on held-out data (sysid identify without
+    --order) judges better than either. Without --past/--future the horizons are the largest
+    of the default grid (1.2 s and 0.4 s, or what the data allow).
 
     \b
     Example:
       sysid order flight.h5 --past 60 --future 17
     """
     flights = load_flights([session], opts=opts)
+    meth = get_method(method)
     grid = default_grid(flights)
     past = grid["pasts"][-1] if past is None else past
     future = grid["futures"][-1] if future is None else future
-    sv = singular_values(flights, past=past, future=future, method=method)
-    head = sv[: min(show, sv.size)]
-    with np.errstate(divide="ignore"):
-        gaps = np.log10(head[:-1] / np.maximum(head[1:], 1e-300))
-    suggested = int(np.argmax(gaps)) + 1
-    ic = information_criteria(flights, orders=range(1, min(show, _IC_MAX_ORDER) + 1), past=past,
-                              future=future, method=method)
+    limit = meth.max_order(past=past, future=future, n_inputs=flights[0].n_inputs,
+                           n_outputs=flights[0].n_outputs)
+    sv = singular_values(flights, past=past, future=future, method=meth)
+    ic = information_criteria(flights, orders=range(1, max(min(show, _IC_MAX_ORDER, limit), 1)
+                                                    + 1), past=past, future=future, method=meth)
+    hint = suggest_order(sv, ic, show=show, max_order=limit)
     if as_json:
-        click.echo(json.dumps({"session": str(session), "singular_values": sv.tolist(),
-                               "suggested_order": suggested, "information_criteria": {
+        click.echo(json.dumps({"session": str(session), "method": meth.name, "past": past,
+                               "future": future, "max_order": limit,
+                               "singular_values": sv.tolist(), "suggested_order": hint.order,
+                               "suggestion": {
+                                   "rule": hint.rule, "reason": hint.reason,
+                                   "by_rule": hint.by_rule, "gap_decades": hint.gap_decades,
+                                   "gap_clear": hint.gap_clear},
+                               "information_criteria": {
                                    "orders": ic.orders.tolist(), "n_params": ic.n_params.tolist(),
                                    "aic": ic.aic.tolist(), "aicc": ic.aicc.tolist(),
                                    "bic": ic.bic.tolist(), "chosen": ic.chosen}}, indent=1))
         return
     con = console()
     table = output_table("n", "singular value", "log10 gap to next", console=con,
-                         title=f"{method} p={past} f={future}")
-    for i, s in enumerate(head):
-        gap = f"{gaps[i]:.2f}" if i < gaps.size else ""
-        table.add_row(str(i + 1), f"{s:.4g}", gap, style="bold" if i + 1 == suggested else None)
+                         title=f"{meth.name} p={past} f={future}, orders up to {limit} "
+                               "(> = largest gap)")
+    for i, value in enumerate(sv[: min(show, sv.size)]):
+        gap = (f"{hint.gaps[i]:.2f}" + (" >" if i + 1 == hint.by_rule["gap"] else "")
+               if i < hint.gaps.size else "")
+        table.add_row(str(i + 1), f"{value:.4g}", gap,
+                      style="bold" if i + 1 == hint.order else None)
     con.print(table)
-    con.print(f"suggested order: {suggested}")
     table = output_table("n", "params", "AIC", "AICc", "BIC", console=con,
                          title="information criteria (one-step errors; * = smallest)")
     for i, n in enumerate(ic.orders):
         cells = [f"{v[i]:.1f}" + (" *" if ic.chosen[k] == n else "")
                  for k, v in (("aic", ic.aic), ("aicc", ic.aicc), ("bic", ic.bic))]
-        table.add_row(str(n), str(ic.n_params[i]), *cells)
+        table.add_row(str(n), str(ic.n_params[i]), *cells,
+                      style="bold" if n == hint.order else None)
     con.print(table)
-    con.print(f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
+    con.print(f"largest gap ({hint.gap_decades:.2f} decades) after s_{hint.by_rule['gap']}; "
+              f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
+    con.print(f"suggested order: {hint.order}, by {hint.reason}")
+    con.print(f"to identify with it: sysid identify {session} --method {meth.name} --past "
+              f"{past} --future {future} --order {hint.order} (and the same channel options); "
+              "without --order and the horizons, validation on held-out data chooses them, "
+              "which judges better")
 
 
 @main.command("sweep")
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@METHOD_OPTION
 @click.option("--pasts", help="START:STOP:STEP or a,b,c (default: scaled to the data rate "
                               "and length, see docs/sysid.md).")
 @click.option("--futures", help="START:STOP:STEP or a,b,c, each >= 2 (default: scaled).")
@@ -507,7 +485,8 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
 @click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
 @click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
               help="Score by simulation over windows of this many seconds (default: 2 s).")
-@click.option("--top", default=10, show_default=True, type=click.IntRange(min=1))
+@click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
+              help="Candidates listed (and in --json).")
 @FOCUS_OPTION
 @STABILITY_OPTION
 @session_options
@@ -521,11 +500,18 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
               validate: tuple[Path, ...], horizon: int | None, window_s: float | None,
               top: int, focus: str | None, stability: str, out: Path | None, force: bool,
               as_json: bool, rrd: Path | None, **opts: Any) -> None:
-    """Identify a model for every (past, future, order) and rank them by score.
+    """Identify a model for every (past, future, order), rank them by score, choose one.
 
-    The score is the mean of the per-channel fits floored at 0 % (one channel no model can
-    predict cannot decide the ranking). Models that cannot be identified are counted with
-    their reasons; when none can, or none is stable, the command exits with 2.
+    The choice is that of `sysid identify` without --past/--future/--order (sysid.auto):
+    the same held-out split, default grid, score and rule, so on the same session both
+    choose the same past, future, order and focus. The score is the mean of the per-channel
+    fits floored at 0 % (one channel no model can predict cannot decide the ranking); the
+    smallest order within 0.5 points of the best stable score is chosen. Without --focus the
+    grid runs once per focus and the focus whose choice scores best is taken. The report
+    lists the best --top candidates with their fits, warns when the choice is at the edge of
+    the grid, and --out saves the chosen model identified again on all the data. Models that
+    cannot be identified are counted with their reasons; when none can, or none is stable,
+    the command exits with 2.
 
     \b
     Example:
@@ -533,119 +519,12 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
         --validate other_flight.h5 --window-s 5 --workers 2 --out model.h5
       sysid sweep flight.h5 --scheduler tcp://10.0.0.5:8786   # on a Dask cluster
     """
-    lazy = {k: parse_grid(text=v, option=f"--{k}", minimum=2 if k == "futures" else 1)
-            for k, v in (("pasts", pasts), ("futures", futures), ("orders", orders))
-            if v is not None}
-    if out is not None:
-        check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=(session, *validate),
-                     overwrite=force, force_flag="--force")
-    check_rrd(rrd, inputs=(session, *validate))
-    groups = load_groups([session], opts=opts)
-    meth = get_method(method)
-    options = meth.options(**_option_values(feedthrough=None, focus=focus, stability=stability))
-    val = load_flights(list(validate), opts=opts) if validate else None
-    ident = groups[0] if val else holdout(groups)[0]
-    if "pasts" in lazy or "futures" in lazy:
-        default = default_grid(ident)
-        _check_sweep_horizons(ident, pasts=lazy.get("pasts", default["pasts"]),
-                              futures=lazy.get("futures", default["futures"]))
-    total = int(np.prod([len(v) for v in lazy.values()], dtype=float))
-    if total > MAX_SWEEP_MODELS:
-        raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
-                        "coarser steps (START:STOP:STEP) and refine around the best")
-    p = plan(groups, validation=val, **{k: list(v) for k, v in lazy.items()})
-    total = len(p.grid["pasts"]) * len(p.grid["futures"]) * len(p.grid["orders"])
-    if total > MAX_SWEEP_MODELS:
-        raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
-                        "coarser steps (START:STOP:STEP) and refine around the best")
-    window = window_s if window_s is not None or horizon is not None else p.window_s
-    with scheduler_client(scheduler) as client, \
-            progress("sweep", total=total, quiet=as_json) as update:
-        result = run_sweep(p.ident, **p.grid, method=meth, options=options, validation=p.val,
-                           horizon=horizon, window=None if horizon else window,
-                           workers=workers, keep_models=rrd is not None, client=client,
-                           progress=lambda done, _total: update(done))
-    ok = result.ranked()
-    failures = result.failures()
-    n_failed = sum(n for _, n in failures)
-    try:
-        best = result.best()
-    except SysIdError:
-        best = None
-    selection = finish(p, result, method=meth, options=options) if best is not None else None
-    if out is not None and selection is not None:
-        selection.model.save(out)
-    rrd_written = rrd is not None and best is not None and best.model is not None
-    if rrd_written:
-        write_rrd(path=rrd, name=f"sweep {session.name}", model=best.model, sweep=result)
-    if as_json:
-        click.echo(json.dumps({"session": str(session), "n_models": len(result.rows),
-                               "n_failed": n_failed, "rule": p.rule, "grid": p.grid,
-                               "failures": [{"error": e, "count": n} for e, n in failures],
-                               "best": best.to_record() if best else None,
-                               "warnings": list(selection.warnings) if selection else [],
-                               "top": [r.to_record() for r in ok[:top]],
-                               "model": str(out) if out and selection else None,
-                               "rrd": str(rrd) if rrd_written else None}, indent=1))
-    else:
-        con = console()
-        if ok:
-            table = output_table("past", "future", "order", "score [%]", "mean fit [%]",
-                                 "max |pole|", "stable", "pred. stable", console=con,
-                                 title=f"best {min(top, len(ok))} of {len(result.rows)} models")
-            for r in ok[:top]:
-                table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.2f}",
-                              f"{r.mean_fit:.2f}", f"{np.abs(r.poles).max():.4f}",
-                              str(r.stable), str(r.predictor_stable))
-            con.print(table)
-        con.print(p.rule)
-        if failures:
-            con.print(f"[yellow]{n_failed} of {len(result.rows)} models failed:[/]")
-            for msg, n in failures[:3]:
-                con.print(f"  {n} x {msg}", markup=False, soft_wrap=True)
-            if len(failures) > 3:
-                con.print(f"  ... and {len(failures) - 3} other reasons (--json lists all)")
-        if best is not None:
-            con.print(f"selected (smallest order within 0.5 points of the best stable score): "
-                      f"past {best.past}, future {best.future}, order {best.order}, "
-                      f"score {best.score:.2f} %")
-            for w in selection.warnings if selection else ():
-                con.print(f"[yellow]warning: {w}[/]")
-            if out is not None:
-                con.print(f"model saved to {out} (identified again on all the data)")
-    if rrd is not None and not rrd_written:
-        click.echo(f"warning: --rrd {rrd} not written: "
-                   f"{'no stable model' if ok else 'no model'} to show", err=True)
-    if not ok:
-        reason = (" (reasons above)" if not as_json else
-                  f"; most often: {failures[0][0]}" if failures else "")
-        raise DataError(f"none of the {len(result.rows)} models could be identified{reason}")
-    if best is None:
-        raise DataError(f"none of the {len(ok)} identified models is stable; widen the grid "
-                        "or pick other channels")
-
-
-def _check_sweep_horizons(flights: list[Any], *, pasts: Any, futures: Any) -> None:
-    """Refuse horizons the data cannot support before the sweep runs: every pair shares the
-    Hankel columns of the largest, which needs ``B c`` columns for ``B = past + future``
-    block rows and c channels, so the largest past + future must fit the data."""
-    c = flights[0].n_inputs + flights[0].n_outputs
-    room = max_blocks(flights, columns_per_row=1.0)
-    n = max(d.n_samples for d in flights)
-    for name, values, other, other_name in (("past", pasts, futures, "future"),
-                                            ("future", futures, pasts, "past")):
-        largest, shortest = grid_max(values), grid_min(other)
-        if largest + shortest > room:
-            raise HorizonError(
-                f"--{name}s goes up to {largest}, but {n} identification samples with {c} "
-                f"channels allow past + future <= {room}: {name} <= "
-                f"{max(room - shortest, 0)} with {other_name} {shortest}; "
-                f"lower the {name}s or pass a longer --window")
-    if grid_max(pasts) + grid_max(futures) > room:
-        raise HorizonError(
-            f"--pasts up to {grid_max(pasts)} with --futures up to {grid_max(futures)}: every "
-            f"pair shares the columns of the largest, but {n} identification samples with {c} "
-            f"channels allow past + future <= {room}; lower the largest past or future")
+    meth, options = _method(method, focus=focus, stability=stability)
+    sweep_command(session=session, method=meth, options=options, choose_focus=focus is None,
+                  pasts=pasts, futures=futures, orders=orders, workers=workers,
+                  connect=lambda: scheduler_client(scheduler), validate=validate,
+                  horizon=horizon, window_s=window_s, top=top, out=out, force=force,
+                  as_json=as_json, rrd=rrd, opts=opts)
 
 
 @main.command()
@@ -655,7 +534,7 @@ def _check_sweep_horizons(flights: list[Any], *, pasts: Any, futures: Any) -> No
               help="Folder for one model per group (GROUP.h5) and summary.csv/summary.json.")
 @click.option("--group-by", type=click.Choice(GROUP_BY), default="session", show_default=True,
               help="One model per session, vehicle (uri), UTC day, plan name, or of all.")
-@click.option("--method", type=click.Choice(sorted(METHODS)), default="iem", show_default=True)
+@METHOD_OPTION
 @click.option("--order", type=click.IntRange(min=1), help="Fix the order (default: chosen).")
 @click.option("--past", type=click.IntRange(min=1), help="Fix the past horizon, samples.")
 @click.option("--future", type=click.IntRange(min=2), help="Fix the future horizon, samples.")
@@ -687,8 +566,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     if summary.exists() and not force:
         raise ParameterError(f"--out {out_dir}: holds a batch summary already; "
                              "pass --force to replace it or choose another folder")
-    meth = get_method(method)
-    options = meth.options(**_option_values(feedthrough=None, focus=focus, stability=stability))
+    meth, options = _method(method, focus=focus, stability=stability)
     grid = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
             if v is not None}
     groups, bad = group_sessions(list(sessions), by=group_by,
@@ -700,7 +578,8 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
             rows = run_batch(groups, out_dir=out_dir, rows=bad,
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
-                             client=client, progress=lambda done, _total: update(done))
+                             client=client, progress=lambda done, _total: update(done),
+                             choose_focus=focus is None)
     except KeyboardInterrupt:
         n = len(json.loads(summary.read_text())) if summary.exists() else 0
         click.echo(f"interrupted: {n} finished group(s) kept in {summary} and "

@@ -30,9 +30,12 @@ from sysid.model import StateSpaceModel
 from sysid.moesp import moesp_factor, po_moesp
 from sysid.stability import Stability
 
-__all__ = ["METHODS", "IEMOptions", "MOESPOptions", "Method", "MethodName", "get_method"]
+__all__ = ["DEFAULT_METHOD", "METHODS", "IEMOptions", "MOESPOptions", "Method", "MethodName",
+           "Options", "get_method", "method_loggers"]
 
 MethodName = Literal["iem", "po-moesp"]
+#: The method the API and the command line use when none is named.
+DEFAULT_METHOD: MethodName = "iem"
 
 
 def _check_literals(obj: object) -> None:
@@ -111,7 +114,7 @@ class Method:
 
     def options(self, **kwargs: Any) -> Options:
         """Typed options from keywords; an unknown keyword is a one-line error."""
-        known = {f.name for f in dataclasses.fields(self.options_type)}
+        known = self.option_names
         unknown = sorted(set(kwargs) - known)
         if unknown:
             raise ParameterError(f"{self.name} has no option(s) {unknown}; its options are "
@@ -134,6 +137,27 @@ class Method:
         return self.function(data, order=order, past=past, future=future, products=products,
                              **opts)
 
+    def max_order(self, *, past: int, future: int, n_inputs: int, n_outputs: int) -> int:
+        """The largest order the method identifies at these horizons: the rank
+        ``min((f - 1) l, p (m + l))`` that :func:`sysid.realize.check_order` enforces."""
+        return min((future - 1) * n_outputs, past * (n_inputs + n_outputs))
+
+    @property
+    def option_names(self) -> frozenset[str]:
+        """The fields of the method's options."""
+        return frozenset(f.name for f in dataclasses.fields(self.options_type))
+
+    def sv_options(self, *, feedthrough: bool | None = None,
+                   weighting: Literal["data", "none"] = "data") -> Options:
+        """Options of the order-selection SVD (:meth:`singular_values`): ``feedthrough``
+        (None: the method's default) and ``weighting`` where the method's singular values
+        have one (IEM: ``"data"`` or ``"none"``); a method without it (PO-MOESP, whose
+        ``[L42 L43]`` is not weighted) ignores ``weighting``."""
+        kwargs: dict[str, Any] = {} if feedthrough is None else {"feedthrough": feedthrough}
+        if "weighting" in self.option_names:
+            kwargs["weighting"] = weighting
+        return self.options(**kwargs)
+
     def singular_values(self, products: DataProducts, *, options: Options | None = None
                         ) -> np.ndarray:
         """The singular values whose gap suggests the order (:mod:`sysid.order`)."""
@@ -151,10 +175,16 @@ METHODS: dict[str, Method] = {
 
 
 def get_method(name: str | Method) -> Method:
-    """The registered method ``name`` (``"po_moesp"`` as in the function's name works too)."""
+    """The registered method ``name`` (``"po_moesp"`` as in the function's name works too);
+    an unknown name is a one-line :class:`ParameterError` listing the registered names."""
     if isinstance(name, Method):
         return name
     key = str(name).replace("_", "-")
     if key not in METHODS:
         raise ParameterError(f"method {name!r} is unknown; use one of {sorted(METHODS)}")
     return METHODS[key]
+
+
+def method_loggers() -> tuple[str, ...]:
+    """The loggers of the registered methods' modules (a sweep quiets them while it runs)."""
+    return tuple(sorted({m.function.__module__ for m in METHODS.values()}))

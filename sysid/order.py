@@ -1,5 +1,6 @@
-"""Model-order selection: singular values (thesis section 5.1.2, Figure 5.1) and information
-criteria (AIC, AICc, BIC) of the identified models."""
+"""Model-order selection: singular values (thesis section 5.1.2, Figure 5.1), information
+criteria (AIC, AICc, BIC) of the identified models, and a suggestion that says which rule gave
+it (:func:`suggest_order`)."""
 
 from __future__ import annotations
 
@@ -12,14 +13,16 @@ import numpy as np
 from sysid.data import IOData, as_flights
 from sysid.errors import ParameterError
 from sysid.factor import build_products
-from sysid.methods import Method, get_method
+from sysid.methods import DEFAULT_METHOD, Method, get_method
+from sysid.sweep import quiet_models
 from sysid.validate import predict, stable_predictor
 
-__all__ = ["InformationCriteria", "information_criteria", "singular_values"]
+__all__ = ["GAP_MIN_DECADES", "InformationCriteria", "OrderSuggestion", "information_criteria",
+           "singular_values", "suggest_order"]
 
 
 def singular_values(data: IOData | Sequence[IOData], *, past: int, future: int,
-                    method: str | Method = "iem", feedthrough: bool | None = None,
+                    method: str | Method = DEFAULT_METHOD, feedthrough: bool | None = None,
                     weighting: Literal["data", "none"] = "data", scale: bool = True
                     ) -> np.ndarray:
     """Singular values ``(min(f l, p (m+l)),)`` of the matrix whose SVD sets the order.
@@ -32,11 +35,9 @@ def singular_values(data: IOData | Sequence[IOData], *, past: int, future: int,
     The same values are stored in ``model.provenance["singular_values"]``.
     """
     meth = get_method(method)
-    kwargs: dict[str, object] = {} if feedthrough is None else {"feedthrough": feedthrough}
-    if meth.name == "iem":
-        kwargs["weighting"] = weighting
+    options = meth.sv_options(feedthrough=feedthrough, weighting=weighting)
     products = build_products(data, past=past, future=future, scale=scale)
-    return meth.singular_values(products, options=meth.options(**kwargs))
+    return meth.singular_values(products, options=options)
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +60,7 @@ class InformationCriteria:
 
 
 def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[int], past: int,
-                         future: int, method: str = "iem", **options: Any
+                         future: int, method: str | Method = DEFAULT_METHOD, **options: Any
                          ) -> InformationCriteria:
     """AIC, AICc and BIC (MDL) per order of the ``method`` model on its identification data.
 
@@ -90,8 +91,9 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
     n_total = sum(d.n_samples for d in flights)
     log_det, n_params = [], []
     for n in orders:
-        model = meth.identify(flights, order=n, past=past, future=future, options=opts,
-                              products=products)
+        with quiet_models():  # a warning per order would flood the log
+            model = meth.identify(flights, order=n, past=past, future=future, options=opts,
+                                  products=products)
         if not model.predictor_is_stable:
             model = stable_predictor(model)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -113,3 +115,67 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
         orders=np.array(orders), n_params=d_arr.astype(int), log_det=ld_arr, aic=aic,
         aicc=crit["aicc"], bic=bic, n_samples=n_total,
         chosen={k: orders[int(np.argmin(v))] for k, v in crit.items()})
+
+
+#: Smallest singular-value gap, decades (a factor of 2), that :func:`suggest_order` takes
+#: as a clear cut between signal and noise.
+GAP_MIN_DECADES = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class OrderSuggestion:
+    """Result of :func:`suggest_order`: the suggested ``order``, the ``rule`` that gave it
+    (``"gap"`` or ``"bic"``), what each rule picks (``by_rule``: ``gap``, ``aic``, ``aicc``,
+    ``bic``), the gaps ``log10(s_n / s_n+1)`` looked at ``(k,)``, the largest in decades,
+    whether it counts as clear, and ``reason`` (one line, for people)."""
+
+    order: int
+    rule: Literal["gap", "bic"]
+    by_rule: dict[str, int]
+    gaps: np.ndarray
+    gap_decades: float
+    gap_clear: bool
+    reason: str
+
+
+def suggest_order(sv: np.ndarray, ic: InformationCriteria, *, show: int | None = None,
+                  max_order: int | None = None, min_gap: float = GAP_MIN_DECADES
+                  ) -> OrderSuggestion:
+    """An order from the singular values ``sv`` and the criteria ``ic``, saying which rule
+    gave it.
+
+    The gap rule picks the ``n`` maximising ``log10(s_n / s_n+1)`` among the first ``show``
+    values, ``n <= max_order`` (the largest order the method identifies at these horizons,
+    :meth:`sysid.methods.Method.max_order`). It is taken when it is clear: ``n >= 2`` and a
+    gap of at least ``min_gap`` decades (a factor of 2). A largest gap right after the first
+    value is degenerate (one dominant direction, e.g. the thrust's scale, says nothing about
+    the order of the rest) and a smaller gap is no cut between signal and noise; the
+    suggestion is then BIC's order (AIC over-fits long records). Validation on held-out data
+    (:func:`sysid.auto.select`) is the better judge of either.
+    """
+    sv = np.asarray(sv, dtype=float)
+    count = sv.size if show is None else min(show, sv.size)
+    if max_order is not None:
+        count = min(count, max_order + 1)
+    head = sv[:count]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gaps = np.log10(head[:-1] / np.maximum(head[1:], 1e-300))
+    gap_order = int(np.argmax(gaps)) + 1 if gaps.size else 1
+    decades = float(gaps[gap_order - 1]) if gaps.size else 0.0
+    clear = gap_order >= 2 and decades >= min_gap
+    by_rule = {"gap": gap_order, **{k: int(v) for k, v in ic.chosen.items()}}
+    bic = by_rule["bic"]
+    edge = (" (the largest order scored: the best may lie beyond)"
+            if bic == int(ic.orders[-1]) and ic.orders.size > 1 else "")
+    if clear:
+        reason = (f"the singular values drop by {decades:.2f} decades after s_{gap_order}"
+                  + ("" if bic == gap_order else f"; BIC picks {bic}{edge}"))
+        return OrderSuggestion(order=gap_order, rule="gap", by_rule=by_rule, gaps=gaps,
+                               gap_decades=decades, gap_clear=True, reason=reason)
+    why = (f"the largest gap ({decades:.2f} decades) is right after s_1: one dominant "
+           "direction, degenerate" if gap_order == 1 else
+           f"the largest gap, after s_{gap_order}, is {decades:.2f} decades (< {min_gap:g}): "
+           "no clear cut")
+    return OrderSuggestion(order=bic, rule="bic", by_rule=by_rule, gaps=gaps,
+                           gap_decades=decades, gap_clear=False,
+                           reason=f"BIC{edge}; gap rule not used: {why}")

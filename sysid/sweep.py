@@ -20,7 +20,9 @@ Selection (:meth:`SweepResult.best`) is parsimonious: among successful (by defau
 models, take the best score :math:`S^*`, keep those within ``tol`` percentage points,
 :math:`S \\ge S^* - \\text{tol}`, and return the one of smallest order (then best score).
 Orders above the true one fit the same data about as well, so "highest fit" alone would pick
-an over-parameterised model at random.
+an over-parameterised model at random. :func:`sysid.auto.select` (what ``sysid identify`` and
+``sysid sweep`` run) adds the held-out split, the default grid, the choice of focus and the
+final identification on all the data.
 """
 
 from __future__ import annotations
@@ -43,11 +45,12 @@ import threadpoolctl
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, ParameterError, SysIdError
 from sysid.grid import HorizonGrid, build_grid, grid_products
-from sysid.methods import Method, Options, get_method
+from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
 from sysid.validate import compare
 
-__all__ = ["SweepResult", "SweepRow", "select_order", "sweep"]
+__all__ = ["SweepResult", "SweepRow", "one_blas_thread", "quiet_models", "select_order",
+           "sweep"]
 
 log = logging.getLogger(__name__)
 
@@ -138,6 +141,16 @@ class SweepResult:
         return [(example[k], n) for k, n in counts.most_common()]
 
     @property
+    def scoring(self) -> str:
+        """How the rows were scored, for people: ``"1-step prediction"``, ``"simulation over
+        2 s windows"`` or ``"simulation of each whole record"``."""
+        if self.horizon is not None:
+            return f"{self.horizon}-step prediction"
+        if self.window is not None:
+            return f"simulation over {self.window:g} s windows"
+        return "simulation of each whole record"
+
+    @property
     def fits(self) -> np.ndarray:
         """Per-channel fits of every row, (n_rows, l), percent."""
         return np.array([r.fit for r in self.rows])
@@ -167,8 +180,7 @@ def _past_task(
     BLAS runs on one thread here (:func:`one_blas_thread`): a multi-threaded BLAS sums in an
     order that depends on its thread count, so a row would differ in its last bits between
     this process, a worker process and a Dask worker (which runs one BLAS thread)."""
-    with one_blas_thread(), _quiet("sysid.iem", "sysid.moesp", "sysid.realize", "sysid.factor",
-                                   "sysid.pem", "sysid.finish", "sysid.stability"):
+    with one_blas_thread(), quiet_models():
         return _past_rows(grid=grid, validation=validation, method=method, options=options,
                           past=past, futures=futures, orders=orders, horizon=horizon,
                           window=window, keep_models=keep_models)
@@ -182,9 +194,13 @@ def one_blas_thread() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _quiet(*names: str) -> Iterator[None]:
-    """Per-model warnings (a skipped refinement, ...) of hundreds of grid models would flood
-    the log; the sweep reports failures in its rows. Only errors pass while a grid runs."""
+def quiet_models() -> Iterator[None]:
+    """Per-model warnings (a skipped refinement, a pole kept outside the unit circle, ...) of
+    the many models of a grid would flood the log; a sweep reports failures in its rows.
+    Only errors of the methods' modules (:func:`sysid.methods.method_loggers`) and of the
+    modules they use pass inside the block."""
+    names = (*method_loggers(), "sysid.realize", "sysid.factor", "sysid.pem", "sysid.finish",
+             "sysid.stability")
     loggers = [logging.getLogger(n) for n in names]
     levels = [lg.level for lg in loggers]
     for lg in loggers:
@@ -242,7 +258,7 @@ def sweep(
     pasts: Sequence[int],
     futures: Sequence[int],
     orders: Sequence[int],
-    method: str | Method = "iem",
+    method: str | Method = DEFAULT_METHOD,
     options: Options | None = None,
     validation: IOData | Sequence[IOData] | None = None,
     horizon: int | None = None,

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import sysid
+from sysid.methods import METHODS
 from tests.paths import SHARED
 
 __all__ = ["DAISY", "SETS", "SIPPY_BEST", "Candidate", "best_model", "candidates", "load",
@@ -65,18 +66,19 @@ class Candidate:
 
 
 def candidates(*, pem: bool = False) -> Iterator[Candidate]:
-    """IEM and PO-MOESP, each with prediction and simulation focus (and PEM if asked)."""
-    for method, focus, refine in itertools.product(("iem", "po_moesp"),
+    """Every registered method (:data:`sysid.methods.METHODS`), each with prediction and
+    simulation focus (and PEM if asked)."""
+    for method, focus, refine in itertools.product(METHODS.values(),
                                                    ("prediction", "simulation"),
                                                    (False, True) if pem else (False,)):
-        fn = getattr(sysid, method)
 
-        def identify(d: sysid.IOData, n: int, fn=fn, focus=focus, refine=refine
+        def identify(d: sysid.IOData, n: int, method=method, focus=focus, refine=refine
                      ) -> sysid.StateSpaceModel:
-            return fn(d, order=n, past=HORIZON, future=HORIZON, feedthrough=True,
-                      focus=focus, pem=refine)
+            return method.identify(d, order=n, past=HORIZON, future=HORIZON,
+                                   options=method.options(feedthrough=True, focus=focus,
+                                                          pem=refine))
 
-        yield Candidate(f"{method} {focus}{' +pem' if refine else ''}", identify)
+        yield Candidate(f"{method.name} {focus}{' +pem' if refine else ''}", identify)
 
 
 def best_model(name: str, *, pem: bool = False) -> tuple[float, str, int, dict[str, float]]:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import sysid
-from sysid.auto import default_grid, holdout, select
+from sysid.auto import NoStableModel, default_grid, holdout, select
 from sysid.methods import get_method
 from tests.sysid.systems import (
     closed_loop,
@@ -110,3 +110,26 @@ def test_focus_is_chosen_on_held_out_data_when_not_given() -> None:
     fixed = select(groups, method=meth, options=meth.options(), pasts=[10], futures=[10],
                    orders=[4])
     assert fixed.focus_note == "" and fixed.model.provenance["focus"] == "prediction"
+
+
+def test_score_follows_horizon_or_window_and_no_stable_model_keeps_each_grid() -> None:
+    """select() scores as asked (k-step prediction or given windows, as `sysid sweep
+    --horizon/--window-s`), lists the chosen model among the best candidates, and when no
+    model is stable raises with each focus run's grid so a caller can still report it."""
+    rng = np.random.default_rng(0)
+    system = pbsid_example1()
+    groups = [[closed_loop(system, n_samples=2000, rng=rng).data]]
+    meth = get_method("iem")
+    one_step = select(groups, method=meth, options=meth.options(), pasts=[10], futures=[10],
+                      orders=[3, 4, 5], horizon=1)
+    assert one_step.scoring == "1-step prediction" and one_step.window_s is None
+    assert one_step.best.order == 4
+    windowed = select(groups, method=meth, options=meth.options(), pasts=[10], futures=[10],
+                      orders=[4], window=5.0)
+    assert windowed.scoring == "simulation over 5 s windows" and windowed.window_s == 5.0
+    assert one_step.top(1)[-1] is one_step.best and one_step.best in one_step.top(8)
+    with pytest.raises(NoStableModel, match="with either focus") as err:
+        select(groups, method=meth, options=meth.options(), pasts=[4], futures=[3],
+               orders=[40], choose_focus=True)
+    assert [r.rows[0].error is not None for r in err.value.results] == [True, True]
+    assert err.value.plan.grid["orders"] == [40] and "last 30 %" in err.value.plan.rule

@@ -127,6 +127,42 @@ def test_sweep_saves_the_selected_model(flights, tmp_path) -> None:
     assert again.exit_code == 2 and "already exists" in again.stderr
 
 
+def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> None:
+    """On one closed-loop session both commands run sysid.auto.select (held-out split, default
+    grid, both focus choices): the same past, future, order and focus, and the model the
+    sweep saves is the one identify returns."""
+    ident = run("identify", flights[0].path, "--json")
+    assert ident.exit_code == 0, ident.output
+    chose = json.loads(ident.stdout)["selection"]
+    out = tmp_path / "swept.h5"
+    swept = run("sweep", flights[0].path, "--out", out, "--json")
+    assert swept.exit_code == 0, swept.output
+    report = json.loads(swept.stdout)
+
+    def key(sel: dict) -> tuple:
+        return (sel["chosen"]["past"], sel["chosen"]["future"], sel["chosen"]["order"],
+                sel["focus"])
+
+    assert key(report) == key(chose) and report["grid"] == chose["grid"]
+    assert set(report["focus_scores"]) == {"prediction", "simulation"}
+    assert report["focus_scores"] == pytest.approx(chose["focus_scores"])
+    assert report["best"] == report["chosen"] and report["rule"] == chose["rule"]
+    model = sysid.load_model(out)
+    assert (model.provenance["past"], model.provenance["future"], model.A.shape[0],
+            model.provenance["focus"]) == key(chose)
+    assert pole_error(flights[0].system.poles(), model.poles()) < 0.03
+
+
+def test_sweep_reports_the_best_candidates_and_the_grid_edge(flights) -> None:
+    res = run("sweep", flights[0].path, "--pasts", "10,20", "--futures", "10",
+              "--orders", "2,3", "--focus", "prediction", "--top", "3")
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.stdout.split())
+    assert "best 3 candidates of 4" in text and "acc.z" in text and "gyro.x" in text
+    assert "chosen: past" in text and "order 3, focus prediction" in text
+    assert "warning: order 3 is the largest tried: the best may lie beyond" in text
+
+
 def test_export_round_trip(flights, tmp_path) -> None:
     src = tmp_path / "m.h5"
     flights[0].system.save(src)

@@ -52,3 +52,49 @@ def test_cli_offers_exactly_the_registered_methods() -> None:
     for command in ("identify", "order", "sweep"):
         choice = next(p for p in main.commands[command].params if p.name == "method").type
         assert sorted(choice.choices) == sorted(METHODS)
+
+
+def test_unknown_method_is_one_line_listing_the_registry_everywhere(data, tmp_path) -> None:
+    """The API and every command with --method refuse an unknown name with the registry's
+    one line, which lists every registered name; "po_moesp" (the function's name) works."""
+    from click.testing import CliRunner
+
+    names = sorted(METHODS)
+    for call in (lambda: get_method("n4sid"),
+                 lambda: sysid.sweep(data, pasts=[4], futures=[4], orders=[2], method="n4sid"),
+                 lambda: sysid.singular_values(data, past=4, future=4, method="n4sid"),
+                 lambda: sysid.information_criteria(data, orders=[2], past=4, future=4,
+                                                    method="n4sid")):
+        with pytest.raises(ParameterError) as err:
+            call()
+        assert "\n" not in str(err.value) and all(repr(n) in str(err.value) for n in names)
+    commands = [c for c, cmd in main.commands.items()
+                if any(p.name == "method" for p in cmd.params)]
+    assert {"identify", "order", "sweep", "batch"} <= set(commands)
+    for command in commands:
+        extra = ["--out", str(tmp_path / "batch")] if command == "batch" else []
+        res = CliRunner().invoke(main, [command, str(tmp_path / "missing.h5"), *extra,
+                                        "--method", "n4sid"])
+        err = res.stderr.strip()
+        assert res.exit_code == 2 and err.startswith("error:") and "\n" not in err, res.output
+        assert "'n4sid' is unknown" in err and all(repr(n) in err for n in names), err
+        # a registered name passes the option (the command then fails on the missing file)
+        res = CliRunner().invoke(main, [command, str(tmp_path / "missing.h5"), *extra,
+                                        "--method", "po_moesp"])
+        assert res.exit_code == 2 and "--method" not in res.stderr, res.stderr
+
+
+def test_registry_knows_each_methods_order_limit_and_sv_options() -> None:
+    from sysid.errors import OrderError
+    from sysid.realize import check_order
+
+    for meth in METHODS.values():
+        for past, future, m, ell in ((5, 3, 4, 4), (1, 10, 1, 2), (2, 2, 3, 6)):
+            top = meth.max_order(past=past, future=future, n_inputs=m, n_outputs=ell)
+            check_order(order=top, past=past, future=future, n_inputs=m, n_outputs=ell)
+            with pytest.raises(OrderError):
+                check_order(order=top + 1, past=past, future=future, n_inputs=m, n_outputs=ell)
+    # the weighting of the order-selection SVD is an option of the methods that have one
+    assert get_method("iem").sv_options(weighting="none").weighting == "none"
+    assert get_method("po-moesp").sv_options(weighting="none") == MOESPOptions()
+    assert get_method("po-moesp").sv_options(feedthrough=False).feedthrough is False

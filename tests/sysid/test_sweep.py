@@ -65,6 +65,7 @@ def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData])
     short = max(r.mean_fit for r in result.rows if r.past == 1)
     assert short < best.mean_fit - 5.0
     assert "past future order" in result.table() and result.fits.shape == (6, 2)
+    assert result.scoring == "1-step prediction"
 
 
 def test_parallel_sweep_equals_serial_and_failures_are_rows(

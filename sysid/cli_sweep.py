@@ -1,0 +1,238 @@
+"""``sysid sweep``, and the choice of horizons, order and focus it shares with ``identify``.
+
+Both commands choose through :func:`choose` (:func:`sysid.auto.select_plan` with progress on
+stderr), so on the same data and grid they choose the same past, future, order and focus, and
+both report the choice with :func:`print_selection` / :func:`selection_json`. The sweep adds
+grid options (--pasts/--futures/--orders, checked before anything runs), the reasons its
+models failed, and --out for the selected model.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+from rich.console import Console
+
+from cfcommon.cli import check_output, output_table
+from sysid.auto import (
+    NoStableModel,
+    Selection,
+    default_grid,
+    holdout,
+    max_blocks,
+    n_runs,
+    plan,
+    select_plan,
+)
+from sysid.cli_progress import progress
+from sysid.cli_support import (
+    MODEL_SUFFIXES,
+    check_rrd,
+    console,
+    grid_max,
+    grid_min,
+    load_flights,
+    load_groups,
+    parse_grid,
+    write_rrd,
+)
+from sysid.data import IOData
+from sysid.errors import DataError, HorizonError
+from sysid.methods import Method, Options
+from sysid.sweep import SweepRow
+
+__all__ = ["MAX_SWEEP_MODELS", "check_sweep_horizons", "choose", "print_selection",
+           "selection_json", "sweep_command"]
+
+#: Largest sweep grid accepted (models); the thesis' coarse-to-fine search was 756 models.
+MAX_SWEEP_MODELS = 100_000
+#: Candidates `identify` lists.
+TOP = 8
+
+Connect = Callable[[], AbstractContextManager[Any]]
+
+
+def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
+           grid: dict[str, list[int]] | None = None,
+           validation: Sequence[IOData] | None = None, choose_focus: bool = False,
+           horizon: int | None = None, window: float | None = None, workers: int = 1,
+           connect: Connect | None = None, quiet: bool = False, label: str | None = None
+           ) -> Selection:
+    """:func:`sysid.auto.plan` and :func:`sysid.auto.select_plan` with a progress bar
+    (``label``) over every focus run; ``connect()`` opens the Dask client (None: run here).
+    Raises :class:`sysid.auto.NoStableModel` when no model of the grid is stable."""
+    p = plan(groups, validation=validation, **(grid or {}))
+    if p.n_models > MAX_SWEEP_MODELS:
+        raise DataError(f"the grid has {p.n_models} models, more than {MAX_SWEEP_MODELS}; use "
+                        "coarser steps (START:STOP:STEP) and refine around the best")
+    total = p.n_models * n_runs(options, choose_focus=choose_focus)
+    label = label or "choosing horizons, order" + (" and focus" if choose_focus else "")
+    with (connect or contextlib.nullcontext)() as client, \
+            progress(label, total=total, quiet=quiet) as update:
+        return select_plan(p, method=method, options=options, workers=workers,
+                           choose_focus=choose_focus, horizon=horizon, window=window,
+                           client=client, progress=lambda done, _total: update(done))
+
+
+def _candidates(con: Console, rows: Sequence[SweepRow], *, names: Sequence[str], title: str,
+                chosen: SweepRow | None = None) -> None:
+    table = output_table("past", "future", "order", "score [%]", *names, "max |pole|", "stable",
+                         console=con, title=title)
+    for r in rows:
+        table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.1f}",
+                      *[f"{f:.1f}" if abs(f) < 1e4 else "diverged" for f in r.fit],
+                      f"{np.abs(r.poles).max():.4f}" if r.poles.size else "-", str(r.stable),
+                      style="bold" if r is chosen else None)
+    con.print(table)
+
+
+def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
+    """The best ``top`` candidates with their per-channel fits, the split and grid, what was
+    chosen and why, and warnings (a choice at the grid's edge, channels no candidate
+    predicts)."""
+    names = sel.model.output_names
+    rows = sel.top(top)
+    shown = min(top, len(sel.result.ranked()))
+    _candidates(con, rows, names=names, chosen=sel.best,
+                title=f"best {shown} candidates of {len(sel.result.rows)}"
+                      + ("" if len(rows) == shown else " and the chosen one (bold)")
+                      + f" (fit [%], {sel.scoring} of held-out data)")
+    dt = sel.model.dt
+    con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
+              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}")
+    con.print(f"chosen: past {sel.best.past} ({sel.best.past * dt:.2f} s), future "
+              f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}, "
+              f"focus {sel.model.provenance.get('focus')}: the smallest order within 0.5 "
+              "points of the best stable score (score = mean fit with each channel floored "
+              "at 0 %)")
+    if sel.focus_note:
+        con.print(sel.focus_note)
+    for w in sel.warnings:
+        con.print(f"[yellow]warning: {w}[/]")
+    bad = [n for i, n in enumerate(names) if max(r.fit[i] for r in rows) <= 0]
+    if bad:
+        con.print(f"[yellow]no candidate predicts {', '.join(bad)} (fit <= 0 %): consider "
+                  "dropping it from --outputs[/]")
+
+
+def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
+    """What was chosen and why, JSON-able (``candidates``: the best ``top``)."""
+    return {"rule": sel.rule, "score": "mean of per-channel fits floored at 0 %, "
+            f"{sel.scoring} of the validation data",
+            "grid": sel.grid, "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
+            "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
+            "focus_scores": sel.focus_scores,
+            "candidates": [r.to_record() for r in sel.top(top)]}
+
+
+def sweep_command(*, session: Path, method: Method, options: Options, choose_focus: bool,
+                  pasts: str | None, futures: str | None, orders: str | None, workers: int,
+                  connect: Connect, validate: tuple[Path, ...], horizon: int | None,
+                  window_s: float | None, top: int, out: Path | None, force: bool,
+                  as_json: bool, rrd: Path | None, opts: dict[str, Any]) -> None:
+    """The body of ``sysid sweep`` (its options and help are in :mod:`sysid.cli`)."""
+    lazy = {k: parse_grid(text=v, option=f"--{k}", minimum=2 if k == "futures" else 1)
+            for k, v in (("pasts", pasts), ("futures", futures), ("orders", orders))
+            if v is not None}
+    if out is not None:
+        check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=(session, *validate),
+                     overwrite=force, force_flag="--force")
+    check_rrd(rrd, inputs=(session, *validate))
+    groups = load_groups([session], opts=opts)
+    val = load_flights(list(validate), opts=opts) if validate else None
+    if "pasts" in lazy or "futures" in lazy:
+        ident = groups[0] if val else holdout(groups)[0]
+        default = default_grid(ident)
+        check_sweep_horizons(ident, pasts=lazy.get("pasts", default["pasts"]),
+                             futures=lazy.get("futures", default["futures"]))
+    total = int(np.prod([len(v) for v in lazy.values()], dtype=float))
+    if total > MAX_SWEEP_MODELS:  # before the lazy ranges become lists
+        raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "
+                        "coarser steps (START:STOP:STEP) and refine around the best")
+    sel: Selection | None = None
+    try:
+        sel = choose(groups, method=method, options=options,
+                     grid={k: list(v) for k, v in lazy.items()}, validation=val,
+                     choose_focus=choose_focus, horizon=horizon, window=window_s,
+                     workers=workers, connect=connect, quiet=as_json, label="sweep")
+        result, rule, grid = sel.result, sel.rule, sel.grid
+    except NoStableModel as exc:  # report the grid of the method's default focus anyway
+        result, rule, grid = exc.results[0], exc.plan.rule, exc.plan.grid
+    names = groups[0][0].output_names or ()
+    ok = result.ranked()
+    failures = result.failures()
+    n_failed = sum(n for _, n in failures)
+    if out is not None and sel is not None:
+        sel.model.save(out)
+    if rrd is not None and sel is not None:
+        write_rrd(path=rrd, name=f"sweep {session.name}", model=sel.model, sweep=result)
+    if as_json:
+        chosen = selection_json(sel, top=top) if sel is not None else {
+            "rule": rule, "grid": grid, "chosen": None, "warnings": [], "focus": None,
+            "focus_note": "", "focus_scores": None}
+        chosen.pop("candidates", None)  # listed as "top"
+        click.echo(json.dumps({
+            "session": str(session), "n_models": len(result.rows), "n_failed": n_failed,
+            "failures": [{"error": e, "count": n} for e, n in failures], **chosen,
+            "best": chosen["chosen"],
+            "top": [r.to_record() for r in (sel.top(top) if sel is not None else ok[:top])],
+            "model": str(out) if out and sel else None,
+            "rrd": str(rrd) if rrd and sel else None}, indent=1))
+    else:
+        con = console()
+        if sel is not None:
+            print_selection(con, sel, top=top)
+        elif ok:
+            _candidates(con, ok[:top], names=names,
+                        title=f"best {min(top, len(ok))} of {len(result.rows)} models (none "
+                              f"stable; fit [%], {result.scoring} of held-out data)")
+            con.print(rule)
+        if failures:
+            con.print(f"[yellow]{n_failed} of {len(result.rows)} models failed:[/]")
+            for msg, n in failures[:3]:
+                con.print(f"  {n} x {msg}", markup=False, soft_wrap=True)
+            if len(failures) > 3:
+                con.print(f"  ... and {len(failures) - 3} other reasons (--json lists all)")
+        if out is not None and sel is not None:
+            con.print(f"model saved to {out} (identified again on all the data)")
+    if rrd is not None and sel is None:
+        click.echo(f"warning: --rrd {rrd} not written: "
+                   f"{'no stable model' if ok else 'no model'} to show", err=True)
+    if not ok:
+        reason = (" (reasons above)" if not as_json else
+                  f"; most often: {failures[0][0]}" if failures else "")
+        raise DataError(f"none of the {len(result.rows)} models could be identified{reason}")
+    if sel is None:
+        raise DataError(f"none of the {len(ok)} identified models is stable"
+                        + (" with either focus" if choose_focus else "")
+                        + "; widen the grid or pick other channels")
+
+
+def check_sweep_horizons(flights: Sequence[IOData], *, pasts: Any, futures: Any) -> None:
+    """Refuse horizons the data cannot support before the sweep runs: every pair shares the
+    Hankel columns of the largest, which needs ``B c`` columns for ``B = past + future``
+    block rows and c channels, so the largest past + future must fit the data."""
+    c = flights[0].n_inputs + flights[0].n_outputs
+    room = max_blocks(flights, columns_per_row=1.0)
+    n = max(d.n_samples for d in flights)
+    for name, values, other, other_name in (("past", pasts, futures, "future"),
+                                            ("future", futures, pasts, "past")):
+        largest, shortest = grid_max(values), grid_min(other)
+        if largest + shortest > room:
+            raise HorizonError(
+                f"--{name}s goes up to {largest}, but {n} identification samples with {c} "
+                f"channels allow past + future <= {room}: {name} <= "
+                f"{max(room - shortest, 0)} with {other_name} {shortest}; "
+                f"lower the {name}s or pass a longer --window")
+    if grid_max(pasts) + grid_max(futures) > room:
+        raise HorizonError(
+            f"--pasts up to {grid_max(pasts)} with --futures up to {grid_max(futures)}: every "
+            f"pair shares the columns of the largest, but {n} identification samples with {c} "
+            f"channels allow past + future <= {room}; lower the largest past or future")
