@@ -7,6 +7,11 @@ up until Ctrl-C (``groundstation fly --view serve``, ``groundstation replay --vi
 Serving binds 127.0.0.1 only: the Rerun SDK's own servers listen on every interface (0.0.0.0)
 with no option to change that, so :func:`serve_web` runs the Rerun viewer binary as a child
 process, ``rerun --serve-web --bind 127.0.0.1``, and streams the recording to it.
+
+Entity paths: every path either side logs to, and every path a blueprint names (a view's
+``origin`` and its ``contents`` query expressions), is built by :func:`entity_path` from
+unescaped parts, so that both name the same entity whatever the names hold. Panel titles go
+through :func:`panel_title`, which keeps them short enough not to be cut in a small panel.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import atexit
 import logging
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -27,11 +33,14 @@ import rerun as rr
 
 __all__ = [
     "MODES",
+    "TITLE_MAX",
     "WEB_PORT",
     "ViewModeError",
     "check_port",
+    "entity_path",
     "has_display",
     "open_recording",
+    "panel_title",
     "serve_until_interrupted",
     "serve_web",
     "stop_servers",
@@ -44,6 +53,54 @@ MODES = ("rerun", "serve", "save")
 127.0.0.1 (:func:`serve_web`); ``save``: write an ``.rrd`` file."""
 
 WEB_PORT = 9090
+
+
+def entity_path(*parts: object, base: str = "/") -> str:
+    """The absolute entity path of ``base`` followed by the unescaped ``parts``, each escaped.
+
+    ``entity_path("stateEstimate+controller", "r_roll")`` is
+    ``/stateEstimate\\+controller/r_roll``; ``entity_path("exp0", "gyro.x", base="/sysid")`` is
+    ``/sysid/exp0/gyro.x``; ``entity_path()`` is the root ``/``. ``base`` is an entity path
+    already (its ``/`` separate parts, nothing in it is escaped again).
+
+    Rerun parses a logged path, a view's ``origin`` and each ``contents`` expression the same
+    forgiving way: split at unescaped ``/``, undo ``\\`` escapes, keep any other character. So
+    an unescaped ``+`` still names the same part, but a ``/`` in a name splits it, a ``\\``
+    starts an escape, whitespace splits a query expression and ``$origin`` in a query is
+    substituted. Escaping every part (:func:`rerun.escape_entity_path_part`) makes the logged
+    string, the blueprint's strings and the path the file stores identical whatever the names
+    hold. Parts are converted with ``str``; an empty part is a ``ValueError`` (Rerun would
+    drop it and shift the path).
+    """
+    names = [str(p) for p in parts]
+    if any(not n for n in names):
+        raise ValueError(f"entity path parts must not be empty: {names!r}")
+    head = base.strip("/")
+    return "/" + "/".join([*([head] if head else []), *map(rr.escape_entity_path_part, names)])
+
+
+TITLE_MAX = 20
+"""Longest panel title: the viewer cuts longer ones in a small panel."""
+
+_GROUP_PREFIX = re.compile(r"\b[A-Za-z_]\w*\.(?=\w)")  # "controller." of controller.r_roll
+
+
+def panel_title(label: str, *, unit: str = "", max_len: int = TITLE_MAX) -> str:
+    """``label [unit]`` in at most ``max_len`` characters, for a panel's title.
+
+    Too long, the variable names in ``label`` lose their group (``controller.r_roll x
+    motor.m1`` -> ``r_roll x m1``; the entity path keeps the full name); still too long, the
+    label is cut and ends in ``…``, the unit kept. The unit (already short, ``deg/s``) is cut
+    only when it alone leaves no room.
+    """
+    suffix = f" [{unit}]" if unit else ""
+    for text in (label, _GROUP_PREFIX.sub("", label)):
+        if len(text) + len(suffix) <= max_len:
+            return text + suffix
+    room = max_len - len(suffix) - 1
+    if room < 3:
+        return (text + suffix)[:max_len - 1] + "…"
+    return text[:room] + "…" + suffix
 
 
 class ViewModeError(ValueError):

@@ -1,11 +1,14 @@
 """The flight view in Rerun: live flights, replayed sessions and plans look the same.
 
-The only module of :mod:`groundstation` that talks to Rerun. :func:`open_view` returns a
-:class:`RerunView`, a listener on the flight runner (:class:`FlightListener`): ``begin`` with the
-session's stream specs, ``rows`` as they arrive, ``end`` with the summary. ``groundstation
-replay`` feeds a recorded session through the same view with :meth:`RerunView.send_block`.
+With its layout (:mod:`groundstation.live_layout`), the only module of :mod:`groundstation`
+that talks to Rerun. :func:`open_view` returns a :class:`RerunView`, a listener on the flight
+runner (:class:`FlightListener`): ``begin`` with the session's stream specs, ``rows`` as they
+arrive, ``end`` with the summary. ``groundstation replay`` feeds a recorded session through
+the same view with :meth:`RerunView.send_block`.
 
-Entities (one scalar series per entity; labels carry the unit, e.g. ``x [deg/s]``):
+Entities (one scalar series per entity; labels carry the unit, e.g. ``x [deg/s]``; paths are
+built from the names by :func:`cfcommon.rerun.entity_path`, escaped, so an imported stream
+``stateEstimate+controller`` is ``/stateEstimate\\+controller/<field>``):
 
 ==============================  ============================================================
 ``/<log stream>/<field>``       every logged variable: ``/motors/m1`` (PWM), ``/acc/x`` (g),
@@ -18,12 +21,10 @@ Entities (one scalar series per entity; labels carry the unit, e.g. ``x [deg/s]`
 ==============================  ============================================================
 
 Timelines: ``host_time`` (the flight clock, s, every stream) and, for log streams, ``fw_time``
-(the Crazyflie tick, s, 24-bit wraps undone). The default layout (blueprint) plots each log
-stream in its own panel; roll/pitch setpoints (deg) share a panel with ``stabilizer.roll/pitch``
-when those are logged, and the yaw-rate setpoint shares one with ``gyro.z`` (both deg/s).
-Panels have short titles and no legend (a legend covers a small panel): channel colours are
-fixed, 1st red, 2nd green, 3rd blue, 4th orange, and a setpoint is the lighter colour of the
-axis it commands; hovering a line names it.
+(the Crazyflie tick, s, 24-bit wraps undone). The default layout (blueprint,
+:func:`groundstation.live_layout.flight_blueprint`) plots each log stream in panels of one unit
+with short titles and no legend: channel colours are fixed, 1st red, 2nd green, 3rd blue, 4th
+orange, and a setpoint is the lighter colour of the axis it commands; hovering a line names it.
 
 Cost: ``rows`` only appends to a queue (about a microsecond, never blocks); a worker thread
 converts queued rows to arrays every ``flush_interval`` seconds and sends one
@@ -43,12 +44,12 @@ from typing import Any, Literal
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 
-from cfcommon.rerun import MODES, WEB_PORT, ViewModeError, open_recording
+from cfcommon.rerun import MODES, WEB_PORT, ViewModeError, entity_path, open_recording
 from cfsession.schema import StreamSpec, phases_spec, setpoints_spec
 from groundstation.errors import GroundStationError
 from groundstation.flight.runner import FlightListener  # the runner's listener protocol
+from groundstation.live_layout import EVENTS, PHASE, SESSION, flight_blueprint, series_fields
 from groundstation.plan.schedule import Schedule
 
 __all__ = [
@@ -65,7 +66,6 @@ log = logging.getLogger(__name__)
 
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 _LEVELS = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
-_SKIP = {"host_time", "fw_time_ms", "phase_id", "tick"}
 _PALETTE = ((228, 26, 28), (77, 175, 74), (55, 126, 184), (255, 127, 0), (152, 78, 163),
             (0, 190, 190))
 _SETPOINT_COLORS = {"roll": (251, 154, 153), "pitch": (178, 223, 138),
@@ -80,7 +80,8 @@ class ViewError(GroundStationError, ValueError):
 
 @dataclass(frozen=True)
 class _Channels:
-    """How one stream is shown: numeric ``(field, entity)`` pairs, or its text kind."""
+    """How one stream is shown: numeric ``(field, entity)`` pairs (every other field, and the
+    fields of events and phases, are not series), and whether it has a firmware tick."""
 
     spec: StreamSpec
     channels: tuple[tuple[str, str], ...]
@@ -88,29 +89,12 @@ class _Channels:
 
 
 def _channels(spec: StreamSpec) -> _Channels:
-    numeric = tuple(
-        (f.name, f"{spec.name}/{f.name}") for f in spec.fields
-        if f.name not in _SKIP and np.dtype(f.dtype).kind in "fiub"
-    ) if spec.kind not in ("events", "phases") else ()
+    numeric = tuple((f.name, entity_path(spec.name, f.name)) for f in series_fields(spec))
     return _Channels(spec, numeric, any(f.name == "fw_time_ms" for f in spec.fields))
 
 
 def _label(field: str, unit: str) -> str:
     return f"{field} [{unit}]" if unit else field
-
-
-def _entity_of(specs: Sequence[StreamSpec], source: str) -> str | None:
-    """The entity of the logged variable ``source`` (e.g. ``gyro.z``), if it is logged."""
-    for spec in specs:
-        for f in spec.fields:
-            if spec.kind == "log" and f.source == source:
-                return f"/{spec.name}/{f.name}"
-    return None
-
-
-def _short_unit(unit: str) -> str:
-    """``PWM (0-65535)`` -> ``PWM``: panel titles stay short enough for small panels."""
-    return unit.split(" (", 1)[0]
 
 
 def _series_color(spec: StreamSpec, field: str, index: int) -> tuple[int, int, int]:
@@ -119,51 +103,6 @@ def _series_color(spec: StreamSpec, field: str, index: int) -> tuple[int, int, i
     if spec.kind == "setpoints":
         return _SETPOINT_COLORS.get(field, _PALETTE[3])
     return _PALETTE[index % len(_PALETTE)]
-
-
-def _plot(*, name: str, contents: str | list[str], origin: str = "/") -> rrb.TimeSeriesView:
-    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name,
-                              plot_legend=rrb.PlotLegend(visible=False))
-
-
-def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
-    """The default layout for these streams (module docstring)."""
-    by_kind: dict[str, list[StreamSpec]] = {}
-    for s in streams:
-        by_kind.setdefault(s.kind, []).append(s)
-    plots: list[rrb.View] = []
-    for s in by_kind.get("log", []):  # one panel per log block and unit
-        by_unit: dict[str, list[str]] = {}
-        for f in s.fields:
-            if f.name not in _SKIP:
-                by_unit.setdefault(_short_unit(f.unit), []).append(f"/{s.name}/{f.name}")
-        for unit, entities in by_unit.items():
-            plots.append(_plot(origin=f"/{s.name}", name=f"{s.name} [{unit}]" if unit else s.name,
-                               contents="$origin/**" if len(by_unit) == 1 else entities))
-    if "setpoints" in by_kind:
-        measured = [e for e in (_entity_of(streams, "stabilizer.roll"),
-                                _entity_of(streams, "stabilizer.pitch")) if e]
-        plots.append(_plot(contents=["/setpoints/roll", "/setpoints/pitch", *measured],
-                           name="roll, pitch [deg]"))
-        gyro_z = _entity_of(streams, "gyro.z")
-        plots.append(_plot(contents=["/setpoints/yaw_rate", *([gyro_z] if gyro_z else [])],
-                           name="yaw rate [deg/s]"))
-        plots.append(_plot(contents="/setpoints/thrust", name="thrust [PWM]"))
-    if "link" in by_kind:
-        plots.append(_plot(contents="/link/quality", name="link quality [%]"))
-        plots.append(_plot(contents="/link/latency_ms", name="latency [ms]"))
-    side: list[rrb.View] = []  # only for streams there are: no "No data available" panel
-    if "phases" in by_kind:
-        side += [rrb.StateTimelineView(origin="/phase", name="phase"),
-                 rrb.TextLogView(origin="/phase", name="phases")]
-    if "events" in by_kind:
-        side.insert(1 if side else 0, rrb.TextLogView(origin="/events", name="events"))
-    side.append(rrb.TextDocumentView(origin="/session", name="session"))
-    return rrb.Blueprint(
-        rrb.Horizontal(rrb.Grid(*plots), rrb.Vertical(*side), column_shares=[3, 1]),
-        rrb.TimePanel(timeline="host_time"),
-        collapse_panels=True,
-    )
 
 
 class RerunView:
@@ -328,7 +267,7 @@ class RerunView:
             return
         texts = [f"[{e[2]}] {e[3].decode('utf-8', errors='replace')}" for e in events]
         self.rec.send_columns(
-            "events", indexes=[rr.TimeColumn("host_time", duration=[e[0] for e in events])],
+            EVENTS, indexes=[rr.TimeColumn("host_time", duration=[e[0] for e in events])],
             columns=rr.TextLog.columns(text=texts, level=[e[1] for e in events]))
 
     def _send_phases(self, t: np.ndarray, data: np.ndarray) -> None:
@@ -336,7 +275,7 @@ class RerunView:
         kinds = [bytes(v).decode("utf-8", errors="replace") for v in data["kind"]]
         ids = data["phase_id"].astype(int)
         self.rec.send_columns(
-            "phase", indexes=[rr.TimeColumn("host_time", duration=t)],
+            PHASE, indexes=[rr.TimeColumn("host_time", duration=t)],
             columns=[*rr.StateChange.columns(state=[f"{n} ({k})" for n, k in
                                                     zip(names, kinds, strict=True)]),
                      *rr.TextLog.columns(text=[f"phase {i}: {n} ({k})" for i, n, k in
@@ -353,7 +292,7 @@ class RerunView:
                          json.dumps(dict(summary), indent=1, sort_keys=True, default=str) +
                          "\n```")
         with self._lock:
-            self.rec.log("session", rr.TextDocument("\n\n".join(lines) or "(no metadata)",
+            self.rec.log(SESSION, rr.TextDocument("\n\n".join(lines) or "(no metadata)",
                                                     media_type=rr.MediaType.MARKDOWN),
                          static=True)
 

@@ -263,9 +263,7 @@ def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
         rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
         try:
             viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
-                                   sweep=sweep)
-            if residuals is not None:
-                viz.log_residuals(rec=rec, result=residuals)
+                                   sweep=sweep, residuals=residuals)
         finally:
             rec.disconnect()
     except (OSError, RuntimeError) as exc:

@@ -23,10 +23,12 @@ entity                               content
 ``<p>/<mode>/summary``               :meth:`sysid.CompareResult.summary` text
 ``<p>/sweep/poles/order_<n>``        poles of every order-n model of a horizon sweep, drawn
                                      translucent so dense regions look darker (Figure 5.2)
+``<p>/residuals/<y>/...``            residual correlations and bands (:func:`log_residuals`)
 ===================================  ===========================================================
 
-``<mode>`` is ``simulation``, ``windowed_simulation`` or ``prediction_<k>_step``. Model-vs-data
-series use the timeline ``t`` (seconds, :math:`t_k = k\\,\\Delta t` from each record's start).
+``<mode>`` is ``simulation``, ``windowed_simulation`` or ``prediction_<k>_step``; a channel name
+``<y>`` is one escaped path part (:func:`cfcommon.rerun.entity_path`). Model-vs-data series use
+the timeline ``t`` (seconds, :math:`t_k = k\\,\\Delta t` from each record's start).
 Pole positions are stored as :math:`(\\Re p, \\Im p)`; a static transform on ``<p>/poles`` and
 ``<p>/sweep/poles`` flips the 2-D view's downward y axis so the imaginary axis points up.
 The fit is the NRMSE fit of :func:`sysid.fit_percent`:
@@ -45,7 +47,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 import cfcommon.rerun as rerun_io
-from cfcommon.rerun import MODES, WEB_PORT, has_display
+from cfcommon.rerun import MODES, WEB_PORT, entity_path, has_display, panel_title
 from sysid.comparison import CompareResult
 from sysid.errors import ParameterError
 from sysid.model import StateSpaceModel
@@ -106,6 +108,12 @@ def _names(result: CompareResult) -> tuple[str, ...]:
     return result.output_names or tuple(f"y{j}" for j in range(result.fit.size))
 
 
+def _path(prefix: str, *parts: object) -> str:
+    """``/<prefix>/<parts...>``, each part (a channel name, ``gyro.x``) escaped as Rerun
+    prints it (:func:`cfcommon.rerun.entity_path`), in what is logged and what a layout names."""
+    return entity_path(*parts, base=prefix)
+
+
 def log_singular_values(
     *, rec: rr.RecordingStream, values: np.ndarray, order: int | None = None,
     prefix: str = "sysid",
@@ -120,21 +128,21 @@ def log_singular_values(
     """
     sv = np.asarray(values, dtype=float).reshape(-1)
     index = np.arange(1, sv.size + 1, dtype=float)
-    base = f"{prefix}/order/singular_values"
+    base = _path(prefix, "order", "singular_values")
     positive = sv[sv > 0]
     floor = positive.min() if positive.size else 1.0
     with np.errstate(divide="ignore"):
         decades = np.log10(np.maximum(sv, floor) / floor)
     rec.log(base, rr.BarChart(sv, abscissa=index, color=_GREY), static=True)
-    rec.log(f"{base}/log10", rr.BarChart(decades, abscissa=index, color=_GREY), static=True)
+    rec.log(_path(base, "log10"), rr.BarChart(decades, abscissa=index, color=_GREY), static=True)
     if order is not None and 0 < order <= sv.size:
-        rec.log(f"{base}/chosen", rr.BarChart(sv[:order], abscissa=index[:order], color=_RED),
+        rec.log(_path(base, "chosen"), rr.BarChart(sv[:order], abscissa=index[:order], color=_RED),
                 static=True)
-        rec.log(f"{base}/log10/chosen", rr.BarChart(decades[:order], abscissa=index[:order],
+        rec.log(_path(base, "log10", "chosen"), rr.BarChart(decades[:order], abscissa=index[:order],
                                                     color=_RED), static=True)
     if order is not None:
         ratio = sv[order - 1] / sv[order] if 0 < order < sv.size and sv[order] > 0 else np.inf
-        rec.log(f"{prefix}/order/order", rr.TextDocument(
+        rec.log(_path(prefix, "order", "order"), rr.TextDocument(
             f"order n = {order}: sigma_n = {sv[order - 1]:.4g}, "
             f"sigma_n / sigma_(n+1) = {ratio:.3g}"), static=True)
 
@@ -151,9 +159,9 @@ def log_poles(*, rec: rr.RecordingStream, model: StateSpaceModel, prefix: str = 
     Points are labelled by their row in the pole table (``<p>/poles/table``, the formatter of
     :mod:`sysid.pole_format`): ``A1``, ``A2``, ... and ``K1``, ... for the predictor, short
     enough not to pile up near z = 1 (the zoomed view separates them)."""
-    base = f"{prefix}/poles"
+    base = _path(prefix, "poles")
     rec.log(base, _FLIP_Y, static=True)
-    rec.log(f"{base}/unit_circle", rr.LineStrips2D([_CIRCLE], colors=[128, 128, 128]),
+    rec.log(_path(base, "unit_circle"), rr.LineStrips2D([_CIRCLE], colors=[128, 128, 128]),
             static=True)
     texts = []
     for entity, tag, poles, color, title in (
@@ -161,13 +169,13 @@ def log_poles(*, rec: rr.RecordingStream, model: StateSpaceModel, prefix: str = 
             ("A_minus_KC", "K", model.predictor_poles(), _BLUE, "predictor poles, eig(A - KC)")):
         ordered = sorted_poles(poles)
         labels = [f"{tag}{i + 1}" for i in range(ordered.size)]
-        rec.log(f"{base}/{entity}", rr.Points2D(_pole_points(ordered), radii=0.01, colors=color,
-                                                labels=labels), static=True)
+        rec.log(_path(base, entity), rr.Points2D(_pole_points(ordered), radii=0.01, colors=color,
+                                                 labels=labels), static=True)
         rows = pole_cells(pole_rows(ordered, dt=model.dt))
         texts.append(f"{title} (labels {tag}1...):\n\n" + _markdown_table(
             POLE_COLUMNS, [(f"{tag}{r[0]}", *r[1:]) for r in rows]))
-    rec.log(f"{base}/table", rr.TextDocument("\n\n".join(texts),
-                                             media_type=rr.MediaType.MARKDOWN), static=True)
+    rec.log(_path(base, "table"), rr.TextDocument("\n\n".join(texts),
+                                                media_type=rr.MediaType.MARKDOWN), static=True)
 
 
 def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -193,14 +201,14 @@ def log_compare(
         time = [rr.TimeColumn("t", duration=np.arange(len(y)) * dt)]
         for j, name in enumerate(names):
             unit = f" [{units[j]}]" if units[j] else ""
-            base = f"{prefix}/{slug}/exp{e}/{name}"
+            base = _path(prefix, slug, f"exp{e}", name)
             fit = float(result.fits[e, j])
             for leaf, values, label in (("measured", y[:, j], f"measured{unit}"),
                                         ("model", yh[:, j], f"model{unit} (fit {fit:.2f} %)")):
-                rec.log(f"{base}/{leaf}", rr.SeriesLines(names=label), static=True)
-                rec.send_columns(f"{base}/{leaf}", indexes=time,
+                rec.log(_path(base, leaf), rr.SeriesLines(names=label), static=True)
+                rec.send_columns(_path(base, leaf), indexes=time,
                                  columns=rr.Scalars.columns(scalars=values))
-    rec.log(f"{prefix}/{slug}/summary", rr.TextDocument(result.summary()), static=True)
+    rec.log(_path(prefix, slug, "summary"), rr.TextDocument(result.summary()), static=True)
 
 
 def log_sweep_poles(
@@ -212,9 +220,9 @@ def log_sweep_poles(
     Every successful row's poles are drawn with opacity ``alpha`` (0-255) so regions where
     many horizon pairs put a pole look darker. Returns ``{order: number of models drawn}``.
     """
-    base = f"{prefix}/sweep/poles"
+    base = _path(prefix, "sweep", "poles")
     rec.log(base, _FLIP_Y, static=True)
-    rec.log(f"{base}/unit_circle", rr.LineStrips2D([_CIRCLE], colors=[128, 128, 128]),
+    rec.log(_path(base, "unit_circle"), rr.LineStrips2D([_CIRCLE], colors=[128, 128, 128]),
             static=True)
     ok = [r for r in result.rows if r.error is None]
     wanted = sorted({r.order for r in ok}) if orders is None else [int(n) for n in orders]
@@ -225,57 +233,91 @@ def log_sweep_poles(
         if not rows:
             continue
         pts = np.vstack([_pole_points(r.poles) for r in rows])
-        rec.log(f"{base}/order_{n}", rr.Points2D(pts, radii=0.01, colors=[20, 20, 20, alpha]),
+        rec.log(_path(base, f"order_{n}"), rr.Points2D(pts, radii=0.01, colors=[20, 20, 20, alpha]),
                 static=True)
-    rec.log(f"{prefix}/sweep/table", rr.TextDocument(result.table()), static=True)
+    rec.log(_path(prefix, "sweep", "table"), rr.TextDocument(result.table()), static=True)
     return counts
 
 
 def identification_blueprint(
     *, prefix: str = "sysid",
     comparisons: Sequence[tuple[str, Sequence[str], int]] = (),
-    sweep: bool = False, singular_values: bool = True,
+    sweep: bool = False, singular_values: bool = True, poles: bool = True,
+    residuals: tuple[Sequence[str], Sequence[str]] | None = None,
 ) -> rrb.Blueprint:
     """Default layout: singular values and poles (whole plane, and zoomed near z = 1) on top,
     the sweep's pole clouds when there was a sweep; below, one tab per comparison
     ``(mode slug, output names, number of experiments)`` with one plot per output channel (all
-    experiments), next to the order, the pole table and the fit summaries.
+    experiments), and a residual tab for ``residuals`` ``(output names, input names)``: per
+    output its autocorrelation and its cross-correlation with each input, with their
+    confidence bands; next to them the order, the pole table, the fit and residual summaries.
+    Only what is asked for gets a panel (none says "No data available"). The time panel shows
+    ``t``, or ``lag`` when there are residuals and no comparison (a plot draws against the
+    time panel's timeline).
 
-    Contents name entities explicitly or end in ``/**``: Rerun matches ``*`` only as a trailing
-    ``/**`` (``$origin/*/q/**`` would match nothing)."""
-    sv = f"/{prefix}/order/singular_values"
+    Paths are escaped (:func:`_path`); contents name entities explicitly or end in ``/**``:
+    Rerun matches ``*`` only as a trailing ``/**`` (``$origin/*/q/**`` would match nothing).
+    Titles fit :data:`cfcommon.rerun.TITLE_MAX` characters (:func:`cfcommon.rerun.panel_title`).
+    """
+    sv = _path(prefix, "order", "singular_values")
     top: list[rrb.View] = []
     if singular_values:
         top += [rrb.BarChartView(origin=sv, contents=["$origin", "$origin/chosen"],
                                  name="singular values (order in red)", plot_legend=_NO_LEGEND),
-                rrb.BarChartView(origin=f"{sv}/log10", name="log10(sigma / sigma_min)",
+                rrb.BarChartView(origin=_path(sv, "log10"), name="log10(sigma / sigma_min)",
                                  plot_legend=_NO_LEGEND)]
     # Origins above the y-flipping transforms, so that the flip applies.
-    poles = ["+ $origin/poles/**", "- $origin/poles/table"]
+    pole_rules = ["+ $origin/poles/**", "- $origin/poles/table"]
     (x0, x1), (y0, y1) = ZOOM
-    top += [rrb.Spatial2DView(origin=f"/{prefix}", contents=poles,
-                              name="poles: A red, A-KC blue"),
-            rrb.Spatial2DView(origin=f"/{prefix}", contents=poles, name="poles near z = 1",
-                              visual_bounds=rrb.VisualBounds2D(x_range=[x0, x1],
-                                                               y_range=[y0, y1]))]
+    if poles:
+        top += [rrb.Spatial2DView(origin=_path(prefix), contents=pole_rules,
+                                  name="poles: A red, A-KC blue"),
+                rrb.Spatial2DView(origin=_path(prefix), contents=pole_rules,
+                                  name="poles near z = 1",
+                                  visual_bounds=rrb.VisualBounds2D(x_range=[x0, x1],
+                                                                   y_range=[y0, y1]))]
     if sweep:
-        top.append(rrb.Spatial2DView(origin=f"/{prefix}/sweep", contents="$origin/poles/**",
+        top.append(rrb.Spatial2DView(origin=_path(prefix, "sweep"), contents="$origin/poles/**",
                                      name="sweep pole clouds"))
-    texts = [rrb.TextDocumentView(origin=f"/{prefix}/poles/table", name="pole table")]
+    texts: list[rrb.View] = []
     if singular_values:
-        texts.insert(0, rrb.TextDocumentView(origin=f"/{prefix}/order/order", name="order"))
-    texts += [rrb.TextDocumentView(origin=f"/{prefix}/{slug}/summary", name=f"{slug} fit")
+        texts.append(rrb.TextDocumentView(origin=_path(prefix, "order", "order"), name="order"))
+    if poles:
+        texts.append(rrb.TextDocumentView(origin=_path(prefix, "poles", "table"),
+                                          name="pole table"))
+    texts += [rrb.TextDocumentView(origin=_path(prefix, slug, "summary"), name=f"{slug} fit")
               for slug, _, _ in comparisons]
     if sweep:
-        texts.append(rrb.TextDocumentView(origin=f"/{prefix}/sweep/table", name="sweep"))
+        texts.append(rrb.TextDocumentView(origin=_path(prefix, "sweep", "table"), name="sweep"))
     tabs = [rrb.Grid(*[rrb.TimeSeriesView(
-                origin=f"/{prefix}/{slug}", name=name,
-                contents=[f"$origin/exp{e}/{name}/**" for e in range(n_exp)])
+                origin=_path(prefix, slug), name=panel_title(name),
+                contents=[f"$origin{entity_path(f'exp{e}', name)}/**" for e in range(n_exp)])
                        for name in names], name=slug.replace("_", " "))
             for slug, names, n_exp in comparisons]
+    if residuals is not None:
+        tabs.append(rrb.Grid(*_residual_views(prefix=prefix, outputs=residuals[0],
+                                              inputs=residuals[1]), name="residuals"))
+        texts.append(rrb.TextDocumentView(origin=_path(prefix, "residuals", "summary"),
+                                          name="residuals"))
     side = rrb.Tabs(*texts)
     bottom = rrb.Horizontal(rrb.Tabs(*tabs), side, column_shares=[3, 1]) if tabs else side
-    return rrb.Blueprint(rrb.Vertical(rrb.Grid(*top), bottom), rrb.TimePanel(timeline="t"))
+    timeline = "lag" if residuals is not None and not comparisons else "t"
+    return rrb.Blueprint(rrb.Vertical(rrb.Grid(*top), bottom) if top else bottom,
+                         rrb.TimePanel(timeline=timeline))
+
+
+def _residual_views(*, prefix: str, outputs: Sequence[str],
+                    inputs: Sequence[str]) -> list[rrb.View]:
+    """Per output: its autocorrelation, then its cross-correlation with each input."""
+    views: list[rrb.View] = []
+    for y in outputs:
+        views.append(rrb.TimeSeriesView(origin=_path(prefix, "residuals", y, "autocorr"),
+                                        name=panel_title(f"{y} autocorr"),
+                                        plot_legend=_NO_LEGEND))
+        views += [rrb.TimeSeriesView(origin=_path(prefix, "residuals", y, "cross", u),
+                                     name=panel_title(f"{y} x {u}"), plot_legend=_NO_LEGEND)
+                  for u in inputs]
+    return views
 
 
 def log_identification(
@@ -284,6 +326,7 @@ def log_identification(
     model: StateSpaceModel,
     comparisons: Sequence[CompareResult] = (),
     sweep: SweepResult | None = None,
+    residuals: ResidualResult | None = None,
     singular_values: np.ndarray | None = None,
     prefix: str = "sysid",
 ) -> None:
@@ -291,7 +334,7 @@ def log_identification(
 
     Singular values default to ``model.provenance["singular_values"]`` (order = the model's);
     each comparison (from :func:`sysid.compare` with data sampled at ``model.dt``) gets its own
-    tab; a sweep adds its pole clouds.
+    tab; a sweep adds its pole clouds; a residual analysis (:func:`sysid.residuals`) its tab.
     """
     sv = singular_values if singular_values is not None else \
         model.provenance.get("singular_values")
@@ -303,38 +346,52 @@ def log_identification(
         log_compare(rec=rec, result=res, dt=model.dt, units=units, prefix=prefix)
     if sweep is not None:
         log_sweep_poles(rec=rec, result=sweep, prefix=prefix)
+    if residuals is not None:
+        log_residuals(rec=rec, result=residuals, prefix=prefix, layout=False)
     tabs = {mode_slug(r): (_names(r), len(r.y_measured)) for r in comparisons}
     rec.send_blueprint(identification_blueprint(
         prefix=prefix, comparisons=[(slug, *v) for slug, v in tabs.items()],
-        sweep=sweep is not None, singular_values=sv is not None))
+        sweep=sweep is not None, singular_values=sv is not None,
+        residuals=_residual_names(residuals) if residuals is not None else None))
 
 
-def _lag_series(*, rec: rr.RecordingStream, path: str, label: str, lags: np.ndarray,
-                values: np.ndarray) -> None:
-    rec.log(path, rr.SeriesLines(names=label), static=True)
-    rec.send_columns(path, indexes=[rr.TimeColumn("lag", sequence=lags)],
-                     columns=rr.Scalars.columns(scalars=values))
+def _residual_names(result: ResidualResult) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    return tuple(result.output_names), tuple(result.input_names)
 
 
-def log_residuals(*, rec: rr.RecordingStream, result: ResidualResult,
-                  prefix: str = "sysid") -> None:
+def _correlation(*, rec: rr.RecordingStream, path: str, label: str, lags: np.ndarray,
+                 values: np.ndarray, bound: float, bound_label: str) -> None:
+    """``path/value`` (blue) and its band ``path/upper``, ``path/lower`` (grey) over ``lag``."""
+    band = np.full(values.shape, bound)
+    for leaf, v, name, color in (("value", values, label, _BLUE), ("upper", band, bound_label,
+                                  _GREY), ("lower", -band, bound_label, _GREY)):
+        rec.log(_path(path, leaf), rr.SeriesLines(names=name, colors=color), static=True)
+        rec.send_columns(_path(path, leaf), indexes=[rr.TimeColumn("lag", sequence=lags)],
+                         columns=rr.Scalars.columns(scalars=v))
+
+
+def log_residuals(*, rec: rr.RecordingStream, result: ResidualResult, prefix: str = "sysid",
+                  layout: bool = True) -> None:
     """Residual analysis (:func:`sysid.residuals`) on the ``lag`` timeline, as MATLAB's resid.
 
     Per output ``y``: ``{prefix}/residuals/{y}/autocorr/{value,upper,lower}`` (lags 0..M with
     the band ``+-z/sqrt(N)``) and ``{prefix}/residuals/{y}/cross/{u}/{value,upper,lower}``
-    (lags -M..M, positive = past inputs, with the Bartlett band), plus the summary text.
+    (lags -M..M, positive = past inputs, with the Bartlett band), plus the summary text. The
+    correlation is blue, its band grey. ``layout``: also send a layout of just these panels
+    (:func:`log_identification` with ``residuals`` lays them out with the model's instead).
     """
-    base = f"{prefix}/residuals"
+    base = _path(prefix, "residuals")
+    bound = f"{100 * result.confidence:g}% bound"
     for c, y in enumerate(result.output_names):
-        auto = result.autocorr[:, c]
-        band = np.full(auto.shape, result.auto_bound)
-        for leaf, values in (("value", auto), ("upper", band), ("lower", -band)):
-            _lag_series(rec=rec, path=f"{base}/{y}/autocorr/{leaf}", label=f"{y} {leaf}",
-                        lags=result.lags, values=values)
+        _correlation(rec=rec, path=_path(base, y, "autocorr"), label=f"{y} autocorr",
+                     lags=result.lags, values=result.autocorr[:, c], bound=result.auto_bound,
+                     bound_label=bound)
         for i, u in enumerate(result.input_names):
-            cross = result.crosscorr[:, c, i]
-            band = np.full(cross.shape, result.cross_bound[c, i])
-            for leaf, values in (("value", cross), ("upper", band), ("lower", -band)):
-                _lag_series(rec=rec, path=f"{base}/{y}/cross/{u}/{leaf}",
-                            label=f"{y} x {u} {leaf}", lags=result.cross_lags, values=values)
-    rec.log(f"{base}/summary", rr.TextDocument(result.summary()), static=True)
+            _correlation(rec=rec, path=_path(base, y, "cross", u), label=f"{y} x {u}",
+                         lags=result.cross_lags, values=result.crosscorr[:, c, i],
+                         bound=float(result.cross_bound[c, i]), bound_label=bound)
+    rec.log(_path(base, "summary"), rr.TextDocument(result.summary()), static=True)
+    if layout:
+        rec.send_blueprint(identification_blueprint(
+            prefix=prefix, singular_values=False, poles=False,
+            residuals=_residual_names(result)))

@@ -9,7 +9,8 @@ import numpy as np
 import pyarrow as pa
 from rerun.chunk import RrdReader
 
-__all__ = ["Entity", "blueprint_entities", "load"]
+__all__ = ["Entity", "View", "blueprint_entities", "explicit_rules", "load", "resolve",
+           "timeline", "views"]
 
 
 @dataclass
@@ -72,20 +73,33 @@ def blueprint_entities(path: Path) -> list[str]:
     return [c.entity_path for b in reader.blueprints() for c in reader.stream(store=b).to_chunks()]
 
 
+def _active_blueprint(path: Path) -> list:
+    """The blueprint the viewer shows, as a list of its chunks (none: empty).
+
+    Each ``send_blueprint`` writes a blueprint store of its own and makes it active, so of
+    several the viewer shows the one sent last: the store whose first message comes last in
+    the file (a store's id is in each of its messages)."""
+    reader = RrdReader(path)
+    data = Path(path).read_bytes()
+    stores = reader.blueprints()
+    if not stores:
+        return []
+    last = max(stores, key=lambda b: data.find(b.recording_id.encode()))
+    return list(reader.stream(store=last).to_chunks())
+
+
 def blueprint_views(path: Path) -> dict[str, list[str]]:
     """Display name of every named view of the file's blueprint -> its content queries."""
-    reader = RrdReader(path)
     names: dict[str, str] = {}
     queries: dict[str, list[str]] = {}
-    for b in reader.blueprints():
-        for c in reader.stream(store=b).to_chunks():
-            rb = c.to_record_batch()
-            cols = set(rb.schema.names)
-            if "ViewBlueprint:display_name" in cols:
-                names[c.entity_path] = rb.column("ViewBlueprint:display_name").to_pylist()[-1][0]
-            if "ViewContents:query" in cols:
-                queries[c.entity_path.rsplit("/", 1)[0]] = rb.column(
-                    "ViewContents:query").to_pylist()[-1]
+    for c in _active_blueprint(path):
+        rb = c.to_record_batch()
+        cols = set(rb.schema.names)
+        if "ViewBlueprint:display_name" in cols:
+            names[c.entity_path] = rb.column("ViewBlueprint:display_name").to_pylist()[-1][0]
+        if "ViewContents:query" in cols:
+            queries[c.entity_path.rsplit("/", 1)[0]] = rb.column(
+                "ViewContents:query").to_pylist()[-1]
     return {name: queries.get(path_, []) for path_, name in names.items()}
 
 
@@ -113,21 +127,19 @@ class View:
 
 def views(path: Path) -> list[View]:
     """Every view of the file's blueprint, with its content query (default ``$origin/**``)."""
-    reader = RrdReader(path)
     found: dict[str, View] = {}
     extra: dict[str, dict[str, object]] = {}
-    for b in reader.blueprints():
-        for c in reader.stream(store=b).to_chunks():
-            rb = c.to_record_batch()
-            last = {n: rb.column(n).to_pylist()[-1] for n in rb.schema.names if ":" in n}
-            if "ViewBlueprint:class_identifier" in last:
-                found[c.entity_path] = View(
-                    kind=last["ViewBlueprint:class_identifier"][0],
-                    name=(last.get("ViewBlueprint:display_name") or [""])[0],
-                    origin=(last.get("ViewBlueprint:space_origin") or ["/"])[0],
-                    query=["$origin/**"])
-            else:
-                extra.setdefault(c.entity_path.rsplit("/", 1)[0], {}).update(last)
+    for c in _active_blueprint(path):
+        rb = c.to_record_batch()
+        last = {n: rb.column(n).to_pylist()[-1] for n in rb.schema.names if ":" in n}
+        if "ViewBlueprint:class_identifier" in last:
+            found[c.entity_path] = View(
+                kind=last["ViewBlueprint:class_identifier"][0],
+                name=(last.get("ViewBlueprint:display_name") or [""])[0],
+                origin=(last.get("ViewBlueprint:space_origin") or ["/"])[0],
+                query=["$origin/**"])
+        else:
+            extra.setdefault(c.entity_path.rsplit("/", 1)[0], {}).update(last)
     for path_, view in found.items():
         props = extra.get(path_, {})
         view.query = list(props.pop("ViewContents:query", view.query))
@@ -135,38 +147,36 @@ def views(path: Path) -> list[View]:
     return list(found.values())
 
 
-def _rule(rule: str, origin: str) -> tuple[bool, str, bool]:
-    """``(include, path, recursive)`` of one rule line (``+ p``, ``- p`` or ``p``)."""
-    rule = rule.strip()
-    include = not rule.startswith("-")
-    rule = rule.lstrip("+-").strip().replace("$origin", origin.rstrip("/") or "")
-    recursive = rule.endswith("/**") or rule == "**"
-    path_ = rule[:-3] if rule.endswith("/**") else rule
-    if "*" in path_:
-        raise AssertionError(f"rule {rule!r}: Rerun supports '*' only as a trailing '/**'")
-    path_ = "/" + path_.strip("/")
-    return include, path_, recursive
+def timeline(path: Path) -> str | None:
+    """The timeline the blueprint's time panel shows (time series plot against it)."""
+    for c in _active_blueprint(path):
+        rb = c.to_record_batch()
+        if "TimePanelBlueprint:timeline" in rb.schema.names:
+            return rb.column("TimePanelBlueprint:timeline").to_pylist()[-1][0]
+    return None
 
 
-def resolve(view: View, entities: dict[str, Entity]) -> list[str]:
-    """Entities of ``entities`` that ``view``'s query selects and that hold something the view
-    can draw, by Rerun's rules (EntityPathFilter: the most specific matching rule wins, an
-    exact path beats ``/**``; the last of equally specific rules wins; no rule: excluded)."""
-    rules = [_rule(r, view.origin) for r in view.query if r.strip()]
-    shown = []
-    for name, ent in entities.items():
-        best: tuple[int, int, int] | None = None
-        verdict = False
-        for k, (include, path_, recursive) in enumerate(rules):
-            if name == path_ or (recursive and (path_ == "/" or name.startswith(path_ + "/"))):
-                rank = (path_.count("/") + (path_ != "/"), 0 if recursive else 1, k)
-                if best is None or rank > best:
-                    best, verdict = rank, include
-        if verdict and any(c in ent.static or ent.rows.get(c) for c in _SHOWS[view.kind]):
-            shown.append(name)
-    return sorted(shown)
+def _expressions(view: View) -> list[str]:
+    """The view's query with ``$origin`` substituted, as the viewer does before parsing."""
+    origin = view.origin if view.origin != "/" else ""
+    return [q.replace("$origin", origin) for q in view.query if q.strip()]
 
 
-def explicit_entities(view: View) -> list[str]:
-    """Entities a view names one by one (include rules without ``/**``)."""
-    return [p for inc, p, rec in (_rule(r, view.origin) for r in view.query) if inc and not rec]
+def resolve(view: View, path: Path, *, timeline: str | None = None) -> list[str]:
+    """Entities of the recording in ``path`` that ``view`` shows: selected by its query under
+    Rerun's own entity-path filter (``LazyChunkStream.filter``: forgiving parse and
+    unescaping, most specific rule wins, ``*`` only as a trailing ``/**``) and holding a
+    component the view draws; for a time series, on ``timeline`` (the time panel's)."""
+    rows: dict[str, int] = {}
+    stream = RrdReader(path).stream().filter(
+        content=_expressions(view), components=list(_SHOWS[view.kind]),
+        has_timeline=timeline if view.kind == "TimeSeries" else None)
+    for chunk in stream.to_chunks():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    return sorted(e for e, n in rows.items() if n)
+
+
+def explicit_rules(view: View) -> list[str]:
+    """The view's include rules that name one entity (no ``/**``), ``$origin`` substituted."""
+    return [r.lstrip("+").strip() for r in _expressions(view)
+            if not r.startswith("-") and not r.rstrip().endswith("**")]
