@@ -70,12 +70,14 @@ def scan_crazyflies(address: int | None = None) -> list[str]:
     from groundstation.flight.link import install_drivers
 
     install_drivers()
-    uris = []
-    for driver in cflib.crtp.CLASSES:
+    uris: list[str] = []
+    # cflib.crtp.init_drivers() appends its drivers again on every call (a script or a plugin
+    # may have called it too): scan each driver class once and list each URI once
+    for driver in dict.fromkeys(cflib.crtp.CLASSES):
         try:
             with contextlib.redirect_stdout(io.StringIO()):  # cflib prints "Cannot find ..."
                 found = driver().scan_interface(address) or []
-            uris += [str(entry[0]) for entry in found]
+            uris += [u for u in (str(entry[0]) for entry in found) if u not in uris]
         except Exception as exc:  # one driver failing (no dongle) must not hide the others
             log.info("scanning with %s failed: %s", driver.__name__, exc)
     return uris

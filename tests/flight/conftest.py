@@ -2,9 +2,16 @@
 real time, every simulation powered off afterwards, and helpers that read the simulator's side.
 
 ``flight_uri`` is the same factory for one backend per parameter (python-can's back-to-back
-style): ``sim`` (``sim://``) or ``sitl`` (the real firmware with our physics on
-``udp://127.0.0.1:P``, real time; skipped when ``make sitl`` has not built it). Select backends
-with ``@pytest.mark.parametrize("flight_uri", [...], indirect=True)``."""
+style), :data:`BACKENDS`: ``sim`` (``sim://``), ``sitl`` (the real firmware with our physics on
+``udp://127.0.0.1:P``, real time; skipped when ``make sitl`` has not built it) or ``radio``
+(``radio://0/80/2M/E7E7E7E7E7`` through unmodified cflib and an emulated Crazyradio PA to a
+simulated vehicle at up to 20x, ``tests/sim_radio/backend.py``; one vehicle per test). A test
+that takes ``flight_uri`` runs on every backend; :func:`backends` skips the ones it names, each
+with its reason (a reason in the report, never a silent omission).
+
+``sim_uri`` (``sim://`` only) serves the tests whose subject is not the link: command-line
+options, output files, the live view; ``udp://`` against :class:`~groundstation.sim.UdpServer` is
+tested in ``test_link_watch.py``."""
 
 from __future__ import annotations
 
@@ -18,7 +25,21 @@ from groundstation.flight.link import install_drivers
 from groundstation.plan import load_plan, parse_plan
 
 SPEED = 20
+BACKENDS = ("sim", "sitl", "radio")
+SITL_COST = ("real-time firmware, 10-15 s a flight: this path is the runner's, flown on sim and "
+             "radio; SITL flies hover-check and three safety paths")
+SIM_HOOK = "the test drives the vehicle through the sim:// registry (groundstation.sim.instance)"
 _counter = itertools.count(500)
+
+
+def backends(**skip: str) -> pytest.MarkDecorator:
+    """Parametrise ``flight_uri`` over :data:`BACKENDS`, skipping those named with the stated
+    reason: ``@backends(sitl=SITL_COST)``."""
+    unknown = set(skip) - set(BACKENDS)
+    assert not unknown, f"no such backend: {unknown}"
+    return pytest.mark.parametrize("flight_uri", [
+        pytest.param(b, marks=pytest.mark.skip(reason=f"{b}: {skip[b]}")) if b in skip else b
+        for b in BACKENDS], indirect=True)
 
 
 @pytest.fixture
@@ -34,11 +55,18 @@ def sim_uri():
     gsim.close_all()
 
 
-@pytest.fixture(params=["sim", "sitl"])
+@pytest.fixture(params=BACKENDS)
 def flight_uri(request):
-    """A factory of fresh vehicle URIs on the backend named by the parameter."""
+    """A factory of fresh vehicle URIs on the backend named by the parameter (``radio``: noise
+    ``loss``, ``bit_error_rate`` and ``seed`` of the emulated dongle)."""
     if request.param == "sim":
         yield request.getfixturevalue("sim_uri")
+        return
+    if request.param == "radio":
+        from ..sim_radio import backend as radio
+
+        yield lambda **noise: radio.start_vehicle(**noise)
+        radio.close_all()
         return
     from ..sitl import backend
 
@@ -52,7 +80,12 @@ def flight_uri(request):
 
 def wait_for_stop(uri: str, timeout_s: float = 5.0) -> gsim.Simulator:
     """The simulation behind ``uri`` once its motors are off and it counted a stop (``udp://``:
-    the SITL vehicle once the firmware's motor commands are zero)."""
+    the SITL vehicle once the firmware's motor commands are zero; ``radio://``: the simulation
+    behind the emulated dongle)."""
+    if uri.startswith("radio://"):
+        from ..sim_radio import backend as radio
+
+        return radio.wait_for_stop(uri).sim
     if uri.startswith("udp://"):
         from ..sitl import backend
 

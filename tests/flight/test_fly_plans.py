@@ -1,4 +1,5 @@
-"""Whole flights of every shipped plan against sim:// at 20x real time, checked in the file.
+"""Whole flights of every shipped plan against sim:// at 20x real time, checked in the file
+(hover-check also on the real firmware in the loop and over the emulated Crazyradio).
 
 Known truth: the plan's compiled schedule (every setpoint, tick and phase), the 50 Hz log period
 (20 ms firmware spacing), the plan's phase durations, and the simulator's own stop counter.
@@ -19,14 +20,24 @@ from .checks import (
     check_log_blocks_jittery,
     check_setpoints,
 )
-from .conftest import wait_for_stop
+from .conftest import BACKENDS, SIM_HOOK, SITL_COST, backends, wait_for_stop
 
 PLANS = ["hover-check", "pitch-only", "roll-only", "yaw-only", "prbs-3axis"]
+_RADIO_COST = ("the link does not depend on the plan: hover-check checks the three 50 Hz blocks "
+               "and the 10 Hz setpoints over it (prbs-3axis would add 5-8 s)")
 
 
-@pytest.mark.parametrize(("name", "flight_uri"),
-                         [*((n, "sim") for n in PLANS), ("hover-check", "sitl")],
-                         indirect=["flight_uri"])
+def _plan_backends():
+    """Every plan on sim, hover-check on the others; the rest skipped with the reason."""
+    for name in PLANS:
+        for b in BACKENDS:
+            skip = (None if b == "sim" or name == "hover-check"
+                    else SITL_COST if b == "sitl" else _RADIO_COST)
+            marks = () if skip is None else pytest.mark.skip(reason=f"{b}: {skip}")
+            yield pytest.param(name, b, marks=marks)
+
+
+@pytest.mark.parametrize(("name", "flight_uri"), list(_plan_backends()), indirect=["flight_uri"])
 def test_shipped_plan_flies_and_records(name, flight_uri, tmp_path):
     plan, uri = load_plan(name), flight_uri()
     sitl = uri.startswith("udp://")
@@ -77,12 +88,13 @@ def test_shipped_plan_flies_and_records(name, flight_uri, tmp_path):
     assert s.json_meta("summary")["blocks"]["gyro"]["received"] == len(s["gyro"])
 
 
-def test_console_text_is_recorded_as_events(sim_uri, tmp_path):
+@backends(sitl=SIM_HOOK, radio=SIM_HOOK)
+def test_console_text_is_recorded_as_events(flight_uri, tmp_path):
     """The firmware's console lines reach the file (source "console"), whole and in order."""
     import groundstation.sim as gsim
     from cfsession import open_session
 
-    uri = sim_uri()
+    uri = flight_uri()
 
     def raise_low_voltage(k: int) -> None:  # pm.lowVoltage above the battery: once the motors
         if k == 0:  # stop after landing, the firmware warns on its console
@@ -94,14 +106,15 @@ def test_console_text_is_recorded_as_events(sim_uri, tmp_path):
     assert all(not e.text.endswith("\n") for e in console)
 
 
-def test_host_stall_freezes_simulation_time(sim_uri, tmp_path):
+@backends(sitl="real time: there is no simulation clock to hold")
+def test_host_stall_freezes_simulation_time(flight_uri, tmp_path):
     """A ground-station thread starved for a second of wall time (a busy host: 20 s of flight at
     speed 20) must not become a setpoint gap on the flight clock: the simulation waits for the
     scheduler, as a faster host would have kept up. The firmware would re-lock the thrust after
     500 ms without setpoints, so a gap would also bring the vehicle down."""
     import time
 
-    plan, uri = load_plan("hover-check"), sim_uri()
+    plan, uri = load_plan("hover-check"), flight_uri()
 
     def stall(k: int) -> None:
         if k == 40:  # hovering

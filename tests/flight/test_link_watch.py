@@ -26,7 +26,7 @@ from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port
 
 from .checks import check_closed_with_stop
-from .conftest import wait_for_stop
+from .conftest import SIM_HOOK, SITL_COST, backends, wait_for_stop
 
 BLOCKS = ("motors", "acc", "gyro")
 
@@ -53,8 +53,9 @@ def _check_silence_abort(result, *, silenced_at_tick: int) -> None:
         assert b["received"] == len(s[name])
 
 
-def test_log_silence_on_sim_is_link_loss_and_the_stop_reaches_the_vehicle(sim_uri, tmp_path):
-    plan, uri = load_plan("hover-check"), sim_uri()
+@backends(sitl=SIM_HOOK, radio=SIM_HOOK)
+def test_log_silence_on_sim_is_link_loss_and_the_stop_reaches_the_vehicle(flight_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), flight_uri()
 
     def silence(k: int) -> None:
         if k == 40:  # in the hover: every log packet lost from now on, setpoints still arrive
@@ -66,9 +67,11 @@ def test_log_silence_on_sim_is_link_loss_and_the_stop_reaches_the_vehicle(sim_ur
     assert not sim.vehicle.is_locked  # stopped by the stop setpoint, not by its watchdog
 
 
-def test_failing_abort_path_still_delivers_and_records_the_stop(sim_uri, tmp_path, monkeypatch):
+@backends(sitl=SITL_COST)
+def test_failing_abort_path_still_delivers_and_records_the_stop(flight_uri, tmp_path,
+                                                                  monkeypatch):
     """The plan raises, then the abort path raises too: the stop still reaches the vehicle."""
-    plan, uri = load_plan("hover-check"), sim_uri()
+    plan, uri = load_plan("hover-check"), flight_uri()
 
     def broken(self, k):
         raise RuntimeError("descent broken")

@@ -20,7 +20,7 @@ from groundstation.flight import RateLimits, fly_plan
 from groundstation.plan import load_plan
 
 from .checks import check_closed_with_stop, check_setpoints
-from .conftest import plan_variant, wait_for_stop
+from .conftest import SIM_HOOK, SITL_COST, backends, plan_variant, wait_for_stop
 
 
 def _safety_events(s):
@@ -46,8 +46,9 @@ def _check_descent(s, *, thrust_ceiling: int, n: int, slack_s: float = 0.0) -> N
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_mid_excitation_descends_then_stops(sig, sim_uri, tmp_path):
-    plan, uri = load_plan("pitch-only"), sim_uri()
+@backends(sitl=SITL_COST)
+def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path):
+    plan, uri = load_plan("pitch-only"), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     before = signal.getsignal(sig)
 
@@ -69,8 +70,10 @@ def test_signal_mid_excitation_descends_then_stops(sig, sim_uri, tmp_path):
         result.raise_if_aborted()
 
 
-def test_link_cut_records_the_loss_and_the_watchdog_stops_the_motors(sim_uri, tmp_path):
-    plan, uri = load_plan("hover-check"), sim_uri()
+@backends(sitl=SIM_HOOK, radio=f"{SIM_HOOK}; a radio that stops answering (out of range, "
+         "powered off, unplugged) is tests/sim_radio/test_radio_link_loss.py")
+def test_link_cut_records_the_loss_and_the_watchdog_stops_the_motors(flight_uri, tmp_path):
+    plan, uri = load_plan("hover-check"), flight_uri()
 
     def cut(k: int) -> None:
         if k == 40:  # in the hover: the simulated radio goes silent for good
@@ -118,14 +121,15 @@ def test_stop_policy_stops_at_once(flight_uri, tmp_path):
 
 
 @pytest.mark.parametrize("where", ["plan", "api"])
-def test_rate_limit_violation_aborts(where, sim_uri, tmp_path):
+@backends(sitl=SITL_COST)
+def test_rate_limit_violation_aborts(where, flight_uri, tmp_path):
     # Thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
     # a vehicle resting on the ground has no body rates.
     edits = {"hover_thrust = 39000": "hover_thrust = 40500"}
     if where == "plan":  # the plan's [safety] max_rate_deg_s
         edits['[safety]\n'] = '[safety]\nmax_rate_deg_s = 10.0\n'
     plan = plan_variant("roll-only", **edits)
-    uri = sim_uri()
+    uri = flight_uri()
     limits = RateLimits(max_rate_deg_s=10.0, samples=2) if where == "api" else None
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, limits=limits)
     assert result.cause.startswith("limit: gyro.") and "beyond 10 deg/s" in result.cause
@@ -137,9 +141,10 @@ def test_rate_limit_violation_aborts(where, sim_uri, tmp_path):
     _check_descent(s, thrust_ceiling=34000, n=20)
 
 
-def test_low_battery_refuses_to_take_off(sim_uri, tmp_path):
+@backends(sitl="the SITL build has no power management (no pm.vbat to check)")
+def test_low_battery_refuses_to_take_off(flight_uri, tmp_path):
     plan = plan_variant("hover-check", **{"min_vbat = 3.8 ": "min_vbat = 4.2 "})
-    uri = sim_uri()  # the simulated battery is at most 4.15 V
+    uri = flight_uri()  # the simulated battery is at most 4.15 V
     result = fly_plan(plan=plan, out=tmp_path, uri=uri)
     assert result.cause.startswith("battery 4.1") and "refusing to take off" in result.cause
     wait_for_stop(uri)
@@ -203,8 +208,9 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
     assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
 
 
-def test_second_signal_during_the_descent_stops_at_once(sim_uri, tmp_path):
-    plan, uri = load_plan("pitch-only"), sim_uri()
+@backends(sitl=SITL_COST)
+def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
+    plan, uri = load_plan("pitch-only"), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
 
     def hook(k: int) -> None:

@@ -8,8 +8,9 @@ import pytest
 from groundstation.flight.link import install_drivers
 from groundstation.sim.crazyradio_usb import emulated_radio
 
-URI = "radio://0/80/2M/E7E7E7E7E7"
-SPEED = 20
+from .backend import SPEED, URI
+
+__all__ = ["SPEED", "URI", "bus"]
 
 
 @pytest.fixture
