@@ -28,18 +28,20 @@ POLE_COLUMNS = ("#", "pole", "|z|", "angle [deg]", "f_n [Hz]", "damping", "tau [
 
 
 def sorted_poles(poles: Sequence[complex] | np.ndarray) -> np.ndarray:
-    """``poles`` in table order: decreasing modulus, then increasing imaginary part."""
-    p = np.asarray(poles, dtype=complex).reshape(-1)
-    return np.array(sorted(p, key=lambda z: (-abs(z), z.imag)), dtype=complex)
+    """``poles`` in table order: decreasing modulus, then complex before real at the same
+    modulus (so a conjugate pair stays adjacent), then increasing imaginary part."""
+    p = np.asarray(poles, dtype=complex).reshape(-1) + 0.0  # no -0.0 printed
+    return np.array(sorted(p, key=lambda z: (-abs(z), -abs(z.imag), z.imag)), dtype=complex)
 
 
 def pole_rows(poles: Sequence[complex] | np.ndarray, *, dt: float) -> list[dict[str, float]]:
     """One JSON-ready dict per pole (table order): ``re``, ``im``, ``abs``, ``angle_deg``,
-    ``freq_hz`` (natural frequency), ``damping`` and ``tau_s`` (None when not stable)."""
+    ``freq_hz`` (natural frequency; None for a pole at 0, infinitely fast), ``damping`` and
+    ``tau_s`` (None when not stable)."""
     rows = []
     for z in sorted_poles(poles):
         if z == 0:  # ln 0 = -inf: infinitely fast, critically damped
-            wn, zeta, tau = math.inf, 1.0, 0.0
+            wn, zeta, tau = None, 1.0, 0.0
         else:
             s = complex(np.log(z)) / dt
             wn = abs(s)
@@ -47,7 +49,8 @@ def pole_rows(poles: Sequence[complex] | np.ndarray, *, dt: float) -> list[dict[
             tau = -1.0 / s.real if s.real < 0 else None
         rows.append({"re": float(z.real), "im": float(z.imag), "abs": float(abs(z)),
                      "angle_deg": float(np.degrees(np.angle(z))),
-                     "freq_hz": float(wn / (2 * math.pi)), "damping": float(zeta),
+                     "freq_hz": None if wn is None else float(wn / (2 * math.pi)),
+                     "damping": float(zeta),
                      "tau_s": tau})
     return rows
 
@@ -59,6 +62,7 @@ def pole_cells(rows: Sequence[dict[str, float]]) -> list[tuple[str, ...]]:
         tau = "unstable" if r["tau_s"] is None and r["abs"] >= 1 else \
             "-" if r["tau_s"] is None else f"{r['tau_s']:.3g}"
         cells.append((str(i + 1), f"{r['re']:.4f}{r['im']:+.4f}j", f"{r['abs']:.4f}",
-                      f"{r['angle_deg']:.1f}", f"{r['freq_hz']:.2f}", f"{r['damping']:.3f}",
+                      f"{r['angle_deg']:.1f}",
+                      "-" if r["freq_hz"] is None else f"{r['freq_hz']:.2f}", f"{r['damping']:.3f}",
                       tau))
     return cells

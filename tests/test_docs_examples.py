@@ -2,11 +2,16 @@
 of their shell blocks parses against the command line as it is (sub-command, options, values),
 and the ones that need no hardware, viewer, network or long run are run, in a scratch folder
 holding the files the examples name (``flight.h5``, ``sessions/prbs-3axis-A.h5`` and ``-B``),
-and must succeed."""
+and must succeed. Every Python block imports real names from their current paths, and runs there
+as written, given only the names the text around it defines (the flight data ``u``, ``y``,
+``data``, ``val``)."""
 
 from __future__ import annotations
 
+import ast
+import builtins
 import glob
+import importlib
 import re
 import shlex
 from pathlib import Path
@@ -19,6 +24,7 @@ import groundstation.sim as gsim
 from groundstation.cli import main as gs_main
 from sysid.cli import main as sysid_main
 from tests.sysid.flights import known_system, write_flight
+from tests.test_old_paths import MOVED
 from tests.viz.sessions import write_session
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -127,3 +133,105 @@ def test_documented_commands_run(doc, scratch, tmp_path, monkeypatch):
     finally:
         gsim.close_all()
     assert ran >= 1
+
+
+# --- Python examples -------------------------------------------------------------------------
+
+_PYTHON = ("python", "py")
+OLD_PATHS = set(MOVED)  # kept for callers; the docs show the current paths
+MADE_BY = {"flight.rrd": ["replay", "flight.h5", "--rrd", "flight.rrd"]}
+"""Files a Python example reads besides the scratch folder's, made by a documented command."""
+
+
+def python_blocks(path: Path) -> list[tuple[int, str]]:
+    """``(line, source)`` of every Python code block of ``path``."""
+    out, lang, start, body = [], None, 0, []
+    for i, line in enumerate(path.read_text().splitlines(), 1):
+        m = _FENCE.match(line.strip())
+        if m and lang is None:
+            lang, start, body = m.group(1), i + 1, []
+        elif m:
+            if lang in _PYTHON:
+                out.append((start, "\n".join(body) + "\n"))
+            lang = None
+        elif lang is not None:
+            body.append(line)
+    return out
+
+
+PY = [(p, line, src) for p in DOCS for line, src in python_blocks(p)]
+PY_IDS = [f"{p.name}:{line}" for p, line, _ in PY]
+
+
+def free_names(source: str) -> set[str]:
+    """Names an example uses but neither assigns nor imports (nor are builtins)."""
+    tree = ast.parse(source)
+    bound = {a.asname or a.name.split(".")[0] for n in ast.walk(tree)
+             if isinstance(n, ast.Import | ast.ImportFrom) for a in n.names}
+    bound |= {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)
+              and isinstance(n.ctx, ast.Store)}
+    used = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)
+            and isinstance(n.ctx, ast.Load)}
+    return used - bound - set(dir(builtins))
+
+
+def _given() -> dict[str, object]:
+    """What the examples take from the text around them: flight data ``u``, ``y`` of a known
+    system as ``data`` (``IOData``, dt 0.02 s) and a second flight ``val`` to validate on."""
+    import numpy as np
+
+    import sysid
+    from tests.sysid.systems import open_loop, random_stable_system
+
+    system = random_stable_system(n_states=4, n_inputs=2, n_outputs=2,
+                                  rng=np.random.default_rng(3), dt=0.02)
+    data, val = (open_loop(system, n_samples=1500, rng=np.random.default_rng(seed)).data
+                 for seed in (1, 2))
+    assert isinstance(data, sysid.IOData)
+    return {"u": data.u, "y": data.y, "data": data, "val": val}
+
+
+def test_the_docs_show_python_examples():
+    assert {p.name for p, _, _ in PY} >= {"sysid.md", "session-format.md", "viewing.md"}
+
+
+@pytest.mark.parametrize(("doc", "line", "source"), PY, ids=PY_IDS)
+def test_documented_python_imports_exist_at_their_current_path(doc, line, source):
+    """Each example compiles and every name it imports exists where it imports it from, at the
+    current path (not one of the old paths kept for callers)."""
+    tree = ast.parse(source, filename=f"{doc.name}:{line}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            modules = [(a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            modules = [(node.module, a.name) for a in node.names]
+        else:
+            continue
+        for module, name in modules:
+            assert module not in OLD_PATHS, f"{doc.name}:{line}: {module} is an old path"
+            mod = importlib.import_module(module)
+            if name is not None and not hasattr(mod, name):
+                importlib.import_module(f"{module}.{name}")  # a sub-module, or ImportError
+
+
+@pytest.mark.parametrize(("doc", "line", "source"), PY, ids=PY_IDS)
+def test_documented_python_runs(doc, line, source, scratch, tmp_path, monkeypatch):
+    """Each example runs as written, in a copy of the scratch folder, with only the names the
+    surrounding text defines given (see :func:`_given`)."""
+    for f in scratch.rglob("*.h5"):
+        target = tmp_path / f.relative_to(scratch)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(f.read_bytes())
+    monkeypatch.chdir(tmp_path)
+    for name, argv in MADE_BY.items():
+        if name in source:
+            res = CliRunner().invoke(gs_main, argv)
+            assert res.exit_code == 0 and Path(name).is_file(), res.output
+    missing = free_names(source)
+    given = _given() if missing else {}
+    assert missing <= set(given), f"{doc.name}:{line}: define {sorted(missing - set(given))}"
+    namespace = {"__name__": "__doc_example__", **{k: given[k] for k in missing}}
+    try:
+        exec(compile(source, f"{doc.name}:{line}", "exec"), namespace)
+    finally:
+        gsim.close_all()

@@ -1,4 +1,6 @@
-"""Focus (prediction / simulation), output-error B, D, x0, and stability modes (issue 10)."""
+"""Focus (prediction / simulation) and stability modes through the methods (issue 10).
+
+The modules on their own: test_finish.py, test_output_error.py, test_stability.py."""
 
 from __future__ import annotations
 
@@ -8,8 +10,7 @@ import scipy.signal
 
 import sysid
 from sysid import IOData
-from sysid.output_error import _modal_responses, _recursive_responses, output_error_bd
-from sysid.stability import MARGINAL_RADIUS, stabilize
+from sysid.stability import MARGINAL_RADIUS
 
 from .systems import (
     closed_loop,
@@ -38,35 +39,6 @@ def _colored_open_loop(*, seed: int, n: int = 3000, noise: float = 0.05, n_true:
 
 def _sim_fit(model: sysid.StateSpaceModel, data: IOData) -> float:
     return float(np.mean(np.asarray(sysid.compare(model, data))))
-
-
-def test_output_error_recovers_b_d_x0_exactly_on_noise_free_data():
-    rng = np.random.default_rng(0)
-    a = np.diag([0.9, 0.5, -0.3, 0.7])
-    a[0, 1] = 0.3
-    b, c, d = rng.normal(size=(4, 2)), rng.normal(size=(3, 4)), rng.normal(size=(3, 2))
-    x0 = rng.normal(size=4)
-    u = rng.normal(size=(400, 2))
-    y = sysid.StateSpaceModel(A=a, B=b, C=c, D=d).simulate(u, x0=x0)
-    b_est, d_est, x0s = output_error_bd(a=a, c=c, flights=[(u, y)], feedthrough=True)
-    np.testing.assert_allclose(b_est, b, atol=1e-9)
-    np.testing.assert_allclose(d_est, d, atol=1e-9)
-    np.testing.assert_allclose(x0s[0], x0, atol=1e-9)
-    # the modal (filter) route and the plain recursion agree
-    r1, f1 = _modal_responses(a, c, u)
-    r2, f2 = _recursive_responses(a, c, u)
-    np.testing.assert_allclose(r1, r2, atol=1e-10)
-    np.testing.assert_allclose(f1, f2, atol=1e-10)
-
-
-def test_output_error_handles_a_defective_a_by_recursion():
-    a = np.array([[0.8, 1.0], [0.0, 0.8]])  # Jordan block: not diagonalisable
-    b, c = np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])
-    u = np.random.default_rng(1).normal(size=(300, 1))
-    y = sysid.StateSpaceModel(A=a, B=b, C=c).simulate(u)
-    b_est, d_est, _ = output_error_bd(a=a, c=c, flights=[(u, y)], feedthrough=False)
-    np.testing.assert_allclose(b_est, b, atol=1e-8)
-    assert not d_est.any()
 
 
 def test_po_moesp_simulates_on_colored_inputs_where_eq_3_15_does_not():
@@ -123,25 +95,6 @@ def test_prediction_focus_keeps_the_closed_loop_predictor_consistent():
     err_pred = np.linalg.norm(freq(pred) - freq(g0)) / np.linalg.norm(freq(g0))
     err_sim = np.linalg.norm(freq(sim) - freq(g0)) / np.linalg.norm(freq(g0))
     assert err_pred < err_sim, (err_pred, err_sim)
-
-
-def test_stabilize_modes():
-    a = np.diag([1.008, 0.5, 1.3])
-    a_auto, moved = stabilize(a, mode="auto")
-    radii = np.sort(np.abs(np.linalg.eigvals(a_auto)))
-    np.testing.assert_allclose(radii, [0.5, MARGINAL_RADIUS, 1.3])  # 1.3 is a real instability
-    assert len(moved) == 1 and abs(moved[0][0]) == pytest.approx(1.008)
-    a_enf, moved = stabilize(a, mode="enforce")
-    radii = np.sort(np.abs(np.linalg.eigvals(a_enf)))
-    np.testing.assert_allclose(radii, [0.5, 1 / 1.3, 1 / 1.008])  # reflected
-    assert len(moved) == 2
-    a_free, moved = stabilize(a, mode="free")
-    assert a_free is a and not moved
-    # a complex pair moves as a pair, keeping its angle
-    rot = 1.02 * np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
-    lam = np.linalg.eigvals(stabilize(rot, mode="auto")[0])
-    np.testing.assert_allclose(np.abs(lam), MARGINAL_RADIUS)
-    np.testing.assert_allclose(np.sort(np.abs(np.angle(lam))), [0.3, 0.3])
 
 
 def test_an_unstable_plant_identified_in_closed_loop_is_kept_by_default_and_reflected_on_request():

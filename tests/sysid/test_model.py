@@ -1,4 +1,4 @@
-"""IOData validation, StateSpaceModel behaviour and model files."""
+"""StateSpaceModel behaviour and model files (IOData: test_data.py)."""
 
 from __future__ import annotations
 
@@ -9,48 +9,7 @@ import pytest
 import scipy.signal
 
 import sysid
-from sysid.data import block_hankel
 from tests.sysid.systems import pbsid_example1, random_stable_system
-
-
-def test_iodata_promotes_1d_and_is_read_only() -> None:
-    d = sysid.IOData(u=np.arange(5.0), y=np.ones((5, 2)) * [1, 2], dt=0.02)
-    assert d.u.shape == (5, 1) and (d.n_samples, d.n_inputs, d.n_outputs) == (5, 1, 2)
-    assert np.allclose(d.time, [0, 0.02, 0.04, 0.06, 0.08])
-    assert d.output_names == ("y0", "y1") and d.input_units == ("",)
-    with pytest.raises(ValueError):
-        d.u[0, 0] = 3.0
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "words"),
-    [
-        ({"u": np.zeros((5, 1)), "y": np.zeros((4, 1))}, ["5 samples", "4", "same length"]),
-        ({"u": np.zeros((5, 1)), "y": np.array([[0], [1], [np.nan], [0], [0]])},
-         ["y channel 0", "sample 2", "nan"]),
-        ({"u": np.array([[0, 0], [0, np.inf]]), "y": np.zeros((2, 1))},
-         ["u channel 1", "sample 1", "inf"]),
-        ({"u": np.zeros((2, 1, 1)), "y": np.zeros((2, 1))}, ["u has 3 dimensions"]),
-        ({"u": np.zeros((2, 1)), "y": np.zeros((2, 1)), "output_names": ["a", "b"]},
-         ["output_names", "give exactly 1"]),
-    ],
-)
-def test_iodata_bad_input_is_one_line_value_error(kwargs: dict, words: list[str]) -> None:
-    with pytest.raises(ValueError) as info:
-        sysid.IOData(dt=0.1, **kwargs)
-    msg = str(info.value)
-    assert "\n" not in msg
-    for w in words:
-        assert w in msg
-
-
-def test_block_hankel_layout() -> None:
-    x = np.arange(12.0).reshape(6, 2)
-    h = block_hankel(x, block_rows=3, start=1)
-    assert h.shape == (6, 3)
-    for i in range(3):
-        for j in range(3):
-            assert np.array_equal(h[2 * i:2 * i + 2, j], x[1 + i + j])
 
 
 def test_model_shapes_are_checked_with_names() -> None:

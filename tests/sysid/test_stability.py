@@ -1,0 +1,85 @@
+"""sysid.stability: what "auto", "enforce" and "free" do to the poles of an identified A."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from sysid.errors import ParameterError
+from sysid.stability import MARGINAL_RADIUS, NEAR_BAND, STABILITY_MODES, check_stability, stabilize
+
+
+def _radii(a: np.ndarray) -> np.ndarray:
+    return np.sort(np.abs(np.linalg.eigvals(a)))
+
+
+def test_stabilize_modes():
+    a = np.diag([1.008, 0.5, 1.3])
+    a_auto, moved = stabilize(a, mode="auto")
+    radii = np.sort(np.abs(np.linalg.eigvals(a_auto)))
+    np.testing.assert_allclose(radii, [0.5, MARGINAL_RADIUS, 1.3])  # 1.3 is a real instability
+    assert len(moved) == 1 and abs(moved[0][0]) == pytest.approx(1.008)
+    a_enf, moved = stabilize(a, mode="enforce")
+    radii = np.sort(np.abs(np.linalg.eigvals(a_enf)))
+    np.testing.assert_allclose(radii, [0.5, 1 / 1.3, 1 / 1.008])  # reflected
+    assert len(moved) == 2
+    a_free, moved = stabilize(a, mode="free")
+    assert a_free is a and not moved
+    # a complex pair moves as a pair, keeping its angle
+    rot = 1.02 * np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
+    lam = np.linalg.eigvals(stabilize(rot, mode="auto")[0])
+    np.testing.assert_allclose(np.abs(lam), MARGINAL_RADIUS)
+    np.testing.assert_allclose(np.sort(np.abs(np.angle(lam))), [0.3, 0.3])
+
+
+def test_auto_moves_exactly_the_near_band(caplog):
+    """``1 < |z| <= 1 + NEAR_BAND`` is noise around an integrator and moves; further out is a
+    real instability, kept with one warning that names the radius."""
+    inside = np.diag([1.0 + NEAR_BAND, 0.5])
+    assert _radii(stabilize(inside, mode="auto")[0])[-1] == pytest.approx(MARGINAL_RADIUS)
+    outside = np.diag([1.0 + NEAR_BAND + 1e-3, 0.5])
+    with caplog.at_level(logging.WARNING, logger="sysid.stability"):
+        kept, moved = stabilize(outside, mode="auto")
+    assert kept is outside and not moved
+    assert [r.getMessage()[:24] for r in caplog.records] == ["pole at |z| = 1.101 kept"]
+
+
+def test_stable_poles_are_left_alone_in_any_basis():
+    """The move is made on A's real Schur form, so in a rotated basis too only the moved pole
+    changes: the others keep their values to rounding, and an A with nothing to move is
+    returned as it is."""
+    rng = np.random.default_rng(0)
+    q, _ = np.linalg.qr(rng.normal(size=(4, 4)))
+    blocks = np.zeros((4, 4))
+    blocks[:2, :2] = [[0.3, -0.4], [0.4, 0.3]]  # 0.3 ± 0.4j
+    blocks[2, 2], blocks[3, 3] = 1.05, -0.6
+    a = q @ blocks @ q.T
+    new, moved = stabilize(a, mode="auto")
+    after = np.sort_complex(np.linalg.eigvals(new))
+    np.testing.assert_allclose(after, np.sort_complex([0.3 - 0.4j, 0.3 + 0.4j, MARGINAL_RADIUS,
+                                                       -0.6]), atol=1e-12)
+    assert moved == [pytest.approx((1.05 + 0j, MARGINAL_RADIUS + 0j))]
+    stable = q @ np.diag([0.9, 0.5, -0.2, 0.1]) @ q.T
+    for mode in STABILITY_MODES:
+        same, none = stabilize(stable, mode=mode)
+        assert same is stable and none == []
+
+
+def test_enforce_pulls_the_unit_circle_and_the_band_above_it_in():
+    """``enforce``: a pole on the circle or just inside MARGINAL_RADIUS's band goes to
+    MARGINAL_RADIUS; one outside is reflected (1/|z|) unless that lands above the cap."""
+    a = np.diag([1.0, 0.9995, 2.0, 0.5])
+    new, moved = stabilize(a, mode="enforce")
+    np.testing.assert_allclose(_radii(new), [0.5, 0.5, MARGINAL_RADIUS, MARGINAL_RADIUS])
+    assert len(moved) == 3
+    assert max(abs(np.linalg.eigvals(new))) < 1.0
+
+
+@pytest.mark.parametrize("mode", ["strict", "", None, "Auto"])
+def test_unknown_modes_are_refused_in_one_line(mode):
+    with pytest.raises(ParameterError, match=r"use one of \('auto', 'enforce', 'free'\)"):
+        check_stability(mode)
+    with pytest.raises(ParameterError):
+        stabilize(np.eye(2), mode=mode)
