@@ -22,6 +22,7 @@ __all__ = [
     "StreamSpec",
     "events_spec",
     "link_spec",
+    "live_id_spec",
     "log_block_spec",
     "phases_spec",
     "setpoints_spec",
@@ -222,4 +223,43 @@ def link_spec() -> StreamSpec:
             Field("latency_ms", "<f4", "ms", "round-trip latency"),
         ),
         description="link quality and latency",
+    )
+
+
+LIVE_ID_POLE_UNIT = "1 (z-plane)"
+
+
+def live_id_spec(*, order: int, attrs: dict[str, str | float | int] | None = None) -> StreamSpec:
+    """One row per live identification update (``groundstation fly --live-id``,
+    ``docs/live-id.md``); the ``order`` poles as two float columns each, sorted by descending
+    magnitude (a conjugate pair: negative imaginary part first). ``attrs`` describe the
+    settings (channels, horizons, grid period)."""
+    fields = [
+        Field("host_time", "<f8", "s", "host: flight time the update started (newest row)"),
+        Field("fw_end_s", "<f8", "s", "Crazyflie time of the newest grid sample (wraps undone)"),
+        Field("span_s", "<f4", "s", "data span of the update: n_samples x grid period"),
+        Field("n_samples", "<u4", "", "grid samples identified from"),
+        Field("order", "<u2", "", "model order"),
+        Field("past", "<u2", "", "past horizon, grid samples"),
+        Field("future", "<u2", "", "future horizon, grid samples"),
+        Field("fit_pct", "<f4", "%", "one-step-ahead fit on the most recent data, mean over "
+              "outputs"),
+        Field("innovation_nvar", "<f4", "1", "one-step prediction error variance over output "
+              "variance on the most recent data, mean over outputs"),
+        Field("pole_move", "<f4", LIVE_ID_POLE_UNIT, "largest distance of a pole to the nearest "
+              "pole of the previous update (Hausdorff distance; NaN at the first)"),
+        Field("max_pole", "<f4", LIVE_ID_POLE_UNIT, "largest pole magnitude"),
+        Field("update_s", "<f4", "s", "wall time the update took"),
+        Field("skipped", "<u4", "", "updates skipped so far (the worker was behind)"),
+        Field("final", "u1", "", "1: the last update of the excitation (the saved model)"),
+    ]
+    for i in range(1, order + 1):
+        fields += [Field(f"pole_re_{i}", "<f8", LIVE_ID_POLE_UNIT, f"pole {i}, real part"),
+                   Field(f"pole_im_{i}", "<f8", LIVE_ID_POLE_UNIT, f"pole {i}, imaginary part")]
+    return StreamSpec(
+        name="live_id",
+        kind="live_id",
+        fields=tuple(fields),
+        description="live identification: one row per model update during the excitation",
+        attrs=dict(attrs or {}),
     )

@@ -208,6 +208,10 @@ class RerunView:
                 self._send_events(t, data)
             elif ch.spec.kind == "phases":
                 self._send_phases(t, data)
+            elif ch.spec.kind == "live_id":
+                from groundstation.liveid_view import send_rows
+
+                send_rows(self.rec, data)
             else:
                 times = [("host_time", t)]
                 if ch.firmware_time:

@@ -32,7 +32,7 @@ _SKIP = {"host_time", "fw_time_ms", "phase_id", "tick"}
 
 def series_fields(spec: StreamSpec) -> list[Field]:
     """The fields of ``spec`` shown as scalar series (numeric, not a time or index column)."""
-    if spec.kind in ("events", "phases"):
+    if spec.kind in ("events", "phases", "live_id"):  # live_id: groundstation.liveid_view
         return []
     return [f for f in spec.fields if f.name not in _SKIP and np.dtype(f.dtype).kind in "fiub"]
 
@@ -123,8 +123,10 @@ def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
     if "events" in by_kind:
         side.insert(1 if side else 0, rrb.TextLogView(origin=EVENTS, name="events"))
     side.append(rrb.TextDocumentView(origin=SESSION, name="session"))
-    return rrb.Blueprint(
-        rrb.Horizontal(rrb.Grid(*plots), rrb.Vertical(*side), column_shares=[3, 1]),
-        rrb.TimePanel(timeline="host_time"),
-        collapse_panels=True,
-    )
+    layout: rrb.Container = rrb.Horizontal(rrb.Grid(*plots), rrb.Vertical(*side),
+                                           column_shares=[3, 1])
+    if "live_id" in by_kind:  # a recorded live identification (fly --live-id), replayed
+        from groundstation.liveid_view import live_id_views
+
+        layout = rrb.Vertical(layout, live_id_views(recorded=True), row_shares=[2, 1])
+    return rrb.Blueprint(layout, rrb.TimePanel(timeline="host_time"), collapse_panels=True)

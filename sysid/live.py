@@ -28,17 +28,27 @@ The samples are shifted by the mean of the first rows before they are accumulate
 the mean is invariant to a constant shift), so the raw Gram does not carry the operating point
 (hover PWM, 1 g) and the centring loses no digits.
 
-No threads here: the ground station's listener (``groundstation/flight/liveid.py``) calls
-:meth:`append` and :meth:`update` from its own worker.
+No threads here. The ground station's listener (``groundstation/flight/liveid.py``) drives
+:class:`LiveIdentifierProcess` from its own worker thread: the same engine in a child
+interpreter with one BLAS thread, so an update never holds the flight's interpreter lock (a thread
+preempted while holding it delays the setpoint thread by a whole time slice on a busy host) and
+no idle OpenBLAS thread spins on the cores the flight needs.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
 
 import numpy as np
+import threadpoolctl
 from numpy.lib.stride_tricks import sliding_window_view
 
 from sysid.data import IOData
@@ -49,10 +59,28 @@ from sysid.iem import iem
 from sysid.model import StateSpaceModel
 from sysid.realize import check_order
 from sysid.stability import Stability, check_stability
+from sysid.validate import fit_percent, predict
 
-__all__ = ["LiveIdentifier", "LiveUpdate"]
+__all__ = ["LiveIdentifier", "LiveIdentifierProcess", "LiveUpdate", "RecentFit"]
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RecentFit:
+    """The one-step-ahead prediction of the most recent samples by an update's model.
+
+    Attributes:
+        measured, predicted: ``(k, l)`` outputs (the mean of all samples removed) and their
+            one-step predictions (:func:`sysid.validate.predict`, initial state estimated).
+        fit_pct: ``(l,)`` NRMSE fit per output (:func:`sysid.validate.fit_percent`).
+        innovation_nvar: one-step error variance over output variance, mean over outputs.
+    """
+
+    measured: np.ndarray
+    predicted: np.ndarray
+    fit_pct: np.ndarray
+    innovation_nvar: float
 
 
 @dataclass(frozen=True)
@@ -66,6 +94,7 @@ class LiveUpdate:
         singular_values: the step-3 singular values (the order is chosen among them).
         model: the identified model (physical units, mean-removed data).
         elapsed_s: wall time of the update.
+        recent: the one-step fit on the most recent samples (``update(fit_samples=k)``).
     """
 
     n_samples: int
@@ -78,6 +107,7 @@ class LiveUpdate:
     model: StateSpaceModel
     elapsed_s: float
     extra: dict[str, float] = field(default_factory=dict)
+    recent: RecentFit | None = None
 
 
 class LiveIdentifier:
@@ -201,8 +231,9 @@ class LiveIdentifier:
                             n_outputs=self.ell, n_columns=cols, u_scale=std[: self.m],
                             y_scale=std[self.m:], flights=(flight,))
 
-    def update(self) -> LiveUpdate:
-        """Identify a model from all samples so far with the offline IEM on these products."""
+    def update(self, *, fit_samples: int = 0) -> LiveUpdate:
+        """Identify a model from all samples so far with the offline IEM on these products;
+        with ``fit_samples``, also its one-step fit on that many most recent samples."""
         t0 = time.perf_counter()
         prod = self.products()
         model = iem(None, order=self.order, past=self.past, future=self.future,  # type: ignore[arg-type]
@@ -210,7 +241,124 @@ class LiveIdentifier:
                     products=prod)
         poles = model.poles()
         sv = np.asarray(model.provenance.get("singular_values", []), dtype=float)
+        recent = self.recent_fit(model, samples=fit_samples) if fit_samples else None
         return LiveUpdate(n_samples=self._n, span_s=self._n * self.dt, order=self.order,
                           past=self.past, future=self.future, poles=poles,
                           singular_values=sv, model=model,
-                          elapsed_s=time.perf_counter() - t0)
+                          elapsed_s=time.perf_counter() - t0, recent=recent)
+
+    def recent_fit(self, model: StateSpaceModel, *, samples: int) -> RecentFit:
+        """``model``'s one-step prediction of the last ``samples`` samples (at least 2)."""
+        n = self._n
+        k = min(n, max(2, int(samples)))
+        tail = self._w[n - k:n] - self._prefix_arr[n] / n  # the mean of all samples removed
+        u, y = tail[:, : self.m], tail[:, self.m:]
+        y_pred, _ = predict(model, u=u, y=y, horizon=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = (y - y_pred).var(axis=0) / y.var(axis=0)
+        ratio = ratio[np.isfinite(ratio)]
+        return RecentFit(measured=y, predicted=y_pred, fit_pct=fit_percent(y, y_pred),
+                         innovation_nvar=float(ratio.mean()) if ratio.size else float("nan"))
+
+
+class LiveIdentifierProcess:
+    """A :class:`LiveIdentifier` in a child interpreter (one BLAS thread there).
+
+    Same arguments and methods (``append``, ``update``, ``samples``, ``n_samples``,
+    ``min_samples``) plus :meth:`close`. ``append`` returns at once (the rows go down a pipe);
+    ``update`` and ``samples`` wait for the child while the calling thread holds no
+    interpreter lock. An error in the child (bad rows, too few samples, a failed update) is
+    raised again here by the next ``update`` or ``samples``; a child that died is an
+    ``EOFError``. The settings are checked here first, so a bad one is the same one-line
+    error as :class:`LiveIdentifier`'s.
+
+    The child is ``python -c`` running :func:`_serve` on two pipes, not a
+    :mod:`multiprocessing` child: those re-import the caller's main module, and a script
+    that flies without an ``if __name__ == "__main__"`` guard would fly again.
+    """
+
+    def __init__(self, **settings: Any) -> None:
+        probe = LiveIdentifier(**{**settings, "capacity": 1})  # the settings' errors, here
+        self.min_samples = probe.min_samples
+        self._n = 0
+        to_child, from_parent = os.pipe()
+        to_parent, from_child = os.pipe()
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+        code = ("import sys; from sysid.live import _serve; "
+                "_serve(int(sys.argv[1]), int(sys.argv[2]))")
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-c", code, str(to_child), str(from_child)],
+                pass_fds=(to_child, from_child), stdin=subprocess.DEVNULL, env=env)
+        finally:
+            os.close(to_child)
+            os.close(from_child)
+        self._send = Connection(from_parent, readable=False)
+        self._recv = Connection(to_parent, writable=False)
+        self._send.send(settings)
+
+    @property
+    def n_samples(self) -> int:
+        """Samples appended so far."""
+        return self._n
+
+    def append(self, *, u: np.ndarray, y: np.ndarray) -> None:
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        self._send.send(("append", u, np.atleast_2d(np.asarray(y, dtype=float))))
+        self._n += u.shape[0]
+
+    def update(self, *, fit_samples: int = 0) -> LiveUpdate:
+        self._send.send(("update", fit_samples))
+        return self._reply()
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        self._send.send(("samples", 0))
+        return self._reply()
+
+    def close(self, *, timeout_s: float = 5.0) -> None:
+        """End the child (it also ends when this process does: its pipe closes)."""
+        with contextlib.suppress(OSError):
+            self._send.send(("close", 0))
+        try:
+            self._proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+        self._send.close()
+        self._recv.close()
+
+    def _reply(self) -> Any:
+        kind, value = self._recv.recv()
+        if kind == "error":
+            raise value
+        return value
+
+
+def _serve(commands_fd: int, replies_fd: int) -> None:
+    """The child of :class:`LiveIdentifierProcess`: one identifier, commands from a pipe."""
+    threadpoolctl.threadpool_limits(limits=1)
+    commands = Connection(commands_fd, writable=False)
+    replies = Connection(replies_fd, readable=False)
+    live = LiveIdentifier(**commands.recv())
+    failed: Exception | None = None  # an append's error, raised by the next reply
+    while True:
+        try:
+            command, *args = commands.recv()
+        except (EOFError, OSError):
+            return
+        if command == "close":
+            return
+        if command == "append":
+            if failed is None:
+                try:
+                    live.append(u=args[0], y=args[1])
+                except Exception as exc:
+                    failed = exc
+            continue
+        try:
+            if failed is not None:
+                raise failed
+            replies.send(("ok", live.update(fit_samples=args[0]) if command == "update"
+                          else live.samples()))
+        except Exception as exc:
+            replies.send(("error", exc))

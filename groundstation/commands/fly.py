@@ -5,6 +5,9 @@ CI logs), a plain line every :data:`PLAIN_EVERY_S` seconds of flight time and at
 start. An aborted flight prints its cause and the session path on one line and exits 2.
 A validation flight is the plan with a different PRBS realisation (``--advance``/``--seed``, see
 :mod:`groundstation.plan.variants`), named with ``--name`` (file name and ``tag`` metadata).
+``--live-id`` (or a plan's ``[live_id]`` table) identifies a model while the excitation flies
+(:mod:`groundstation.flight.liveid`, ``docs/live-id.md``); ``--until-converged`` ends the
+excitation once its poles have settled. Only then is ``sysid`` imported.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import importlib
 import json
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +28,19 @@ from cfsession.schema import StreamSpec
 from groundstation.errors import GroundStationError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
 from groundstation.flight.link import DEFAULT_URI, check_uri
-from groundstation.plan import Plan, load_plan
+from groundstation.flight.liveid import (
+    Convergence,
+    Engine,
+    LiveIdListener,
+    check_live_id,
+    planned_streams,
+)
+from groundstation.plan import LiveIdConfig, Plan, load_plan
 from groundstation.plan.variants import advance_prbs, reseed_prbs
 from groundstation.recorder import check_folder, check_tag
 
-__all__ = ["PlainProgress", "ProgressListener", "command", "open_view", "summary_lines"]
+__all__ = ["PlainProgress", "ProgressListener", "command", "live_id_engine", "live_id_listener",
+           "open_view", "summary_lines"]
 
 
 PLAIN_EVERY_S = 5.0
@@ -46,12 +57,34 @@ def open_view(*, mode: str, name: str, web_port: int) -> FlightListener:
     return live.open_view(mode=mode, name=name, web_port=web_port)
 
 
+def live_id_engine() -> Engine:
+    """sysid's live identification for the listener, imported only when asked for."""
+    try:
+        from sysid import model_io, preprocess
+        from sysid.live import LiveIdentifierProcess
+    except ImportError as exc:
+        raise GroundStationError(f"live identification needs the sysid package ({exc}); "
+                                 "install it, or fly without --live-id / [live_id]") from None
+    return Engine(identifier=LiveIdentifierProcess, zoh=preprocess.zoh_resample,
+                  save_model=model_io.save)
+
+
+def live_id_listener(plan: Plan, *, convergence: Convergence | None = None) -> LiveIdListener:
+    """The live identification listener for ``plan`` (its ``[live_id]`` or the defaults),
+    checked against the flight's log blocks: a one-line error before anything connects."""
+    config = plan.live_id or LiveIdConfig()
+    check_live_id(config, streams=planned_streams(plan))
+    return LiveIdListener(config=config, engine=live_id_engine(), convergence=convergence)
+
+
 class PlainProgress:
     """Progress as plain lines on stderr: at each phase start and every ``every_s`` seconds
-    of flight time, ``[fly] t 12.0/112.0 s  phase excitation  packets motors 600 ...``."""
+    of flight time, ``[fly] t 12.0/112.0 s  phase excitation  packets motors 600 ...``, and
+    the live identification's ``status`` when there is one."""
 
-    def __init__(self, *, duration_s: float, every_s: float = PLAIN_EVERY_S) -> None:
-        self.duration_s, self.every_s = duration_s, every_s
+    def __init__(self, *, duration_s: float, every_s: float = PLAIN_EVERY_S,
+                 status: Callable[[], str] | None = None) -> None:
+        self.duration_s, self.every_s, self.status = duration_s, every_s, status
         self._t0: float | None = None
         self._next = 0.0
         self._phase = "connected"
@@ -87,22 +120,25 @@ class PlainProgress:
         self._next = (t // self.every_s + 1) * self.every_s
         packets = " ".join(f"{k} {v}" for k, v in self._packets.items()) or "-"
         line = (f"[fly] t {t:6.1f}/{self.duration_s:.1f} s  phase {self._phase:<12} "
-                f"packets {packets}")
+                f"packets {packets}{f'  | {self.status()}' if self.status else ''}")
         self.lines.append(line)
         click.echo(line, err=True)
 
 
 class ProgressListener:
-    """A ``rich`` progress bar: phase, flight time of the plan's duration, log packets."""
+    """A ``rich`` progress bar: phase, flight time of the plan's duration, log packets (and
+    the live identification's ``status`` when there is one)."""
 
-    def __init__(self, *, duration_s: float) -> None:
+    def __init__(self, *, duration_s: float, status: Callable[[], str] | None = None) -> None:
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+        self._status = status
         self._progress = Progress(TextColumn("{task.description:<12}"), BarColumn(),
                                   TextColumn("{task.completed:6.1f}/{task.total:.1f} s"),
                                   TextColumn("{task.fields[packets]}"), TimeElapsedColumn(),
-                                  transient=True)
-        self._task = self._progress.add_task("connected", total=duration_s, packets="")
+                                  TextColumn("{task.fields[live]}"), transient=True)
+        self._task = self._progress.add_task("connected", total=duration_s, packets="",
+                                             live="")
         self._t0: float | None = None
         self._packets: dict[str, int] = {}
         self._logs: set[str] = set()
@@ -128,6 +164,8 @@ class ProgressListener:
         if update or now - self._last > 0.2:
             self._last = now
             update["packets"] = " ".join(f"{k} {v}" for k, v in self._packets.items())
+            if self._status is not None:
+                update["live"] = self._status()
             self._progress.update(self._task, **update)
 
     def end(self, *, summary: Mapping[str, Any]) -> None:
@@ -149,7 +187,30 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
                  f"(+{extra} unlock/abort); period jitter p50 {jit.get('p50', 0):.1f} ms, "
                  f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms "
                  "on the flight clock")
+    lines += _live_id_lines(summary)
     lines.append(f"  file {summary.get('file')}")
+    return lines
+
+
+def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The live identification's part of the summary (none without it)."""
+    lid, cut = summary.get("live_id"), summary.get("excitation_cut")
+    if not lid:
+        return []
+    lines = [f"  live id {lid['updates']} updates ({lid['skipped']} skipped, {lid['failed']} "
+             f"failed), order {lid['order']}, past {lid['past']}, future {lid['future']}"]
+    if lid.get("span_s") is not None:
+        lines.append(f"    final model on {lid['span_s']:.1f} s of data: one-step fit "
+                     f"{lid['fit_pct']:.1f} %, max |pole| {lid['max_pole']:.4f}, "
+                     f"saved as {lid['model_file'] or '(not saved)'}")
+    if cut:
+        planned = float(summary.get("setpoints", {}).get("planned", 0)) * float(
+            summary.get("setpoints", {}).get("period_s", 0.0))
+        lines.append(f"    {cut['reason']}; excitation ended at {cut['at_s']:.1f} s, "
+                     f"{cut['skipped_s']:.1f} s of flight saved ({planned - cut['skipped_s']:.1f}"
+                     f" s instead of {planned:.1f} s planned)")
+    if lid.get("error"):
+        lines.append(f"    live id: {lid['error']}")
     return lines
 
 
@@ -183,9 +244,24 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
                    "channel 80, 2M, E7E7E7E7E7 (cflib unchanged; docs/flying.md).")
 @click.option("--emulated-radio-speed", type=FiniteFloat(min=0.1, max=20.0), default=1.0,
               show_default=True, help="Simulation speed behind --emulated-radio (x real time).")
+@click.option("--live-id", is_flag=True,
+              help="Identify a model while the excitation flies (the plan's [live_id] settings, "
+                   "else motors -> gyro, order 8, past 60, future 17, every 1 s; "
+                   "docs/live-id.md). On by itself when the plan has a [live_id] table.")
+@click.option("--until-converged", is_flag=True,
+              help="End the excitation once the live model's poles have settled "
+                   "(--converged-tol over --converged-for), then fly the plan's landing. "
+                   "Implies --live-id.")
+@click.option("--converged-tol", type=FiniteFloat(min=0.0, min_open=True), default=None,
+              help="Largest pole movement (z-plane distance) that counts as settled "
+                   "[default: 0.01].")
+@click.option("--converged-for", type=FiniteFloat(min=0.1), default=None, metavar="SECONDS",
+              help="Flight time the poles must stay within --converged-tol [default: 3].")
 def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed: int | None,
             view: str, web_port: int, max_rate: float | None, timeout_s: float,
-            as_json: bool, emulated_radio: bool, emulated_radio_speed: float) -> None:
+            as_json: bool, emulated_radio: bool, emulated_radio_speed: float, live_id: bool,
+            until_converged: bool, converged_tol: float | None,
+            converged_for: float | None) -> None:
     """Fly a flight plan and record it to a session file.
 
     Connects, checks the log TOC and the battery, streams the plan's setpoints at its rate and
@@ -198,9 +274,15 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
       groundstation fly prbs-3axis --uri sim://0?speed=20 --out sessions --view rerun
       groundstation fly prbs-3axis --advance 500 --name validation   # validation flight
       groundstation fly hover-check --emulated-radio --emulated-radio-speed 10
+      groundstation fly prbs-3axis --uri sim://0?speed=20 --live-id --until-converged
     """
     if advance is not None and seed is not None:
         raise click.UsageError("--advance and --seed both choose the PRBS; pass only one")
+    if (converged_tol is not None or converged_for is not None) and not until_converged:
+        raise click.UsageError("--converged-tol and --converged-for need --until-converged")
+    d = Convergence()
+    convergence = Convergence(tolerance=d.tolerance if converged_tol is None else converged_tol,
+                              duration_s=d.duration_s if converged_for is None else converged_for)
     loaded = load_plan(plan)
     if advance is not None:
         loaded = advance_prbs(loaded, chips=advance)
@@ -218,7 +300,9 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
     try:
         with bus:
             result, url = _fly(loaded, uri=uri, out=out, tag=tag, view=view, web_port=web_port,
-                               max_rate=max_rate, timeout_s=timeout_s, as_json=as_json)
+                               max_rate=max_rate, timeout_s=timeout_s, as_json=as_json,
+                               live_id=live_id or until_converged or loaded.live_id is not None,
+                               convergence=convergence if until_converged else None)
     except BaseException:
         for folder in missing:  # nothing recorded (no radio, no view): leave no empty folder
             if folder.is_dir() and not any(folder.iterdir()):
@@ -238,21 +322,30 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
 
 
 def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
-         max_rate: float | None, timeout_s: float,
-         as_json: bool) -> tuple[FlightResult, str | None]:
-    """Open the view (before connecting: a view that cannot start stops us here), fly."""
+         max_rate: float | None, timeout_s: float, as_json: bool, live_id: bool,
+         convergence: Convergence | None) -> tuple[FlightResult, str | None]:
+    """Check the live identification, open the view (before connecting: either failing stops
+    us here), fly."""
     listeners: list[FlightListener] = []
-    url = None
+    url, status = None, None
+    lid = live_id_listener(plan, convergence=convergence) if live_id else None
     if view != "none":
-        listener = open_view(mode=view, name=plan.name, web_port=web_port)
-        listeners.append(listener)
-        url = getattr(listener, "url", None)
+        shown = open_view(mode=view, name=plan.name, web_port=web_port)
+        listeners.append(shown)
+        url = getattr(shown, "url", None)
         if url:
             click.echo(f"Rerun web viewer: {url}", err=True)
+        if lid is not None and getattr(shown, "rec", None) is not None:
+            from groundstation.liveid_view import LiveIdView  # Rerun only with a view
+
+            lid.observers.append(LiveIdView(rec=shown.rec))
+    if lid is not None:
+        listeners.append(lid)
+        status = lambda: lid.status  # noqa: E731
     if sys.stdout.isatty() and not as_json:
-        listeners.append(ProgressListener(duration_s=plan.duration))
+        listeners.append(ProgressListener(duration_s=plan.duration, status=status))
     else:  # nohup, CI logs, --json: plain lines on stderr
-        listeners.append(PlainProgress(duration_s=plan.duration))
+        listeners.append(PlainProgress(duration_s=plan.duration, status=status))
     result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag,
                       limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
                       connect_timeout_s=timeout_s)

@@ -13,7 +13,7 @@ from rich.markup import escape
 from cfcommon.cli import output_console, output_table
 from cfsession import Session, open_session
 
-__all__ = ["command", "describe"]
+__all__ = ["command", "describe", "live_id"]
 
 
 def describe(session: Session) -> dict[str, Any]:
@@ -57,7 +57,56 @@ def describe(session: Session) -> dict[str, Any]:
             for p in session.phases()
         ],
         "events": len(session.events()),
+        **({"live_id": live_id(session)} if "live_id" in session else {}),
     }
+
+
+def live_id(session: Session) -> dict[str, Any]:
+    """The live identification of a flight (``groundstation fly --live-id``): ``updates``
+    (the number recorded), the settings and, for the final model (the last row), its flight
+    time, data span, one-step fit and ``poles`` as ``[re, im]`` pairs; the summary's counts
+    (skipped, failed updates, the saved model file) and the excitation cut when converged."""
+    s = session["live_id"]
+    out: dict[str, Any] = {"updates": len(s)}
+    out.update({k: v for k, v in s.attrs.items() if k not in ("kind", "description")})
+    summary = session.json_meta("summary", {}) or {}
+    entry = summary.get("live_id") or {}
+    for key in ("skipped", "failed", "dropped_batches", "converged_at_s", "model_file", "error"):
+        if key in entry:
+            out[key] = entry[key]
+    if entry.get("model_file"):
+        out["model_path"] = str(session.path.with_name(entry["model_file"]))
+    if summary.get("excitation_cut"):
+        out["excitation_cut"] = summary["excitation_cut"]
+    if len(s):
+        row = s.data[-1]
+        order = int(row["order"])
+        out["final"] = {"t_s": float(row["host_time"]), "final": bool(row["final"]),
+                        "span_s": float(row["span_s"]), "n_samples": int(row["n_samples"]),
+                        "order": order, "past": int(row["past"]), "future": int(row["future"]),
+                        "fit_pct": float(row["fit_pct"]), "max_pole": float(row["max_pole"])}
+        out["poles"] = [[float(row[f"pole_re_{i}"]), float(row[f"pole_im_{i}"])]
+                        for i in range(1, order + 1) if f"pole_re_{i}" in s.data.dtype.names]
+    return out
+
+
+def _live_id_text(d: dict[str, Any]) -> list[str]:
+    lines = [f"live id: {d['updates']} updates ({d.get('skipped', '?')} skipped), order "
+             f"{d.get('order', '-')}, past {d.get('past', '-')}, future {d.get('future', '-')}"]
+    if "final" in d:
+        f = d["final"]
+        poles = ", ".join(f"{re:+.4f}{im:+.4f}j" for re, im in d["poles"])
+        lines.append(f"  {'final' if f['final'] else 'last'} model at {f['t_s']:.1f} s on "
+                     f"{f['span_s']:.1f} s of data: one-step fit {_fmt(f['fit_pct'], '.1f')} %, "
+                     f"max |pole| {f['max_pole']:.4f}")
+        lines.append(f"  poles {poles}")
+    if d.get("model_path"):
+        lines.append(f"  model {d['model_path']}")
+    if d.get("excitation_cut"):
+        c = d["excitation_cut"]
+        lines.append(f"  excitation ended at {c['at_s']:.1f} s, {c['skipped_s']:.1f} s early: "
+                     f"{c['reason']}")
+    return lines
 
 
 def _fields_text(fields: dict[str, str]) -> str:
@@ -124,6 +173,9 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
+    if "live_id" in d:
+        for line in _live_id_text(d["live_id"]):
+            out.print(escape(line))
     for problem in d["problems"]:
         out.print(f"[yellow]problem:[/] {problem}")
     if show_events:

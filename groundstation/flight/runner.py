@@ -32,6 +32,11 @@ recorded as a row and an event. The summary counts the log packets missing up to
 closed, so a link dead before the end shows as dropped packets. A listener that raises is dropped
 (with an event); the flight goes on. Without its recorder the flight aborts; a session file
 that cannot be created (folder, name) is a one-line error before take-off, nothing flown.
+
+**Sources.** A listener with ``streams()``, ``poll()``, ``finish(path=)`` (live identification,
+:mod:`groundstation.flight.liveid`) adds streams, polled after each setpoint (rows to the
+recorder only; a request to end the excitation: the plan goes on after its last excitation
+phase, no period skipped), and is finished after the stop; its entries join the summary.
 """
 
 from __future__ import annotations
@@ -69,7 +74,8 @@ from groundstation.plan import Plan, Schedule, load_plan
 from groundstation.plan.altitude import AltitudeHold
 from groundstation.recorder import Recorder, session_path
 
-__all__ = ["FlightListener", "FlightResult", "RateLimits", "block_summary", "fly_plan"]
+__all__ = ["FlightListener", "FlightResult", "RateLimits", "altitude_block_period",
+           "block_summary", "fly_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +86,11 @@ LINK_SILENCE_S = 0.5
 The three 50 Hz blocks make it 75 missing packets; the Crazyflie's own watchdog levels out
 after 0.5 s without a setpoint too."""
 _SILENCE_GRACE_S = 0.1  # wall s: cflib's threads get this long to deliver what has arrived
+
+
+def altitude_block_period(setpoint_period_s: float) -> float:
+    """The altitude block's period: twice the setpoint rate, at least 10 ms."""
+    return max(0.01, round(setpoint_period_s / 2, 2))
 
 
 class FlightListener(Protocol):
@@ -104,6 +115,8 @@ class _Runner:
         self.plan, self.schedule, self.uri, self.tag = plan, schedule, uri, tag
         self.recorder, self.limits, self.tick_hook = recorder, limits, tick_hook
         self.listeners: list[FlightListener] = [recorder, *listeners]
+        self.sources: list[Any] = [x for x in listeners if hasattr(x, "poll")]
+        self.end_excitation, self.cut = "", {}  # a source's request; what was skipped
         self.connect_timeout_s = connect_timeout_s
         # the only hand-off from cflib's threads: log rows, link events, aborts
         self.inbox: queue.SimpleQueue[tuple] = queue.SimpleQueue()
@@ -205,19 +218,30 @@ class _Runner:
                 self._cause(f"limit: gyro.{'xyz'[i]} = {v:.0f} deg/s beyond "
                             f"{lim.max_rate_deg_s:g} deg/s for {lim.samples} samples")
 
-    def _call(self, listener: FlightListener, method: str, **kw: Any) -> None:
+    def _call(self, listener: FlightListener, method: str, **kw: Any) -> Any:
         try:
-            getattr(listener, method)(**kw)
+            return getattr(listener, method)(**kw)
         except Exception as exc:
             self.listeners.remove(listener)
+            if listener in self.sources:
+                self.sources.remove(listener)
             what = f"{type(listener).__name__}.{method} failed ({type(exc).__name__}: {exc})"
             log.exception("listener %s", what)
             if listener is self.recorder:
                 self._cause(f"recording failed: {what}")
             else:
                 self.event(f"{what}; listener dropped, flight continues", level="error")
+        return None
+
+    def _from_sources(self, method: str, **kw: Any) -> list[Any]:
+        return [x for x in (self._call(s, method, **kw) for s in list(self.sources)) if x]
 
     def dispatch(self) -> None:
+        for batches, reason in self._from_sources("poll"):
+            for stream, rows in batches:  # the sources' own streams: into the file only
+                if rows and self.recorder in self.listeners:
+                    self._call(self.recorder, "rows", stream=stream, rows=rows)
+            self.end_excitation = self.end_excitation or reason
         pending, self.pending = self.pending, defaultdict(list)
         for stream, rows in pending.items():
             for listener in list(self.listeners):
@@ -322,6 +346,14 @@ class _Runner:
             if self.tick_hook is not None:
                 self.tick_hook(k)
             ph = s.phase_at(k)
+            if self.end_excitation and ph.kind == "excitation" and not self.cut:
+                end = max(p.end_tick for p in s.phases if p.kind == "excitation")
+                self.t_first -= (end - k) * s.period  # setpoint `end` goes out now
+                self.cut = {"at_s": round(self.now(), 3), "reason": self.end_excitation,
+                            "skipped_s": round((end - k) * s.period, 3)}
+                self.event(f"excitation ended {self.cut['skipped_s']:.1f} s early: "
+                           f"{self.end_excitation}")
+                k, ph = end, s.phase_at(end)
             if ph.id != current:
                 current = ph.id
                 self.phase(phase_id=ph.id, name=ph.name, kind=ph.kind, planned_s=ph.duration)
@@ -389,13 +421,14 @@ class _Runner:
             for name, (variables, period) in self.slow_blocks.items():
                 blocks += link.plan_blocks(blocks={name: variables}, period_s=period)
             if self.extra_blocks:  # altitude for the hold, at twice the setpoint rate
-                period = max(0.01, round(self.schedule.period / 2, 2))
+                period = altitude_block_period(self.schedule.period)
                 blocks += link.plan_blocks(blocks=self.extra_blocks, period_s=period)
             self.block_periods = {b.name: b.period_s for b in blocks}
             meta = {**link.metadata(), **self._plan_metadata()}
             streams = [*(b.spec() for b in blocks), *standard_streams()]
+            own = [spec for specs in self._from_sources("streams") for spec in specs]
             try:  # the file first: a flight that cannot be recorded is not flown
-                self.recorder.begin(streams=streams, metadata=meta)
+                self.recorder.begin(streams=[*streams, *own], metadata=meta)
             except (GroundStationError, SessionError) as exc:
                 raise SessionError(f"{exc}; nothing flown") from None
             except Exception as exc:
@@ -429,7 +462,10 @@ class _Runner:
             self.t_close = self.now()
             link.close()
             self.collect()
+            finished = self._from_sources("finish", path=self.recorder.path) if begun else []
             summary = self.summary()
+            for entries in finished:
+                summary.update(entries)
             if begun:
                 self.dispatch()
                 for listener in list(self.listeners):
@@ -476,6 +512,7 @@ class _Runner:
             "duration_s": round(self.now(), 3),
             "aborted": bool(self.causes),
             "cause": self.causes[0] if self.causes else "",
+            **({"excitation_cut": self.cut} if self.cut else {}),
             "blocks": blocks,
             "setpoints": {
                 "sent": len(self.sent_t),

@@ -41,9 +41,11 @@ from groundstation.plan.schedule import (
 )
 from groundstation.plan.sections import (
     ExcitationSpec,
+    LiveIdConfig,
     PhaseSpec,
     check_thrust,
     read_altitude_hold,
+    read_live_id,
     read_phase,
     read_safety,
     read_vehicle,
@@ -55,6 +57,7 @@ __all__ = [
     "SHIPPED_PLANS_DIR",
     "UNITS",
     "ExcitationSpec",
+    "LiveIdConfig",
     "Phase",
     "PhaseSpec",
     "Plan",
@@ -80,6 +83,7 @@ _TOP_KEYS = (
     "vehicle",
     "safety",
     "altitude_hold",
+    "live_id",
     "phase",
 )
 
@@ -98,6 +102,7 @@ class Plan:
     safety: Safety
     phases: tuple[PhaseSpec, ...]
     altitude_hold: AltitudeHoldConfig | None = None
+    live_id: LiveIdConfig | None = None  # [live_id]: identify while flying (docs/live-id.md)
 
     @property
     def n_setpoints(self) -> int:
@@ -214,6 +219,8 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         else read_altitude_hold(TomlTable(src, ("altitude_hold",), hold), vehicle=vehicle,
                                  hover_thrust=hover)
     )
+    raw_live = top.get("live_id", dict, default=None)
+    live_id = None if raw_live is None else read_live_id(TomlTable(src, ("live_id",), raw_live))
     raw_phases = top.get("phase", list)
     if len(raw_phases) < 2:
         raise src.error(("phase",), "a plan needs a takeoff and a landing [[phase]]; add them")
@@ -240,6 +247,7 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         safety=safety,
         phases=tuple(phases),
         altitude_hold=altitude_hold,
+        live_id=live_id,
     )
     log.debug("plan %s: %d phases, %d setpoints", plan.name, len(phases), plan.n_setpoints)
     return plan

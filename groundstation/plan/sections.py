@@ -7,6 +7,7 @@ instead of clamping them.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,9 +22,11 @@ __all__ = [
     "KINDS",
     "SIGNALS",
     "ExcitationSpec",
+    "LiveIdConfig",
     "PhaseSpec",
     "check_thrust",
     "read_altitude_hold",
+    "read_live_id",
     "read_phase",
     "read_safety",
     "read_vehicle",
@@ -309,3 +312,64 @@ def read_prbs(t: TomlTable, *, n_ticks: int) -> dict[str, int]:
     seed = t.number("seed", lo=1, hi=(1 << n) - 1, unit="(register state)", kind=int, default=1)
     return {"register_length": n, "clock_period": clock, "seed": seed}
 
+
+
+@dataclass(frozen=True)
+class LiveIdConfig:
+    """The plan's ``[live_id]`` table (every key optional; ``docs/live-id.md``): identify a
+    model while the excitation flies. Channels name log streams (``"gyro"``), stream fields
+    (``"gyro.z"``) or logged variables (``"motor.m1"``); horizons in grid samples; the update
+    period in seconds of flight time."""
+
+    inputs: tuple[str, ...] = ("motors",)
+    outputs: tuple[str, ...] = ("gyro",)
+    order: int = 8
+    past: int = 60
+    future: int = 17
+    update_period: float = 1.0
+
+
+_CHANNEL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)?")
+
+
+def _channel_names(t: TomlTable, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
+    raw = t.data.get(key, list(default))
+    ok = isinstance(raw, list) and raw and all(isinstance(x, str) for x in raw)
+    if not ok:
+        raise t.src.error((*t.path, key), f"{raw!r} is not a valid value: {key} must be a "
+                          'non-empty array of channel names, e.g. ["gyro"] or ["gyro.x", "gyro.y"]')
+    for name in raw:
+        if not _CHANNEL.fullmatch(name):
+            raise t.src.error((*t.path, key), f"{name!r} is not a channel name; use a log "
+                              'stream ("gyro"), STREAM.FIELD ("gyro.x") or a logged variable '
+                              '("motor.m1")')
+    if len(set(raw)) != len(raw):
+        twice = sorted({x for x in raw if raw.count(x) > 1})
+        raise t.src.error((*t.path, key), f"{twice} named twice; name each channel once")
+    return tuple(raw)
+
+
+def read_live_id(t: TomlTable) -> LiveIdConfig:
+    """``[live_id]``: defaults in :class:`LiveIdConfig`. The names are checked against the
+    flight's log blocks before take-off (:func:`groundstation.flight.liveid.check_live_id`)."""
+    d = LiveIdConfig()
+    t.allow(set(LiveIdConfig.__dataclass_fields__))
+    inputs = _channel_names(t, "inputs", d.inputs)
+    outputs = _channel_names(t, "outputs", d.outputs)
+    both = sorted(set(inputs) & set(outputs))
+    if both:
+        raise t.src.error((*t.path, "outputs"), f"{both} is both an input and an output; "
+                          "pick one")
+    cfg = LiveIdConfig(
+        inputs=inputs, outputs=outputs,
+        order=t.number("order", lo=1, hi=200, unit="states", kind=int, default=d.order),
+        past=t.number("past", lo=1, hi=1000, unit="samples", kind=int, default=d.past),
+        future=t.number("future", lo=2, hi=1000, unit="samples", kind=int, default=d.future),
+        update_period=t.number("update_period", lo=0.1, hi=600.0, unit="s",
+                               default=d.update_period),
+    )
+    if cfg.order > (cfg.future - 1) * len(outputs) and all("." in x for x in outputs):
+        raise t.src.error((*t.path, "order"), f"order {cfg.order} exceeds (future - 1) x "
+                          f"{len(outputs)} outputs = {(cfg.future - 1) * len(outputs)}; lower "
+                          f"the order or raise future to {-(-cfg.order // len(outputs)) + 1}")
+    return cfg

@@ -1,0 +1,418 @@
+"""Live identification while flying: a flight listener that feeds the IEM engine of
+:mod:`sysid.live` during the excitation and records every update (``docs/live-id.md``).
+
+**Threads.** :meth:`LiveIdListener.rows` runs on the runner's thread and only appends the rows
+of the selected log streams (and the phase markers) to a bounded queue (drop-oldest, counted in
+``dropped_batches``); it never blocks and never raises. Everything else runs on the listener's
+own worker thread: zero-order hold onto the grid, :meth:`LiveIdentifier.append`, the updates.
+The runner collects the worker's results with :meth:`poll` (rows of the ``live_id`` stream for
+the recorder, and a request to end the excitation once converged) and, after the stop setpoint,
+:meth:`finish` waits (bounded) for the final update and saves the model next to the session.
+No identification code is imported here: the caller hands the engine in (:class:`Engine`,
+built by ``groundstation fly``), so flying without live identification loads none.
+
+**Data.** The window is the recorded excitation, from the first excitation phase marker to the
+marker of the first phase after the last excitation phase (an abort ends it too): log rows
+whose host time falls inside it. The grid is :math:`g_j = g_0 + j\\,\\Delta t` on firmware
+time, :math:`g_0` the latest first firmware time of the selected streams in the window and
+:math:`\\Delta t` their (common) logged period; a grid instant is used once every stream has a
+sample at or after it, each channel holding its latest sample at or before it (the zero-order
+hold of :func:`sysid.preprocess.zoh_resample`, as offline). The samples identified are
+therefore exactly those :func:`sysid.preprocess.iodata_from_streams` builds from the session
+file on ``[g_0, g_{N-1}]``, and the final model equals ``sysid.iem`` of them (mean removed).
+
+**Updates** are due every ``update_period`` seconds of flight time from the start of the
+window, once there are enough samples. One that comes due while the previous one still runs is
+skipped (counted): the worker falls behind, never the flight. Each update records the flight
+time, data span, order, horizons, the poles, the largest pole magnitude, the pole movement (the
+Hausdorff distance to the previous update's poles: every pole within that distance of one of
+the other set, and back), and the one-step-ahead fit and normalised innovation variance on the
+last :data:`FIT_WINDOW_S` seconds. When the excitation ends, a final update uses every sample.
+
+**Converged** (:class:`Convergence`, ``--until-converged``): the current poles lie within
+``tolerance`` (Hausdorff distance) of those of every update of the last ``duration_s`` seconds,
+at least two of them older than the current one and one ``duration_s`` or more ago. The runner
+then ends the excitation at its next setpoint and flies the rest of the plan (its landing).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cfsession.schema import StreamSpec, live_id_spec
+from groundstation.flight.liveid_data import (
+    Channel,
+    Feed,
+    check_live_id,
+    planned_streams,
+    resolve_channels,
+)
+from groundstation.plan import LiveIdConfig
+
+__all__ = ["FIT_WINDOW_S", "Channel", "Convergence", "Engine", "LiveIdListener", "Update",
+           "check_live_id", "planned_streams", "resolve_channels"]
+
+log = logging.getLogger(__name__)
+
+FIT_WINDOW_S = 5.0
+"""Seconds of the most recent data the one-step fit and innovation variance are measured on."""
+FINISH_TIMEOUT_S = 30.0
+"""Longest wait (wall s, after the stop setpoint) for the final update."""
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Poles within ``tolerance`` (z-plane distance) over ``duration_s`` seconds of flight."""
+
+    tolerance: float = 0.01
+    duration_s: float = 3.0
+
+
+@dataclass(frozen=True)
+class Engine:
+    """The identification the worker drives, handed in by a caller that may import ``sysid``
+    (``groundstation.commands.fly.live_id_engine``): ``identifier`` builds a
+    ``sysid.live.LiveIdentifierProcess`` (the engine in a child process: an update never
+    holds this interpreter's lock, which the setpoint thread needs on time), ``zoh`` is
+    ``sysid.preprocess.zoh_resample`` and ``save_model`` ``sysid.model_io.save``."""
+
+    identifier: Callable[..., Any]
+    zoh: Callable[..., np.ndarray]
+    save_model: Callable[[Any, Path], Path]
+
+
+@dataclass(frozen=True)
+class Update:
+    """One update as the views see it (the recorded row plus the arrays behind it)."""
+
+    t: float
+    n_samples: int
+    span_s: float
+    order: int
+    poles: np.ndarray
+    singular_values: np.ndarray
+    fit_pct: float
+    innovation_nvar: float
+    pole_move: float
+    update_s: float
+    skipped: int
+    final: bool
+    fw_times: np.ndarray = field(repr=False)  # (k,) firmware s of the samples below
+    host_times: np.ndarray = field(repr=False)  # (k,) the same on the flight clock (estimated)
+    measured: np.ndarray = field(repr=False)  # (k, l) mean-removed outputs
+    predicted: np.ndarray = field(repr=False)  # (k, l) their one-step predictions
+
+
+def _hausdorff(a: np.ndarray, b: np.ndarray) -> float:
+    d = np.abs(a[:, None] - b[None, :])
+    return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+
+
+def _finite_mean(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(x.mean()) if x.size else float("nan")
+
+
+def _sorted_poles(p: np.ndarray) -> np.ndarray:
+    """Descending magnitude; a conjugate pair with the negative imaginary part first."""
+    p = np.asarray(p, dtype=complex)
+    return p[np.lexsort((np.round(p.imag, 12), -np.round(np.abs(p), 12)))]
+
+
+class LiveIdListener:
+    """A flight listener (and the runner's source of ``live_id`` rows); module docstring.
+
+    ``observers`` get ``begin(listener=self, streams=streams)`` once and ``update(update=)``
+    (an :class:`Update`) from the worker thread; one that raises is dropped. ``status`` is a
+    one-line summary of the last update for progress displays.
+    """
+
+    def __init__(self, *, config: LiveIdConfig, engine: Engine,
+                 convergence: Convergence | None = None, observers: Sequence[Any] = (),
+                 fit_window_s: float = FIT_WINDOW_S, queue_batches: int = 4096,
+                 finish_timeout_s: float = FINISH_TIMEOUT_S) -> None:
+        self.config, self.engine, self.convergence = config, engine, convergence
+        self.observers = list(observers)
+        self.fit_window_s, self.finish_timeout_s = fit_window_s, finish_timeout_s
+        self._inbox: deque[tuple[str, Sequence[tuple]]] = deque(maxlen=queue_batches)
+        self._outbox: deque[tuple] = deque()
+        self._wake, self._stop = threading.Event(), threading.Event()
+        self._thread: threading.Thread | None = None
+        self._wanted: set[str] = set()
+        self.dropped_batches = 0
+        self.updates = self.skipped = self.failed = 0
+        self.status = "live id: waiting for the excitation"
+        self.error = ""
+        self.inputs: list[Channel] = []
+        self.outputs: list[Channel] = []
+        self.dt = 0.0
+        self.final: Update | None = None
+        self.final_model: Any = None
+        self.converged_at: float | None = None
+        self._end_reason = ""
+        self._reported = False
+
+    # ------------------------------------------------------------ runner's thread
+    def streams(self) -> list[StreamSpec]:
+        """The stream this listener adds to the session (declared before the file exists)."""
+        c = self.config
+        return [live_id_spec(order=c.order, attrs={
+            "inputs": ",".join(c.inputs), "outputs": ",".join(c.outputs), "order": c.order,
+            "past": c.past, "future": c.future, "update_period_s": c.update_period,
+            "fit_window_s": self.fit_window_s})]
+
+    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
+        self.inputs, self.outputs, self.dt = check_live_id(self.config, streams=streams)
+        chans = self.inputs + self.outputs
+        specs = {s.name: s for s in streams}
+        self._feeds: dict[str, Feed] = {}
+        self._where: list[tuple[str, int]] = []  # channel -> (stream, column in its feed)
+        for ch in chans:
+            names = [f.name for f in specs[ch.stream].fields]
+            feed = self._feeds.setdefault(ch.stream, Feed(columns=[]))
+            feed.columns.append(names.index(ch.field))
+            self._where.append((ch.stream, len(feed.columns) - 1))
+        for feed in self._feeds.values():
+            feed.values = np.empty((0, len(feed.columns)))
+        table = metadata.get("phase_table") or []
+        exc = [int(p["id"]) for p in table if p.get("kind") == "excitation"]
+        self._last_excitation = max(exc) if exc else None
+        c = self.config
+        self.ident = self.engine.identifier(
+            n_inputs=len(self.inputs), n_outputs=len(self.outputs), order=c.order,
+            past=c.past, future=c.future, dt=self.dt,
+            input_names=tuple(x.label for x in self.inputs),
+            output_names=tuple(x.label for x in self.outputs),
+            input_units=tuple(x.unit for x in self.inputs),
+            output_units=tuple(x.unit for x in self.outputs))
+        self._window: list[float | None] = [None, None]  # host time the excitation starts, ends
+        self._g0: float | None = None
+        self._latest = -np.inf
+        self._next_due: float | None = None
+        self._history: list[tuple[float, np.ndarray]] = []
+        self._last_n = 0
+        self._wanted = {*self._feeds, "phases"}
+        for obs in list(self.observers):
+            self._notify(obs, "begin", listener=self, streams=streams)
+        if self._last_excitation is None:
+            self.status = "live id: the plan has no excitation phase; nothing to identify"
+        self._thread = threading.Thread(target=self._run, name="live-id", daemon=True)
+        self._thread.start()
+
+    def rows(self, stream: str, rows: Sequence[tuple]) -> None:
+        """Queue rows of a selected stream (never blocks; a full queue drops its oldest)."""
+        if stream in self._wanted and rows:
+            if len(self._inbox) == self._inbox.maxlen:
+                self.dropped_batches += 1
+            self._inbox.append((stream, rows))
+            self._wake.set()
+
+    def poll(self) -> tuple[list[tuple[str, list[tuple]]], str]:
+        """Rows of the ``live_id`` stream since the last call, and (once) why the excitation
+        should end now ('' while not converged)."""
+        rows = []
+        while self._outbox:
+            rows.append(self._outbox.popleft())
+        reason = ""
+        if self._end_reason and not self._reported:
+            self._reported, reason = True, self._end_reason
+        return ([("live_id", rows)] if rows else []), reason
+
+    def finish(self, *, path: Path) -> dict[str, Any]:
+        """After the stop: wait (bounded) for the final update, save the model next to the
+        session (``STEM.live-model.json``); returns the summary's ``live_id`` entry."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=self.finish_timeout_s)
+            if self._thread.is_alive():
+                self.error = (self.error or
+                              f"final update unfinished after {self.finish_timeout_s:g} s")
+        model_file = ""
+        if self.final_model is not None:
+            target = path.with_name(f"{path.stem}.live-model.json")
+            prov = {**self.final_model.provenance, "live_id": {
+                "session": path.name, "fw_start_s": self._g0, "dt": self.dt,
+                "n_samples": self.final.n_samples, "flight_time_s": self.final.t,
+                "channels": {c.label: f"{c.stream}.{c.field}" for c in self.inputs + self.outputs}}}
+            try:
+                self.engine.save_model(self.final_model.replace(provenance=prov), target)
+                model_file = target.name
+            except Exception as exc:
+                log.exception("live id: saving the model failed")
+                self.error = f"model not saved ({type(exc).__name__}: {exc})"
+        f = self.final
+        return {"live_id": {
+            "updates": self.updates, "skipped": self.skipped, "failed": self.failed,
+            "dropped_batches": self.dropped_batches, "order": self.config.order,
+            "past": self.config.past, "future": self.config.future, "dt_s": self.dt,
+            "final_t_s": None if f is None else round(f.t, 3),
+            "span_s": None if f is None else round(f.span_s, 3),
+            "fit_pct": None if f is None else round(f.fit_pct, 2),
+            "max_pole": None if f is None else round(float(np.abs(f.poles).max()), 6),
+            "converged_at_s": self.converged_at, "model_file": model_file, "error": self.error}}
+
+    def end(self, *, summary: Mapping[str, Any]) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=self.finish_timeout_s)
+
+    # ------------------------------------------------------------ worker thread
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # a bug here (or a dead engine) must never reach the flight
+            log.exception("live id worker failed")
+            self.error = f"worker failed ({type(exc).__name__}: {exc})"
+            self.status = f"live id: stopped ({type(exc).__name__})"
+        finally:
+            close = getattr(self.ident, "close", None)
+            if close is not None:
+                close()
+
+    def _loop(self) -> None:
+        while True:
+            self._wake.wait(0.05)
+            self._wake.clear()
+            stopping = self._stop.is_set()
+            self._take()
+            done = self._advance(stopping=stopping)
+            if done or stopping:
+                if self.ident.n_samples >= self.ident.min_samples:
+                    self._update(final=True)
+                return
+            self._maybe_update()
+
+    def _take(self) -> None:
+        while self._inbox:
+            stream, rows = self._inbox.popleft()
+            if stream != "phases":
+                self._feeds[stream].add(rows)
+                self._latest = max(self._latest, float(rows[-1][0]))
+                continue
+            for t, pid, _, kind in rows:
+                start, stop = self._window
+                if start is None and kind == b"excitation":
+                    self._window[0] = float(t)
+                elif start is not None and stop is None and (
+                        pid < 0 or self._last_excitation is None or pid > self._last_excitation):
+                    self._window[1] = float(t)
+
+    def _advance(self, *, stopping: bool) -> bool:
+        """Append the grid samples every stream now covers; True once the window has closed
+        and every row inside it has arrived."""
+        start, stop = self._window
+        feeds = list(self._feeds.values())
+        if start is None:
+            for f in feeds:  # before the excitation: keep the last seconds only
+                f.keep(f.host >= self._latest - 5.0)
+            return False
+        for f in feeds:
+            f.keep((f.host >= start) & (f.host < (np.inf if stop is None else stop)))
+        complete = stop is not None and (stopping or all(f.max_host >= stop for f in feeds))
+        if any(f.fw.size == 0 for f in feeds):
+            return complete
+        if self._g0 is None:
+            self._g0 = max(float(f.fw[0]) for f in feeds)
+        ready = min(float(f.fw[-1]) for f in feeds)
+        j0 = self.ident.n_samples
+        j1 = int(np.floor((ready - self._g0) / self.dt + 1e-9)) + 1
+        if j1 > j0:
+            grid = self._g0 + self.dt * np.arange(j0, j1)
+            held = {name: self.engine.zoh(t=f.fw, values=f.values, grid=grid)
+                    for name, f in self._feeds.items()}
+            w = np.column_stack([held[s][:, i] for s, i in self._where])
+            m = len(self.inputs)
+            self.ident.append(u=w[:, :m], y=w[:, m:])
+            for f in feeds:  # keep the sample held at the last grid instant, and later ones
+                idx = max(int(np.searchsorted(f.fw, grid[-1] + 1e-9, side="right")) - 1, 0)
+                f.keep(np.arange(f.fw.size) >= idx)
+        return complete
+
+    def _maybe_update(self) -> None:
+        start, stop = self._window
+        if start is None or stop is not None or self.ident.n_samples < self.ident.min_samples:
+            return
+        period = self.config.update_period
+        if self._next_due is None:  # the first due time with enough samples
+            self._next_due = start + period * np.ceil((self._latest - start) / period)
+        if self._latest < self._next_due:
+            return
+        missed = int((self._latest - self._next_due) // period)
+        self.skipped += missed
+        self._next_due += (missed + 1) * period
+        self._update(final=False)
+
+    def _update(self, *, final: bool) -> None:
+        t, t0 = self._latest, time.perf_counter()
+        try:
+            k = max(2, round(self.fit_window_s / self.dt))
+            upd = self.ident.update(fit_samples=k)
+            yc, y_pred = upd.recent.measured, upd.recent.predicted
+            fit, nvar = _finite_mean(upd.recent.fit_pct), upd.recent.innovation_nvar
+        except Exception as exc:  # a constant channel, a numerical failure: counted
+            self.failed += 1
+            self.error = f"update failed ({type(exc).__name__}: {exc})"
+            self.status = f"live id: {self.updates} updates; last failed: {exc}"
+            log.log(logging.WARNING if self.failed == 1 else logging.DEBUG, "live id %s",
+                    self.error)
+            return
+        poles = _sorted_poles(upd.poles)
+        move = _hausdorff(poles, self._history[-1][1]) if self._history else float("nan")
+        self._history.append((t, poles))
+        new = max(1, min(k, upd.n_samples - self._last_n))
+        self._last_n = upd.n_samples
+        elapsed = time.perf_counter() - t0
+        n, c = upd.n_samples, self.config
+        fw_end = self._g0 + (n - 1) * self.dt
+        fw_times = fw_end - self.dt * np.arange(new)[::-1]
+        offset = next(iter(self._feeds.values())).offset
+        self.updates += 1
+        row = (t, fw_end, upd.span_s, n, c.order, c.past, c.future, fit, nvar, move,
+               float(np.abs(poles).max()), elapsed, self.skipped, int(final))
+        self._outbox.append(row + tuple(x for p in poles for x in (p.real, p.imag)))
+        info = Update(t=t, n_samples=n, span_s=upd.span_s, order=c.order, poles=poles,
+                      singular_values=upd.singular_values, fit_pct=fit, innovation_nvar=nvar,
+                      pole_move=move, update_s=elapsed, skipped=self.skipped, final=final,
+                      fw_times=fw_times, host_times=fw_times + offset,
+                      measured=yc[-new:], predicted=y_pred[-new:])
+        self.status = (f"live id {self.updates} upd ({self.skipped} skipped)  n {c.order}  "
+                       f"max|p| {row[10]:.3f}  move {move:.1e}  "
+                       f"innov {nvar:.3f}  fit {fit:.0f}%")
+        if final:
+            self.final, self.final_model = info, upd.model
+        elif self.convergence is not None and self.converged_at is None:
+            self._check_converged(t, poles)
+        for obs in list(self.observers):
+            self._notify(obs, "update", update=info)
+
+    def _check_converged(self, t: float, poles: np.ndarray) -> None:
+        conv = self.convergence
+        old = [i for i, (ti, _) in enumerate(self._history) if ti <= t - conv.duration_s]
+        if not old or len(self._history) - old[-1] < 3:
+            return
+        moved = max(_hausdorff(poles, p) for _, p in self._history[old[-1]:])
+        if moved < conv.tolerance:
+            self.converged_at = round(t, 3)
+            span = t - self._history[old[-1]][0]
+            self._end_reason = (f"live id converged: poles moved at most {moved:.1e} "
+                                f"(< {conv.tolerance:g}) over {span:.1f} s")
+
+    def _notify(self, obs: Any, method: str, **kw: Any) -> None:
+        try:
+            getattr(obs, method)(**kw)
+        except Exception:
+            log.exception("live id observer %s.%s failed; dropped", type(obs).__name__, method)
+            if obs in self.observers:
+                self.observers.remove(obs)

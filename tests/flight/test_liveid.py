@@ -1,0 +1,331 @@
+"""Live identification during sim:// flights (``groundstation fly --live-id``).
+
+Known truth: the session file itself. The samples the listener identified from are rebuilt
+offline from the recorded log streams (the zero-order hold of ``sysid.preprocess`` on the
+firmware-time grid the model file names), and ``sysid.iem`` of them must give the saved live
+model's poles; the live_id stream must hold one row per update, the last one final and equal to
+the model. The runner must fly every setpoint whatever the listener does (slow, failing), and
+``--until-converged`` must cut the excitation short and still fly the landing and the stop.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import groundstation.sim as gsim
+from cfcommon.rerun import open_recording
+from cfsession import open_session
+from groundstation.cli import main
+from groundstation.commands.fly import live_id_engine, live_id_listener
+from groundstation.flight import fly_plan
+from groundstation.flight.link import install_drivers
+from groundstation.flight.liveid import Engine, LiveIdListener
+from groundstation.live import open_view
+from groundstation.liveid_view import LiveIdView, send_rows
+from groundstation.plan import LiveIdConfig, load_plan, parse_plan
+from sysid import detrend_data, iem
+from sysid.model_io import load as load_model
+from sysid.preprocess import Stream, iodata_from_streams
+from tests.viz.rrd import load as load_rrd
+from tests.viz.rrd import views as rrd_views
+
+from .checks import check_closed_with_stop
+from .conftest import wait_for_stop
+
+SMALL = "order = 4\npast = 15\nfuture = 8\n"
+
+
+def _plan(excitation_s: float = 30.0, live_id: str | None = "") -> object:
+    """prbs-3axis with a shorter excitation and, unless None, a [live_id] table."""
+    text = load_plan("prbs-3axis").text.replace("duration = 102.3", f"duration = {excitation_s}")
+    if live_id is not None:
+        text += f"\n[live_id]\n{live_id}\n"
+    return parse_plan(text=text, source="prbs-short", name="prbs-3axis")
+
+
+def _sorted(p: np.ndarray) -> np.ndarray:
+    return p[np.lexsort((np.round(p.imag, 9), np.round(p.real, 9)))]
+
+
+def _row_poles(row: np.void) -> np.ndarray:
+    n = int(row["order"])
+    return np.array([row[f"pole_re_{i}"] + 1j * row[f"pole_im_{i}"] for i in range(1, n + 1)])
+
+
+def _recorded_samples(s, model):
+    """The samples of the live model, again from the file: every channel it names held on
+    the grid its provenance records (``sysid.preprocess``, as offline)."""
+    prov = model.provenance["live_id"]
+    streams = [Stream(name=label, t=s[where.split(".")[0]].fw_time_s,
+                      values=s[where.split(".")[0]].data[where.split(".")[1]].astype(float))
+               for label, where in prov["channels"].items()]
+    g0, n, dt = prov["fw_start_s"], prov["n_samples"], prov["dt"]
+    return iodata_from_streams(streams=streams, inputs=list(model.input_names),
+                               outputs=list(model.output_names), dt=dt, start=g0,
+                               stop=g0 + (n - 1) * dt)
+
+
+@pytest.fixture(scope="module")
+def thesis_flight(tmp_path_factory):
+    """One flight at the thesis settings (the defaults: motors -> gyro, order 8, past 60,
+    future 17), 30 s of PRBS at 20x, with the Rerun view saved to a file."""
+    install_drivers()
+    out = tmp_path_factory.mktemp("liveid")
+    plan = _plan()
+    lid = live_id_listener(plan)
+    view = open_view(mode="save", name="live-id", rrd_path=out / "view.rrd")
+    lid.observers.append(LiveIdView(rec=view.rec))
+    uri = "sim://7601?speed=20"
+    result = fly_plan(plan=plan, out=out, uri=uri, listeners=[view, lid])
+    wait_for_stop(uri)
+    yield result, lid, out
+    gsim.close_all()
+
+
+def test_final_live_model_equals_offline_iem_of_the_recorded_samples(thesis_flight):
+    result, lid, _ = thesis_flight
+    assert not result.aborted, result.cause
+    assert lid.error == "" and lid.updates >= 2 and lid.failed == 0
+    s = check_closed_with_stop(result)
+    rows = s["live_id"].data
+    assert len(rows) == lid.updates and rows["final"].tolist() == [0] * (len(rows) - 1) + [1]
+    assert (np.diff(rows["n_samples"]) >= 0).all() and (rows["order"] == 8).all()
+    assert (rows["past"] == 60).all() and (rows["future"] == 17).all()
+    entry = result.summary["live_id"]
+    model = load_model(result.path.with_name(entry["model_file"]))
+    prov = model.provenance["live_id"]
+    assert prov["session"] == result.path.name and prov["n_samples"] == rows["n_samples"][-1]
+    data = _recorded_samples(s, model)
+    g0, n, dt = prov["fw_start_s"], prov["n_samples"], prov["dt"]
+    assert data.n_samples == n and model.input_names == ("motor.m1", "motor.m2", "motor.m3",
+                                                         "motor.m4")
+    # the grid lies in the excitation phase: the data are the excitation's
+    start, end = s.phase_window("excitation")
+    offset = float(np.median(s["gyro"].time - s["gyro"].fw_time_s))
+    assert start - 0.1 <= g0 + offset and g0 + (n - 1) * dt + offset <= end + 0.1
+    assert n * dt == pytest.approx(end - start, abs=0.5)
+    offline = iem(detrend_data(data, kind="mean")[0], order=8, past=60, future=17)
+    np.testing.assert_allclose(_sorted(model.poles()), _sorted(offline.poles()), atol=1e-8)
+    np.testing.assert_allclose(_sorted(_row_poles(rows[-1])), _sorted(model.poles()), atol=1e-12)
+
+
+def test_info_reports_the_updates_and_the_final_poles(thesis_flight):
+    result, lid, _ = thesis_flight
+    res = CliRunner().invoke(main, ["info", str(result.path), "--json"])
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)["live_id"]
+    assert d["updates"] == lid.updates and d["skipped"] == lid.skipped
+    assert (d["order"], d["past"], d["future"]) == (8, 60, 17) and d["final"]["final"]
+    model = load_model(Path(d["model_path"]))
+    poles = np.array([re + 1j * im for re, im in d["poles"]])
+    np.testing.assert_allclose(_sorted(poles), _sorted(model.poles()), atol=1e-12)
+    text = CliRunner().invoke(main, ["info", str(result.path)]).output
+    assert f"live id: {lid.updates} updates" in text and "poles " in text
+    before = json.loads(CliRunner().invoke(main, ["info", str(result.path), "--json"]).stdout)
+    assert before["streams"]["live_id"]["fields"]["pole_re_1"] == "1 (z-plane)"
+
+
+def test_the_view_shows_poles_singular_values_prediction_and_convergence(thesis_flight):
+    _, lid, out = thesis_flight
+    entities = load_rrd(out / "view.rrd")
+    assert len(entities["/live_id/z_plane/poles"].rows["Points2D:positions"]) == lid.updates
+    sv = entities["/live_id/singular_values/values"].rows["Points2D:positions"][-1]
+    assert len(sv) == 17 * 3  # future x outputs singular values, the chosen 8 marked
+    assert len(entities["/live_id/convergence/pole_move"].scalars()) == lid.updates - 1
+    measured = entities["/live_id/prediction/gyro.x/measured"].scalars()
+    predicted = entities["/live_id/prediction/gyro.x/predicted"].scalars()
+    assert len(measured) == len(predicted) > 0
+    names = {v.name for v in rrd_views(out / "view.rrd")}
+    assert {"poles (z-plane)", "singular values", "1-step prediction", "convergence"} <= names
+    assert any("gyro" in n for n in names)  # the flight's own panels stay
+
+
+def test_recorded_updates_replay_into_the_same_panels(thesis_flight, tmp_path):
+    result, lid, _ = thesis_flight
+    rec, _ = open_recording(name="replay", mode="save", rrd_path=tmp_path / "r.rrd")
+    send_rows(rec, open_session(result.path)["live_id"].data)
+    rec.flush()
+    rec.disconnect()
+    entities = load_rrd(tmp_path / "r.rrd")
+    poles = entities["/live_id/z_plane/poles"]
+    assert len(poles.rows["Points2D:positions"]) == lid.updates
+    assert len(poles.rows["Points2D:positions"][-1]) == 8
+    assert len(entities["/live_id/convergence/fit_pct"].scalars()) == lid.updates
+
+
+def test_replaying_a_live_id_session_shows_data_in_every_panel(thesis_flight, tmp_path):
+    """`groundstation replay` of a session with a live_id stream: the flight's panels and the
+    recorded live identification's, each resolving to entities that hold data."""
+    from tests.viz.rrd import resolve, timeline, views
+
+    result, lid, _ = thesis_flight
+    rrd = tmp_path / "replay.rrd"
+    res = CliRunner().invoke(main, ["replay", str(result.path), "--rrd", str(rrd)])
+    assert res.exit_code == 0, res.output
+    found, tl = views(rrd), timeline(rrd)
+    assert "poles (z-plane)" in {v.name for v in found}
+    for view in found:
+        assert resolve(view, rrd, timeline=tl), f"panel {view.name!r} ({view.query}) is empty"
+    assert len(load_rrd(rrd)["/live_id/z_plane/poles"].rows["Points2D:positions"]) == lid.updates
+
+
+def test_until_converged_cuts_the_excitation_then_lands_with_the_stop(sim_uri, tmp_path):
+    plan = tmp_path / "p.toml"
+    plan.write_text(load_plan("prbs-3axis").text + f"\n[live_id]\n{SMALL}", encoding="utf-8")
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", uri, "--out", str(tmp_path),
+                                    "--until-converged", "--converged-tol", "0.05", "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    cut = summary["excitation_cut"]
+    assert cut["skipped_s"] > 0 and "converged" in cut["reason"]
+    assert summary["live_id"]["converged_at_s"] <= cut["at_s"]
+    wait_for_stop(uri)
+    s = open_session(summary["file"])
+    assert s.closed_cleanly and s["setpoints"].data[-1]["thrust"] == 0
+    assert any(e.text.startswith("stop setpoint sent (landed)") for e in s.events())
+    assert any(e.text.startswith("excitation ended") for e in s.events())
+    phases = {p.name: p for p in s.phases()}
+    planned = {p.name: p.n_ticks / 10 for p in load_plan("prbs-3axis").phases}
+    flown = phases["prbs"].end_s - phases["prbs"].start_s
+    assert flown == pytest.approx(planned["prbs"] - cut["skipped_s"], abs=0.15)
+    for name in ("recover", "land"):  # the rest of the plan, in full
+        assert phases[name].end_s - phases[name].start_s >= planned[name] - 0.15
+    sp = s["setpoints"].data
+    gaps = np.diff(sp["host_time"][sp["tick"] >= 0])
+    assert gaps.max() < 0.1 + 0.05  # no setpoint period lost at the cut
+    assert summary["setpoints"]["scheduled"] == len(load_plan("prbs-3axis").compile()) - round(
+        cut["skipped_s"] * 10)
+    text = CliRunner().invoke(main, ["info", summary["file"]]).output
+    assert "early" in text and "live id:" in text
+
+
+def test_the_summary_prints_the_flight_time_saved(sim_uri, tmp_path):
+    plan = tmp_path / "p.toml"
+    plan.write_text(_plan(40.0, SMALL).text, encoding="utf-8")
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", sim_uri(), "--out",
+                                    str(tmp_path), "--until-converged", "--converged-tol", "0.05"])
+    assert res.exit_code == 0, res.output
+    assert "s of flight saved (" in res.stdout and "live id" in res.stdout
+    assert "| live id" in res.stderr  # the plain progress line carries the status
+
+
+class _Slow:
+    """A LiveIdentifier whose update takes ``delay`` wall seconds, or raises (``fail``)."""
+
+    def __init__(self, real, *, delay: float = 0.0, fail: bool = False) -> None:
+        self.real, self.delay, self.fail = real, delay, fail
+
+    def __getattr__(self, name):
+        return getattr(self.real, name)
+
+    def update(self, **kw):
+        if self.fail:
+            raise FloatingPointError("injected")
+        time.sleep(self.delay)
+        return self.real.update(**kw)
+
+
+def _engine(**kw) -> Engine:
+    e = live_id_engine()
+    return Engine(identifier=lambda **a: _Slow(e.identifier(**a), **kw), zoh=e.zoh,
+                  save_model=e.save_model)
+
+
+class _Broken:
+    def begin(self, **kw):
+        pass
+
+    def update(self, **kw):
+        raise RuntimeError("view gone")
+
+
+@pytest.mark.parametrize("kind", ["slow", "failing"])
+def test_a_slow_or_failing_identification_never_touches_the_flight(sim_uri, tmp_path, kind):
+    plan = _plan(20.0, SMALL + "update_period = 0.2")
+    lid = LiveIdListener(config=plan.live_id, observers=[_Broken()],
+                         engine=_engine(delay=0.5) if kind == "slow" else _engine(fail=True))
+    uri = sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid])
+    assert not result.aborted, result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
+    assert not any(e.level == "error" for e in s.events())
+    if kind == "slow":  # 0.5 s of wall time is 10 s of flight at 20x: updates come due unmet
+        assert lid.observers == []  # the broken view was dropped, nothing else
+        assert lid.skipped > 0 and lid.updates >= 1 and lid.error == ""
+        assert len(s["live_id"]) == lid.updates and s["live_id"].data["final"][-1] == 1
+        assert s["live_id"].data["skipped"][-1] == lid.skipped
+    else:
+        assert lid.failed >= 1 and lid.updates == 0 and "injected" in lid.error
+        assert len(s["live_id"]) == 0 and result.summary["live_id"]["model_file"] == ""
+
+
+def test_a_full_queue_drops_its_oldest_rows_and_counts_them():
+    lid = LiveIdListener(config=LiveIdConfig(), engine=live_id_engine(), queue_batches=3)
+    lid._wanted = {"gyro"}  # as after begin, without the worker draining the queue
+    for i in range(5):
+        lid.rows("gyro", [(float(i), i, 0.0, 0.0, 0.0)])
+    lid.rows("acc", [(9.0, 9, 0.0, 0.0, 0.0)])  # not selected: not queued
+    assert lid.dropped_batches == 2 and [b[1][0][0] for b in lid._inbox] == [2.0, 3.0, 4.0]
+
+
+def test_fly_options_and_bad_live_id_settings_are_one_line(tmp_path, sim_uri):
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--converged-tol", "0.1", "--out",
+                                    str(tmp_path)])
+    assert res.exit_code == 2 and "need --until-converged" in res.output
+    plan = tmp_path / "p.toml"
+    plan.write_text(load_plan("hover-check").text + '\n[live_id]\noutputs = ["gyr"]\n',
+                    encoding="utf-8")
+    out = tmp_path / "out"
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", sim_uri(), "--out", str(out)])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "'gyr': no such log stream or variable" in res.output
+    assert not out.exists() or not any(out.iterdir())  # nothing flown, nothing recorded
+
+
+def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim_uri, tmp_path):
+    plan = _plan(30.0, SMALL)
+    lid = live_id_listener(plan)
+    start = next(p for p in plan.compile().phases if p.kind == "excitation").start_tick
+    abort_at = start + 150  # 15 s into the PRBS
+
+    def hook(k: int) -> None:
+        if k == abort_at:
+            raise RuntimeError("injected fault")
+
+    uri = sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid], tick_hook=hook)
+    assert result.aborted and "injected fault" in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    rows = s["live_id"].data
+    assert len(rows) == lid.updates >= 1 and rows["final"][-1] == 1 and lid.error == ""
+    assert rows["span_s"][-1] == pytest.approx(15.0, abs=0.5)  # the data up to the abort
+    assert result.summary["live_id"]["model_file"]
+
+
+@pytest.mark.parametrize("flight_uri", ["radio", "sitl"], indirect=True)
+def test_live_id_over_the_emulated_radio_and_the_real_firmware(flight_uri, tmp_path):
+    """The same listener over cflib's radio driver (emulated dongle, 20x) and against the
+    real firmware in the loop (real time, jittery firmware time stamps): updates recorded, the
+    final model saved and equal to the offline one of the recorded samples."""
+    plan = _plan(15.0, SMALL)
+    lid = live_id_listener(plan)
+    uri = flight_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid])
+    assert not result.aborted, result.cause
+    wait_for_stop(uri)
+    s = open_session(result.path)
+    assert lid.error == "" and len(s["live_id"]) == lid.updates >= 1
+    model = load_model(result.path.with_name(result.summary["live_id"]["model_file"]))
+    offline = iem(detrend_data(_recorded_samples(s, model), kind="mean")[0], order=4, past=15,
+                  future=8)
+    np.testing.assert_allclose(_sorted(model.poles()), _sorted(offline.poles()), atol=1e-8)
