@@ -9,7 +9,8 @@ session can be read with numpy and h5py alone.
 
 :mod:`cfsession.schema` (stream kinds, fields, units, version), :mod:`cfsession.writer`
 (:class:`SessionWriter`, the only writer), :mod:`cfsession.reader` (:func:`open_session`, the only
-reader), :mod:`cfsession.errors` (:class:`SessionError`).
+reader), :mod:`cfsession.channels` (which log variables channel names select, for offline and
+live identification alike), :mod:`cfsession.errors` (:class:`SessionError`).
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -19,7 +20,8 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
-from cfsession.errors import SessionError
+from cfsession.channels import Channel, resolve_channels
+from cfsession.errors import ChannelError, SessionError
 from cfsession.reader import (
     Event,
     Gap,
@@ -37,6 +39,8 @@ from cfsession.writer import SessionWriter, event_rows, standard_streams
 __all__ = [
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
+    "Channel",
+    "ChannelError",
     "Event",
     "Field",
     "Gap",
@@ -49,5 +53,6 @@ __all__ = [
     "__version__",
     "event_rows",
     "open_session",
+    "resolve_channels",
     "standard_streams",
 ]

@@ -1,14 +1,37 @@
-"""The one error of the session format.
+"""The errors of the session format.
 
 Every problem with a session file (missing, damaged, not a session, of a newer schema, a name
 that is not in it) is a :class:`SessionError`: a ``ValueError`` with a one-line message that names
 the file and says what to do. Both command lines print it as one line and exit with code 2.
+:class:`ChannelError`, a channel name that selects no log variable (or two things, or one
+twice), is one of them; its message names no file, so a caller prefixes its own context.
 """
 
 from __future__ import annotations
 
-__all__ = ["SessionError"]
+from typing import Literal
+
+__all__ = ["ChannelError", "ChannelProblem", "SessionError"]
+
+ChannelProblem = Literal["unknown", "ambiguous", "duplicate", "empty"]
 
 
 class SessionError(ValueError):
     """A session file is missing, damaged, not a session, or of a newer schema."""
+
+
+class ChannelError(SessionError):
+    """Channel names (:func:`cfsession.channels.resolve_channels`) that select no log variable,
+    a variable logged in several streams, one twice, or nothing at all.
+
+    Attributes:
+        problem: which of those (``unknown``, ``ambiguous``, ``duplicate``, ``empty``).
+        role: the role the names were given for (``input``, ``output``).
+        name: the offending name ('' for ``empty``; the labels for ``duplicate``).
+        logged: the log streams the names were resolved against, sorted.
+    """
+
+    def __init__(self, message: str, *, problem: ChannelProblem, role: str, name: str = "",
+                 logged: tuple[str, ...] = ()) -> None:
+        super().__init__(message)
+        self.problem, self.role, self.name, self.logged = problem, role, name, logged

@@ -43,13 +43,15 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import scipy.signal
 
 from cfsession import Session, open_session
-from cfsession.errors import SessionError
+from cfsession.channels import Channel, session_specs
+from cfsession.channels import resolve_channels as _resolve
+from cfsession.errors import ChannelError, SessionError
 from sysid.data import IOData
 from sysid.errors import DataError, ParameterError
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams
@@ -83,66 +85,15 @@ SessionFileError = SessionError
 """Re-exported: callers of this bridge catch session-file errors without importing cfsession."""
 
 
-@dataclass(frozen=True)
-class Channel:
-    """One selected log variable: stream, field, label (IOData name) and unit."""
-
-    stream: str
-    field: str
-    label: str
-    unit: str
-
-
-def _log_streams(session: Session) -> dict:
-    return {n: s for n, s in session.streams.items() if s.kind == "log" and len(s)}
-
-
-def resolve_channels(session: Session, names: Sequence[str], *, role: str) -> list[Channel]:
-    """Log variables selected by ``names`` (module docstring, step 1), in order.
-
-    The label is the firmware variable (``motor.m1``) when the session records one that is
-    unique, else ``stream.field``. One-line :class:`DataError` naming the file for a name that
-    matches nothing or a firmware variable logged in more than one stream.
-    """
-    streams = _log_streams(session)
-    by_source: dict[str, list[tuple[str, str]]] = {}
-    for sname, st in streams.items():
-        for f in st.value_fields:
-            by_source.setdefault(st.sources.get(f, ""), []).append((sname, f))
-
-    def channel(sname: str, f: str) -> Channel:
-        st = streams[sname]
-        src = st.sources.get(f, "")
-        label = src if src and "." in src and len(by_source.get(src, [])) == 1 else f"{sname}.{f}"
-        return Channel(sname, f, label, st.units.get(f, ""))
-
-    out: list[Channel] = []
-    for name in names:
-        sname, _, fname = name.partition(".")
-        if name in streams:
-            out += [channel(name, f) for f in streams[name].value_fields]
-        elif sname in streams and fname in streams[sname].value_fields:
-            out.append(channel(sname, fname))
-        elif len(by_source.get(name, [])) == 1:
-            out.append(channel(*by_source[name][0]))
-        elif "." not in name and (group := [sf for src, sfs in by_source.items()
-                                            if src.startswith(name + ".") for sf in sfs]):
-            out += [channel(*sf) for sf in group]
-        elif by_source.get(name):
-            where = [f"{s}.{f}" for s, f in by_source[name]]
-            raise DataError(f"{session.path}: {role} {name!r} is logged in several streams "
-                            f"({where}); name one of those")
-        else:
-            raise DataError(f"{session.path}: no log stream or variable {name!r} for the "
-                            f"{role}s; log streams are {sorted(streams)} (use STREAM or "
-                            "STREAM.FIELD or group.variable)")
-    if not out:
-        raise DataError(f"{session.path}: no {role} channels selected; name at least one")
-    labels = [c.label for c in out]
-    dup = sorted({x for x in labels if labels.count(x) > 1})
-    if dup:
-        raise DataError(f"{session.path}: {role} channel(s) {dup} selected twice; name each once")
-    return out
+def resolve_channels(session: Session, names: Sequence[str], *,
+                     role: Literal["input", "output"]) -> list[Channel]:
+    """Log variables selected by ``names`` (module docstring, step 1), in order: the rule of
+    :func:`cfsession.channels.resolve_channels` (live identification uses it too) on the
+    session's log streams that hold rows. One-line :class:`DataError` naming the file."""
+    try:
+        return _resolve(names, streams=session_specs(session), role=role)
+    except ChannelError as exc:
+        raise DataError(f"{session.path}: {exc}") from None
 
 
 def clock_offset(session: Session, stream_names: Sequence[str]) -> float:

@@ -290,6 +290,7 @@ class LiveIdListener:
             done = self._advance(stopping=stopping)
             if done or stopping:
                 if self.ident.n_samples >= self.ident.min_samples:
+                    self._count_missed()  # due times the worker was too busy for
                     self._update(final=True)
                 return
             self._maybe_update()
@@ -339,6 +340,15 @@ class LiveIdListener:
                 idx = max(int(np.searchsorted(f.fw, grid[-1] + 1e-9, side="right")) - 1, 0)
                 f.keep(np.arange(f.fw.size) >= idx)
         return complete
+
+    def _count_missed(self) -> None:
+        """Count the update times that came due before the final update and got none."""
+        start, stop = self._window
+        if self._next_due is None or start is None:
+            return
+        end = self._latest if stop is None else min(self._latest, stop)
+        if end > self._next_due:
+            self.skipped += int((end - self._next_due) // self.config.update_period)
 
     def _maybe_update(self) -> None:
         start, stop = self._window

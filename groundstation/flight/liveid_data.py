@@ -6,10 +6,13 @@ connecting, :func:`planned_streams`, and at its start, the streams as recorded),
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
+from cfsession.channels import Channel
+from cfsession.channels import resolve_channels as _resolve
+from cfsession.errors import ChannelError
 from cfsession.schema import StreamSpec, log_block_spec
 from groundstation.errors import PlanError
 from groundstation.flight.link import ATTITUDE_BLOCK, BATTERY_BLOCK, BLOCK_PERIOD_S, FLIGHT_BLOCKS
@@ -18,18 +21,7 @@ from groundstation.plan import LiveIdConfig, Plan
 
 __all__ = ["Channel", "Feed", "check_live_id", "planned_streams", "resolve_channels"]
 
-_TIMES = ("host_time", "fw_time_ms")
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One selected log variable: stream, field, label (``motor.m1``) and unit."""
-
-    stream: str
-    field: str
-    label: str
-    unit: str
 
 
 def planned_streams(plan: Plan) -> list[StreamSpec]:
@@ -44,24 +36,19 @@ def planned_streams(plan: Plan) -> list[StreamSpec]:
 
 
 def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
-                     role: str) -> list[Channel]:
-    """The log variables ``names`` select, in order: a log stream (all its fields),
-    ``stream.field``, a logged variable (``motor.m1``) or a variable group (``gyro``), as
-    ``sysid``'s session loader reads them. One-line :class:`PlanError` otherwise."""
-    pairs = [(s, f) for s in streams if s.kind == "log" for f in s.fields if f.name not in _TIMES]
-    out: list[Channel] = []
-    for name in names:
-        stream, _, fname = name.partition(".")
-        hit = ([p for p in pairs if p[0].name == name]
-               or [p for p in pairs if (p[0].name, p[1].name) == (stream, fname)]
-               or [p for p in pairs if p[1].source == name]
-               or [p for p in pairs if not fname and p[1].source.startswith(name + ".")])
-        if not hit:
-            logged = ", ".join(sorted({s.name for s, _ in pairs}))
-            raise PlanError(f"live_id {role} {name!r}: no such log stream or variable; the "
-                            f"flight logs {logged} (name a stream, STREAM.FIELD or a variable)")
-        out += [Channel(s.name, f.name, f.source or f"{s.name}.{f.name}", f.unit) for s, f in hit]
-    return out
+                     role: Literal["input", "output"]) -> list[Channel]:
+    """The log variables ``names`` select, in order, by the rule of offline identification
+    (:func:`cfsession.channels.resolve_channels`: a log stream, ``stream.field``, a logged
+    variable such as ``motor.m1`` or a variable group such as ``gyro``). One-line
+    :class:`PlanError` otherwise."""
+    try:
+        return _resolve(names, streams=streams, role=role)
+    except ChannelError as exc:
+        if exc.problem == "unknown":
+            raise PlanError(f"live_id {role} {exc.name!r}: no such log stream or variable; the "
+                            f"flight logs {', '.join(exc.logged)} (name a stream, STREAM.FIELD, "
+                            "a variable or a variable group)") from None
+        raise PlanError(f"live_id: {exc}") from None
 
 
 def check_live_id(config: LiveIdConfig, *, streams: Sequence[StreamSpec]

@@ -217,10 +217,11 @@ def test_the_summary_prints_the_flight_time_saved(sim_uri, tmp_path):
 
 
 class _Slow:
-    """A LiveIdentifier whose update takes ``delay`` wall seconds, or raises (``fail``)."""
+    """A LiveIdentifier whose update takes ``delay`` seconds of the vehicle's simulated time
+    (``uri``'s clock: however busy the host, several update periods pass), or raises."""
 
-    def __init__(self, real, *, delay: float = 0.0, fail: bool = False) -> None:
-        self.real, self.delay, self.fail = real, delay, fail
+    def __init__(self, real, *, delay: float = 0.0, fail: bool = False, uri: str = "") -> None:
+        self.real, self.delay, self.fail, self.uri = real, delay, fail, uri
 
     def __getattr__(self, name):
         return getattr(self.real, name)
@@ -228,7 +229,10 @@ class _Slow:
     def update(self, **kw):
         if self.fail:
             raise FloatingPointError("injected")
-        time.sleep(self.delay)
+        clock, deadline = gsim.instance(self.uri).clock, time.monotonic() + 30.0
+        until = clock.now() + self.delay
+        while clock.now() < until and time.monotonic() < deadline:
+            time.sleep(0.005)
         return self.real.update(**kw)
 
 
@@ -249,18 +253,20 @@ class _Broken:
 @pytest.mark.parametrize("kind", ["slow", "failing"])
 def test_a_slow_or_failing_identification_never_touches_the_flight(sim_uri, tmp_path, kind):
     plan = _plan(20.0, SMALL + "update_period = 0.2")
-    lid = LiveIdListener(config=plan.live_id, observers=[_Broken()],
-                         engine=_engine(delay=0.5) if kind == "slow" else _engine(fail=True))
     uri = sim_uri()
+    lid = LiveIdListener(config=plan.live_id, observers=[_Broken()],
+                         engine=_engine(delay=1.0, uri=uri) if kind == "slow"
+                         else _engine(fail=True))
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid])
     assert not result.aborted, result.cause
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
     assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
     assert not any(e.level == "error" for e in s.events())
-    if kind == "slow":  # 0.5 s of wall time is 10 s of flight at 20x: updates come due unmet
+    if kind == "slow":  # each update takes 1 s of flight: 5 update periods come due unmet
         assert lid.observers == []  # the broken view was dropped, nothing else
-        assert lid.skipped > 0 and lid.updates >= 1 and lid.error == ""
+        assert lid.error == "" and lid.failed == 0, (lid.error, lid.failed)
+        assert lid.skipped > 0 and lid.updates >= 1, (lid.skipped, lid.updates)
         assert len(s["live_id"]) == lid.updates and s["live_id"].data["final"][-1] == 1
         assert s["live_id"].data["skipped"][-1] == lid.skipped
     else:
