@@ -361,12 +361,18 @@ def _run_parallel(pasts: list[int], common: dict[str, Any], *, workers: int,
             top_up()
     except BaseException:
         procs = list((getattr(pool, "_processes", None) or {}).values())
+        manager = getattr(pool, "_executor_manager_thread", None)  # shutdown forgets it
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             if proc.is_alive():
                 proc.terminate()
         for proc in procs:
             proc.join(timeout=5)
+        # let the executor's manager thread see its workers gone and close its wake-up pipe:
+        # else the interpreter's exit hook may write to that pipe as it closes and print a
+        # traceback after Ctrl-C (CPython 3.11 concurrent.futures.process._python_exit)
+        if manager is not None:
+            manager.join(timeout=5)
         raise
     pool.shutdown(wait=True)
 

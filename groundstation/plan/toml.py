@@ -7,7 +7,8 @@ text once and maps every key path, e.g. ``("phase", 2, "roll", "amplitude")`` fo
 and strings. :class:`TomlTable` refuses unknown keys (with a "did you mean" hint), wrong types,
 non-finite numbers (TOML ``nan``, ``inf``; they compare false with every limit) and out-of-range
 numbers, each as a one-line :class:`~groundstation.errors.PlanError` that reads
-``FILE:LINE: key.path: problem; what to change``.
+``FILE:LINE: key.path: problem; what to change``. :func:`set_keys` edits values through
+:mod:`tomlkit`, which keeps every comment and all layout of the values it does not change.
 """
 
 from __future__ import annotations
@@ -15,11 +16,16 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from collections.abc import Sequence
 from typing import Any
+
+import tomlkit
+from tomlkit.container import Container
+from tomlkit.items import Array, InlineTable
 
 from groundstation.errors import PlanError
 
-__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines"]
+__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines", "set_keys"]
 
 _KEY = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
 _DOTTED = re.compile(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*")
@@ -97,6 +103,52 @@ def key_lines(text: str) -> dict[tuple, int]:
                 row = end
         row += 1
     return where
+
+
+def _children(node: Any, part: str | int) -> list[Any]:
+    """The items at ``part`` of a table, array of tables or array: every table of a key written
+    in dotted form (``roll.signal = ...``, ``roll.seed = ...``)."""
+    if isinstance(part, int):
+        return [node[part]] if 0 <= part < len(node) else []
+    body = node.body if isinstance(node, Container) else node.value.body
+    return [item for key, item in body if key is not None and key.key == part]
+
+
+def set_keys(text: str, *, edits: Sequence[tuple[tuple, Any, str]], mark: str = "#") -> str:
+    """``text`` with each ``(path, value, note)`` applied by :mod:`tomlkit`: the key at ``path``
+    (as :func:`key_lines`'s) set to ``value``, or added to its table when absent, and a ``note``
+    (if any) made its line's trailing comment ``MARK NOTE``; comments keep their column. Keys
+    of an inline table share its line: ``MARK key: note; key: note``. Everything not edited
+    stays byte for byte; no edits give ``text`` back."""
+    doc = tomlkit.parse(text)
+    notes: dict[Any, tuple[Any, int, list[str]]] = {}  # line -> its item, old width, notes
+    for path, value, note in edits:
+        *parent, key = path
+        tables, line = [doc], None  # line: the inline table or array the key is written in
+        for k, part in enumerate(parent):
+            tables = [c for t in tables for c in _children(t, part)]
+            if not tables:
+                raise PlanError(f"no table {dotted(tuple(parent[: k + 1]))} to set {key} in")
+            if line is None and isinstance(tables[-1], InlineTable | Array):
+                line = tables[-1]
+                notes.setdefault(id(line), (line, len(line.as_string()), []))
+        holder = next((t for t in tables if key in t), tables[-1])
+        table = holder if isinstance(holder, Container) else holder.value
+        width = len(table.item(key).as_string()) if key in holder else 0
+        holder[key] = value  # tomlkit keeps the old item's indent and comment
+        if line is not None:
+            notes[id(line)][2].extend([f"{key}: {note}"] if note else [])
+        else:
+            item = table.item(key)
+            notes[tuple(path)] = (item, width or len(item.as_string()), [note] if note else [])
+    for item, width, texts in notes.values():  # comments at their column
+        had = bool(item.trivia.comment)
+        if had or texts:
+            pad = len(item.trivia.comment_ws) + width - len(item.as_string()) if had else 2
+            if texts:
+                item.comment(f"{mark} {'; '.join(texts)}")
+            item.trivia.comment_ws = " " * max(2 if texts else 1, pad)
+    return doc.as_string()
 
 
 def dotted(path: tuple) -> str:

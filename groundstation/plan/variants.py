@@ -3,23 +3,21 @@
 :func:`advance_prbs` gives a second realisation of a PRBS plan for validation flights: every PRBS
 starts ``chips`` chips later in its own m-sequence. The lags between the axes (which make them
 uncorrelated) are unchanged, and so are the period and the persistence of excitation; the input is
-a different stretch of the sequence. The new seeds are written into the plan's TOML text, which is
-parsed again, so ``plan.text`` is exactly what was flown.
+a different stretch of the sequence. The new seeds are written into the plan's TOML text (by
+:func:`~groundstation.plan.toml.set_keys`, every other byte kept), which is parsed again, so
+``plan.text`` is exactly what was flown.
 """
 
 from __future__ import annotations
 
-import re
+from typing import Any
 
 from groundstation.errors import PlanError
 from groundstation.plan import Plan, parse_plan
 from groundstation.plan.excitation import mls_bits, prbs_shift
-from groundstation.plan.toml import key_lines
+from groundstation.plan.toml import set_keys
 
 __all__ = ["advance_prbs", "advanced_seed", "reseed_prbs"]
-
-# `seed = 3`, `roll.seed = 3`, `{ ..., seed = 0x3 }`: the key and its TOML integer literal
-_SEED = re.compile(r"(?<![\w-])(seed\s*=\s*)(\+?(?:0x[0-9A-Fa-f_]+|0o[0-7_]+|0b[01_]+|\d[\d_]*))")
 
 
 def advanced_seed(*, register_length: int, seed: int, chips: int) -> int:
@@ -36,10 +34,8 @@ def advance_prbs(plan: Plan, *, chips: int) -> Plan:
     """The same plan with every PRBS advanced by ``chips`` chips (see the module docstring)."""
     if chips < 0:
         raise PlanError(f"{plan.source}: PRBS advance {chips} must be >= 0 chips")
-    lines = plan.text.splitlines(keepends=True)
-    where = key_lines(plan.text)
-    inserts: list[tuple[int, str]] = []
     expected: dict[tuple[int, str], int] = {}
+    edits: list[tuple[tuple, Any, str]] = []
     for i, phase in enumerate(plan.phases):
         for exc in phase.excitation:
             if exc.signal != "prbs":
@@ -47,34 +43,19 @@ def advance_prbs(plan: Plan, *, chips: int) -> Plan:
             new = expected[i, exc.axis] = advanced_seed(
                 register_length=exc.register_length, seed=exc.seed, chips=chips
             )
-            line = where.get(("phase", i, exc.axis, "seed"))
-            if line is not None:
-                text = lines[line - 1]
-                lines[line - 1] = _SEED.sub(lambda m, v=new: f"{m.group(1)}{v}", text, 1)
-                continue
-            # seed defaulted to 1: add it to the axis table, whichever way it is written
-            line = where[("phase", i, exc.axis)]
-            text = lines[line - 1]
-            inline = re.match(rf"(\s*{exc.axis}\s*=\s*\{{)", text)
-            if inline:  # roll = { ... }: inline tables cannot be extended on a later line
-                lines[line - 1] = f"{inline.group(1)} seed = {new},{text[inline.end():]}"
-            elif text.lstrip().startswith("["):  # [phase.roll]: under the header
-                inserts.append((line, f"seed = {new}\n"))
-            else:  # roll.signal = ... (dotted keys)
-                inserts.append((line, f"{exc.axis}.seed = {new}\n"))
+            if new != exc.seed:  # a defaulted seed is added to its axis table
+                edits.append((("phase", i, exc.axis, "seed"), new, ""))
     if not expected:
         raise PlanError(f"{plan.source}: plan '{plan.name}' has no PRBS to advance")
-    for line, text in sorted(inserts, reverse=True):
-        lines.insert(line, text)
     header = f"# PRBS advanced by {chips} chips from the shipped plan (groundstation)\n"
-    advanced = parse_plan(text=header + "".join(lines), source=plan.source, name=plan.name)
+    text = header + set_keys(plan.text, edits=edits)
+    advanced = parse_plan(text=text, source=plan.source, name=plan.name)
     for i, phase in enumerate(advanced.phases):  # never fly the old realisation by mistake
         for exc in phase.excitation:
             if (i, exc.axis) in expected and exc.seed != expected[i, exc.axis]:
                 raise PlanError(
                     f"{plan.source}: could not rewrite phase[{i}].{exc.axis}.seed "
-                    f"(got {exc.seed}, wanted {expected[i, exc.axis]}); write it as seed = N "
-                    "on its own line"
+                    f"(got {exc.seed}, wanted {expected[i, exc.axis]})"
                 )
     return advanced
 

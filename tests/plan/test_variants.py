@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from groundstation.cli import main
 from groundstation.errors import PlanError
 from groundstation.plan import load_plan, parse_plan
 from groundstation.plan.variants import advance_prbs
@@ -32,3 +34,21 @@ def test_advanced_plan_is_the_same_sequence_shifted_with_the_same_axis_lags():
 def test_plans_without_prbs_are_refused():
     with pytest.raises(PlanError, match="no PRBS"):
         advance_prbs(load_plan("hover-check"), chips=10)
+
+
+@pytest.mark.parametrize("chips", [0, 1023, 500])
+def test_only_the_seed_lines_change_and_no_advance_changes_nothing(chips, tmp_path):
+    base = load_plan("prbs-3axis")
+    text = advance_prbs(base, chips=chips).text
+    (tmp_path / "advanced.toml").write_text(text, encoding="utf-8")
+    check = CliRunner().invoke(main, ["plan", "check", str(tmp_path / "advanced.toml")])
+    assert check.exit_code == 0 and "warning" not in check.output, check.output
+    header, *lines = text.splitlines(keepends=True)
+    assert header == f"# PRBS advanced by {chips} chips from the shipped plan (groundstation)\n"
+    old = base.text.splitlines(keepends=True)
+    differ = [(a, b) for a, b in zip(old, lines, strict=True) if a != b]
+    if chips % 1023 == 0:  # a whole period: the same seeds, the same bytes
+        assert differ == []
+    else:  # three seeds; their comments stay at their column
+        assert [a.split("=")[0] for a, _ in differ] == ["seed "] * 3
+        assert all(a.index("#") == b.index("#") for a, b in differ if "#" in a)

@@ -1,0 +1,379 @@
+"""The next flight's excitation, designed from an identified model (``groundstation plan design``).
+
+Numbers in, plan text out: :class:`ModelFacts` holds what the design needs from a model (poles,
+``dt``, channel names, singular values, horizons, fits per output), so this module loads no
+identification code; the command reads the model file (with ``sysid``'s hardened loader, inside
+the function) and hands the numbers over. :func:`design_plan` edits the ``--from`` plan's text
+with :func:`~groundstation.plan.toml.set_keys` (tomlkit: its comments and layout kept, every
+changed value with a ``# design:`` comment saying why) and parses the result again, so the plan
+written is the plan checked. The rules, with their equations, are in ``docs/flightplans.md``
+("Designing the next flight"):
+
+* PRBS chip :math:`T_{sw} \\le 2.78\\,\\tau_L / \\alpha_s` and period
+  :math:`N T_{sw} \\ge 2\\pi \\beta_s \\tau_H` (Rivera and Jun 2000): :math:`\\tau_L = 1 / |s|`
+  of the fastest mode below the setpoints' Nyquist frequency,
+  :math:`\\tau_H = 1 / |\\mathrm{Re}\\,s|` of the slowest that settles within
+  the phase (:math:`s = \\ln z / dt`), in whole setpoint ticks, the period at most the phase;
+* amplitude :math:`a = \\min(a_0 (1 + w), 0.9\\,L)` (never below :math:`a_0`, never beyond the
+  limit :math:`L`), :math:`w` the axis' weakness from its fit and the singular values; kept
+  at :math:`a_0` when the flown excitation already drove the model's inputs (the motors) to
+  their limits in more than 1 % of its samples (:func:`saturated`): more amplitude would be
+  clipped, a nonlinearity no linear model explains;
+* seeds as far along the m-sequence from every flown start as the axes' spacing allows.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from groundstation.errors import PlanError
+from groundstation.plan import Plan, parse_plan
+from groundstation.plan.excitation import LFSR_TAPS, prbs_shift
+from groundstation.plan.toml import dotted, key_lines, set_keys
+from groundstation.plan.variants import advanced_seed
+
+__all__ = ["AXIS_OUTPUTS", "MAX_SATURATION", "Change", "Design", "ModelFacts", "choose_seeds",
+           "design_notes", "design_plan", "prbs_timing", "saturated", "weakness"]
+
+AXIS_OUTPUTS = {"roll": ("gyro.x", "controller.r_roll", "stateEstimate.roll", "stabilizer.roll"),
+                "pitch": ("gyro.y", "controller.r_pitch", "stateEstimate.pitch",
+                          "stabilizer.pitch"),
+                "yaw_rate": ("gyro.z", "controller.r_yaw")}
+"""Model outputs that measure each setpoint axis, in order of preference."""
+_LIMIT = {"roll": "max_roll_deg", "pitch": "max_pitch_deg", "yaw_rate": "max_yaw_rate_deg_s"}
+SWITCH, ALPHA_S, BETA_S = 2.78, 2.0, 3.0
+"""PRBS power is down by half at 2.78 / T_sw rad/s; closed loop alpha_s times faster than the
+open loop; beta_s time constants to settle (Rivera and Jun 2000)."""
+FIT_GOOD, FIT_POOR = 90.0, 50.0  # % fit: weakness 0 at or above FIT_GOOD, 1 at or below FIT_POOR
+SV_GOOD = 10.0  # sigma_n / median(discarded sigmas) at or above this: the order is well supported
+LIMIT_SHARE = 0.9  # amplitudes at most 0.9 x the vehicle limit (and at most 2x: weakness <= 1)
+MAX_SATURATION = 0.01  # inputs at their limits in more of the flown excitation: no raise
+PLATEAU = 0.01  # an input's extreme value held in more than this share of samples: a limit
+MARK = "# design:"
+
+
+@dataclass(frozen=True)
+class ModelFacts:
+    """What the design reads from a model file; ``fits`` maps output name to fit %."""
+
+    source: str
+    poles: np.ndarray
+    dt: float
+    output_names: tuple[str, ...]
+    singular_values: np.ndarray | None = None
+    horizon_samples: int = 0  # past + future of the identification
+    fits: dict[str, float] = field(default_factory=dict)
+    fit_source: str = "no fits"
+
+    @classmethod
+    def from_model(cls, model: Any, *, source: str, fits: dict[str, float] | None = None,
+                   fit_source: str = "") -> ModelFacts:
+        """The facts of a ``sysid`` model (duck-typed, nothing imported). Without measured
+        ``fits``: the provenance's ``fit_percent`` if it has one, else the one-step fit the
+        model implies, 100 (1 - sigma_e / sigma_y) from its innovation covariance and the
+        identification data's output scale."""
+        prov = model.provenance if isinstance(model.provenance, dict) else {}
+        names = tuple(model.output_names)
+        if fits is None:
+            fits, fit_source = _stored_fits(prov, names=names, noise_cov=model.noise_cov)
+        sv = prov.get("singular_values")
+        sv = np.asarray(sv, dtype=float).ravel() if isinstance(sv, list) and sv else None
+        horizons = [prov.get(k) for k in ("past", "future")]
+        h = sum(horizons) if all(type(v) is int and v > 0 for v in horizons) else 0
+        return cls(source=source, poles=np.linalg.eigvals(model.A), dt=float(model.dt),
+                   output_names=names, singular_values=sv, horizon_samples=h,
+                   fits=dict(fits), fit_source=fit_source or "no fits")
+
+
+def _stored_fits(prov: dict, *, names: tuple[str, ...], noise_cov: Any
+                 ) -> tuple[dict[str, float], str]:
+    raw = prov.get("fit_percent")
+    if isinstance(raw, dict):  # {output: %} or, as `sysid identify --json`, {mode: {output: %}}
+        raw = next((raw[m] for m in ("simulation", "1-step") if isinstance(raw.get(m), dict)),
+                   raw)
+        got = {k: float(v) for k, v in raw.items() if k in names
+               and isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)}
+        if got:
+            return got, "fits stored in the model's provenance"
+    scaling = prov.get("scaling")
+    scale = scaling.get("y_scale") if isinstance(scaling, dict) else None
+    if noise_cov is None or not isinstance(scale, list) or len(scale) != len(names):
+        return {}, "no fits"
+    sd = np.sqrt(np.clip(np.diag(np.asarray(noise_cov, dtype=float)), 0, None))
+    fits = {n: float(100 * (1 - e / s)) for n, e, s in zip(names, sd, scale, strict=True)
+            if isinstance(s, int | float) and s > 0}
+    return fits, "1-step fits the model implies (innovation std / output std)"
+
+
+@dataclass(frozen=True)
+class Change:
+    """One value the design changes: key path, new and old value, and why."""
+
+    path: tuple
+    value: Any
+    old: Any
+    why: str
+
+
+@dataclass(frozen=True)
+class Design:
+    """The designed plan (text and parsed), what changed and the notes on the whole design."""
+
+    plan: Plan
+    changes: tuple[Change, ...]
+    notes: tuple[str, ...]
+
+
+def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
+                horizon_ticks: float = 0.0) -> tuple[int, int, str, str] | None:
+    """``(clock ticks, register length, why clock, why register)`` from the model's modes
+    (module docstring); None when no mode below the setpoints' Nyquist frequency settles
+    within the phase."""
+    z = np.asarray(poles, dtype=complex)
+    z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
+    s = np.log(z) / dt  # continuous-time equivalents, rad/s
+    speed, decay = np.abs(s), -1.0 / s.real  # natural frequency; decay time constant, s
+    tick, phase_s = 1.0 / rate_hz, n_ticks / rate_hz
+    band = speed <= math.pi * rate_hz  # at or below the setpoints' Nyquist frequency
+    settles = band & (decay <= phase_s)  # slower modes act as integrators over the phase
+    if not settles.any():
+        return None
+    tau_l, tau_h = float(1.0 / speed[band].max()), float(decay[settles].max())
+    clock = max(1, math.floor(SWITCH * tau_l / ALPHA_S / tick + 1e-9))
+    why_clock = (f"chip {clock * tick:g} s <= 2.78 tau_L / alpha_s = 2.78 x {tau_l:.3g} s / "
+                 f"{ALPHA_S:g} = {SWITCH * tau_l / ALPHA_S:.3g} s (fastest mode below the "
+                 f"setpoint Nyquist)" + (", at least one tick" if clock == 1 else ""))
+    want = 2 * math.pi * BETA_S * tau_h
+    need = max(want, horizon_ticks * tick) / (clock * tick)
+    fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
+    if not fits:
+        raise PlanError(f"an excitation phase of {phase_s:g} s cannot hold one period of a "
+                        f"PRBS with {clock * tick:g} s chips; lengthen it to at least "
+                        f"{3 * clock * tick:g} s")
+    n = next((n for n in fits if (1 << n) - 1 >= need), fits[-1])
+    period_s = ((1 << n) - 1) * clock * tick
+    why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period_s:g} s vs 2 pi beta_s "
+               f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
+    if (1 << n) - 1 < need:
+        why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
+    return clock, n, why_clock, why_reg
+
+
+def saturated(u: np.ndarray) -> np.ndarray:
+    """``(N,)`` True where any input of ``u (N, m)`` sits at a limit: its largest or smallest
+    value, when that value is held in more than 1 % of the samples (a plateau, as a motor
+    command at 65535 PWM; a free signal touches its extremes once)."""
+    u = np.asarray(u, dtype=float)
+    at = np.zeros(u.shape[0], dtype=bool)
+    for col in u.T:
+        for ext in (col.max(initial=-np.inf), col.min(initial=np.inf)):
+            hit = col == ext
+            if hit.mean() > PLATEAU:
+                at |= hit
+    return at
+
+
+def weakness(*, fit: float | None, sv_weakness: float) -> float:
+    """0 (explained well) to 1 (poorly): from the fit (90 % -> 0, 50 % -> 1) and the singular
+    values' weakness, whichever is larger."""
+    w = 0.0 if fit is None else (FIT_GOOD - fit) / (FIT_GOOD - FIT_POOR)
+    return float(min(1.0, max(0.0, w, sv_weakness)))
+
+
+def sv_weakness(facts: ModelFacts) -> tuple[float, str]:
+    """How close the smallest kept singular value is to the noise floor (the median of the
+    discarded ones): ratio >= 10 -> 0, ratio 1 -> 1, log scale between."""
+    sv, n = facts.singular_values, len(facts.poles)
+    if sv is None or len(sv) <= n or n == 0 or not np.median(sv[n:]) > 0:
+        return 0.0, "singular values: not stored"
+    ratio = float(sv[n - 1] / np.median(sv[n:]))
+    w = min(1.0, max(0.0, math.log(SV_GOOD / ratio) / math.log(SV_GOOD))) if ratio > 0 else 1.0
+    return w, (f"singular values: sigma_{n} / median(discarded) = {ratio:.3g} "
+               f"(weakness {w:.2f}; 0 at >= {SV_GOOD:g})")
+
+
+def choose_seeds(*, register_length: int, n_axes: int, flown: set[tuple[int, int]]
+                 ) -> tuple[list[int], int]:
+    """Seeds for ``n_axes`` PRBS of one register, N // n_axes chips apart, placed where the
+    nearest start of a flown PRBS of that register (``(register_length, seed)`` pairs) is
+    farthest; no seed equals a flown one. Returns the seeds and that distance in chips (-1 when
+    no PRBS of this register was flown)."""
+    n, big = register_length, (1 << register_length) - 1
+    step = max(1, big // n_axes)
+    starts = np.array([prbs_shift(register_length=n, seed_a=1, seed_b=s)
+                       for r, s in sorted(flown) if r == n], dtype=np.int64)
+    cands = np.arange(big, dtype=np.int64)[:: max(1, big // 65536)]
+    score = np.full(cands.size, big, dtype=np.int64)
+    for i in range(n_axes):
+        for p in starts:
+            d = (cands + i * step - p) % big
+            score = np.minimum(score, np.minimum(d, big - d))
+    taken = {s for _, s in flown}
+    if starts.size == 0:
+        score[:] = -1  # nothing flown on this register: any start, the first that is new
+    for k in np.lexsort((cands, -score)):
+        seeds = [advanced_seed(register_length=n, seed=1, chips=int(cands[k]) + i * step)
+                 for i in range(n_axes)]
+        if not taken & set(seeds):
+            return seeds, int(score[k])
+    raise PlanError(f"no {n}-bit PRBS seeds left that differ from the flown ones; "
+                    "design a longer register")
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return f"{value:.1f}" if isinstance(value, float) else str(value)
+
+
+def _strip_comment(line: str) -> str:
+    """The line without its trailing comment (a ``#`` outside strings)."""
+    quote = None
+    for i, c in enumerate(line):
+        if quote:
+            quote = None if c == quote else quote
+        elif c in "\"'":
+            quote = c
+        elif c == "#":
+            return line[:i].rstrip()
+    return line.rstrip()
+
+
+def design_notes(text: str) -> tuple[list[str], list[tuple[str, str]]]:
+    """The ``# design:`` notes of a plan text: the header lines, and ``(key, why)`` for every
+    key line that carries one (what ``plan show`` prints)."""
+    header: list[str] = []
+    by_line: dict[int, tuple] = {}
+    for path, row in key_lines(text).items():
+        if len(path) > len(by_line.get(row, ())):
+            by_line[row] = path
+    keys = []
+    for row, line in enumerate(text.splitlines(), start=1):
+        at = line.find(MARK)
+        if at < 0:
+            continue
+        note = line[at + len(MARK):].strip()
+        if not line[:at].strip():
+            header.append(note)
+        elif row in by_line and _strip_comment(line) == line[:at].rstrip():
+            keys.append((dotted(by_line[row]), note))
+    return header, keys
+
+
+def _axis_fit(facts: ModelFacts, axis: str) -> tuple[str, float | None]:
+    name = next((n for n in AXIS_OUTPUTS[axis] if n in facts.output_names), None)
+    if name is None:
+        raise PlanError(
+            f"{facts.source}: the model has no output for the plan's {axis} axis (looked for "
+            f"{', '.join(AXIS_OUTPUTS[axis])}; its outputs are {', '.join(facts.output_names)});"
+            " identify with the gyro outputs, or design from a plan without that axis")
+    return name, facts.fits.get(name)
+
+
+def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[int, int]],
+                saturation: float | None = None, max_saturation: float = MAX_SATURATION,
+                source: str = "") -> Design:
+    """The next flight: ``plan``'s PRBS re-timed, re-scaled and re-seeded from ``facts`` (module
+    docstring); ``flown`` holds ``(register_length, seed)`` of every PRBS already flown (the
+    ``plan``'s own are added),
+    ``saturation`` the share of the flown excitation's samples with an input at its limit (None:
+    not measured); above ``max_saturation`` no amplitude is raised. ``source`` names the new
+    plan in errors (its file)."""
+    rate = plan.setpoint_rate_hz
+    flown = set(flown) | {(e.register_length, e.seed) for p in plan.phases
+                          for e in p.excitation if e.signal == "prbs"}  # never fly them again
+    w_sv, sv_note = sv_weakness(facts)
+    clipped = saturation is not None and saturation > max_saturation
+    sat_note = ("inputs at their limits: not measured (no flown session)" if saturation is None
+                else f"inputs at their limits in {100 * saturation:.1f} % of the flown "
+                f"excitation (amplitudes raised only below {100 * max_saturation:g} %)")
+    changes: list[Change] = []
+    if name != plan.name:
+        changes.append(Change(("name",), name, plan.name, "the output file's name"))
+    prbs_phases = [(i, p) for i, p in enumerate(plan.phases)
+                   if any(e.signal == "prbs" for e in p.excitation)]
+    if not prbs_phases:
+        raise PlanError(f"{plan.source}: plan '{plan.name}' has no PRBS excitation to design; "
+                        "start from one that has (e.g. --from prbs-3axis)")
+    fits_used: dict[str, str] = {}
+    for i, phase in prbs_phases:
+        chains = [e for e in phase.excitation if e.signal == "prbs"]
+        timing = prbs_timing(poles=facts.poles, dt=facts.dt, rate_hz=rate, n_ticks=phase.n_ticks,
+                             horizon_ticks=facts.horizon_samples * facts.dt * rate)
+        for e in chains:
+            if e.axis not in _LIMIT:
+                continue
+            out, fit = _axis_fit(facts, e.axis)
+            limit = getattr(plan.vehicle, _LIMIT[e.axis])
+            w = weakness(fit=fit, sv_weakness=w_sv)
+            gain = 1.0 if clipped else 1 + w
+            amp = math.floor(min(e.amplitude * gain, LIMIT_SHARE * limit) * 10 + 1e-9) / 10
+            fits_used[out] = "?" if fit is None else f"{fit:.1f}"
+            if amp > e.amplitude:
+                fit_text = "no fit" if fit is None else f"fit {out} {fit:.1f} %"
+                changes.append(Change(
+                    ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
+                    f"{fit_text}, weakness {w:.2f}: x{1 + w:.2f}, at most "
+                    f"{LIMIT_SHARE:g} x vehicle.{_LIMIT[e.axis]} = {LIMIT_SHARE * limit:g}"))
+        clock, n = timing[:2] if timing else (chains[0].clock_period, chains[0].register_length)
+        why_clock, why_reg = timing[2:] if timing else (
+            "no mode below the setpoint Nyquist settles within the phase: as before",) * 2
+        seeds, apart = choose_seeds(register_length=n, n_axes=len(chains), flown=flown)
+        flown |= {(n, s) for s in seeds}
+        for e, seed in zip(chains, seeds, strict=True):
+            base = ("phase", i, e.axis)
+            if clock != e.clock_period:
+                changes.append(Change((*base, "clock_period"), clock, e.clock_period, why_clock))
+            if n != e.register_length:
+                uses_period = "period" in _raw_table(plan, base)
+                changes.append(Change((*base, "period" if uses_period else "register_length"),
+                                      (1 << n) - 1 if uses_period else n,
+                                      e.register_length, why_reg))
+            far = (f">= {apart} chips from every flown start" if apart >= 0 else
+                   f"no {n}-bit PRBS flown yet, and unlike every flown seed")
+            changes.append(Change((*base, "seed"), seed, e.seed,
+                                  f"{max(1, ((1 << n) - 1) // len(chains))} chips from the "
+                                  f"other axes; {far}"))
+    changes = [replace(c, why=f"{c.why}; was {_fmt(c.old)}") for c in changes]
+    fits_text = ", ".join(f"{k} {v}" for k, v in fits_used.items())
+    notes = (f"designed from {facts.source} by `groundstation plan design` (from {plan.name})",
+             f"model: {len(facts.poles)} states at {facts.dt:g} s; fits: {fits_text} % "
+             f"({facts.fit_source})",
+             sv_note, sat_note
+             + ("; amplitudes kept: more would be clipped" if clipped else ""),
+             "rules and equations: docs/flightplans.md, 'Designing the next flight'")
+    header = "".join(f"{MARK} {n}\n" for n in notes)
+    earlier = f"{MARK} (earlier design)"
+    kept = "".join(ln.replace(MARK, earlier) if MARK in ln and earlier not in ln else ln
+                   for ln in plan.text.splitlines(keepends=True)
+                   if not ln.lstrip().startswith(MARK))  # an earlier design's notes
+    text = header + set_keys(kept, edits=[(c.path, c.value, c.why) for c in changes], mark=MARK)
+    new = parse_plan(text=text, source=source or f"{name} (designed)", name=name)
+    _verify(new, changes)
+    return Design(plan=new, changes=tuple(changes), notes=notes)
+
+
+def _raw_table(plan: Plan, path: tuple) -> dict:
+    data: Any = tomllib.loads(plan.text)
+    for key in path:
+        data = data[key]
+    return data
+
+
+def _verify(plan: Plan, changes: list[Change]) -> None:
+    """Every designed value is in the parsed plan (never fly what was not designed)."""
+    for ch in changes:
+        if ch.path[0] != "phase":
+            continue
+        spec = next(e for e in plan.phases[ch.path[1]].excitation if e.axis == ch.path[2])
+        key = "register_length" if ch.path[3] == "period" else ch.path[3]
+        got = getattr(spec, key)
+        want = ch.value if ch.path[3] != "period" else int(ch.value).bit_length()
+        if not math.isclose(got, want):
+            raise PlanError(f"{plan.source}: could not write {dotted(ch.path)} (got {got}, "
+                            f"wanted {want})")
