@@ -16,8 +16,16 @@ Wire formats (little-endian, the header byte first, ``(port << 4) | (3 << 2) | c
 * Barometer: port 9 channel 0, ``<B B 3f``: type 2, pressure (mbar), temperature (deg C),
   altitude (m).
 * External pose: port 6 channel 1, ``<B B 7f``: id 8, x, y, z (m), qx, qy, qz, qw.
-* Motor command from the firmware: port 9 channel 0, ``<B 4H``, m1..m4 PWM (0..65535). The SITL
-  build applies no battery compensation: the PWM is the duty cycle.
+* Motor command from the firmware: port 9 channel 0, ``<B 4H``, m1..m4 PWM (0..65535), what the
+  firmware logs as ``motor.m1..m4``.
+
+Motor commands become duty cycles as on a Crazyflie 2.x: its firmware scales each command by
+the battery voltage (``motorsCompensateBatteryVoltage`` in ``motors.c``) after the mixer, a
+hardware-driver stage the SITL build leaves out. The peer applies it with the ``sim://``
+firmware's own :func:`~groundstation.sim.firmware.battery_compensated_pwm`, so a motor command
+gives the thrust it gives on ``sim://`` and on a real vehicle: independent of the battery's
+charge and sag. Without it the command was the duty, the thrust fell with the battery and the
+motor-to-rate gain at hover was 1.5 times ``sim://``'s.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import math
 import random
 import struct
 
+from groundstation.sim.firmware import battery_compensated_pwm
 from groundstation.sim.physics import (
     GRAVITY_M_S2,
     Battery,
@@ -94,7 +103,8 @@ class PhysicsPeer:
         self.body = RigidBody(c=self.const)
         self.battery = Battery(full_v=vbat_full, c=self.const)
         self.sensors = Sensors(rng=rng, noise=noise)
-        self.pwm: tuple[int, int, int, int] = (0, 0, 0, 0)
+        self.pwm: tuple[int, int, int, int] = (0, 0, 0, 0)   # the firmware's motor commands
+        self.duty_pwm: tuple[int, int, int, int] = (0, 0, 0, 0)  # after battery compensation
         self.steps = 0
         self._targets = (0.0, 0.0, 0.0, 0.0)
 
@@ -104,11 +114,14 @@ class PhysicsPeer:
         return self.steps * DT_S
 
     def set_motors(self, pwm: tuple[int, int, int, int]) -> None:
-        """The firmware's latest motor command (held until the next one)."""
+        """The firmware's latest motor command (held until the next one), battery-compensated at
+        the present voltage as the real firmware does."""
         self.pwm = pwm
         vbat = self.battery.voltage_v
         c = self.const
-        t = [motor_thrust_n(pwm=p, vbat_v=vbat, c=c) for p in pwm]
+        duty = [battery_compensated_pwm(ithrust=p, vbat_v=vbat) if p else 0 for p in pwm]
+        self.duty_pwm = (duty[0], duty[1], duty[2], duty[3])
+        t = [motor_thrust_n(pwm=d, vbat_v=vbat, c=c) for d in duty]
         self._targets = (t[0], t[1], t[2], t[3])
 
     def step(self) -> bytes:
@@ -116,7 +129,7 @@ class PhysicsPeer:
         t1, t2, t3, t4 = self._targets
         body = self.body
         body.step(t1, t2, t3, t4, DT_S)
-        p = self.pwm
+        p = self.duty_pwm
         duties = (p[0] / 65535.0, p[1] / 65535.0, p[2] / 65535.0, p[3] / 65535.0)
         self.battery.update(duties=duties, dt_s=DT_S)
         s = self.sensors
@@ -140,13 +153,15 @@ class PhysicsPeer:
         return _POSE.pack(_POSE_HEADER, _EXT_POSE_ID, b.x, b.y, b.z, b.qx, b.qy, b.qz, b.qw)
 
     def hover_pwm(self) -> int:
-        """The PWM per motor that carries the weight at the present battery voltage."""
+        """The motor command that carries the weight (the same at any battery voltage until the
+        compensation saturates)."""
         c, vbat = self.const, self.battery.voltage_v
         weight = c.mass_kg * GRAVITY_M_S2 / 4.0
         lo, hi = 0.0, 65535.0
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if motor_thrust_n(pwm=mid, vbat_v=vbat, c=c) < weight:
+            duty = battery_compensated_pwm(ithrust=mid, vbat_v=vbat)
+            if motor_thrust_n(pwm=duty, vbat_v=vbat, c=c) < weight:
                 lo = mid
             else:
                 hi = mid

@@ -8,7 +8,7 @@ import struct
 
 import pytest
 
-from groundstation.sim.physics import GRAVITY_M_S2
+from groundstation.sim.physics import GRAVITY_M_S2, VehicleConstants, motor_thrust_n
 from groundstation.sim.physics_peer import (
     BARO_EVERY,
     POSE_EVERY,
@@ -17,6 +17,7 @@ from groundstation.sim.physics_peer import (
     parse_motor_packet,
 )
 from groundstation.sim.sensors import NoiseModel
+from groundstation.sim.vehicle import SimVehicle
 
 QUIET = NoiseModel(gyro_rest_dps=(0.0,) * 3, gyro_vib_dps=(0.0,) * 3, acc_rest_g=(0.0,) * 3,
                    acc_vib_g=(0.0,) * 3, gyro_bias_dps=0.0, acc_bias_g=0.0)
@@ -43,7 +44,7 @@ def test_default_noise_at_rest_is_small_enough_for_the_gyro_bias_estimate():
 def test_hover_pwm_holds_and_more_climbs():
     peer = PhysicsPeer(noise=QUIET)
     hover = peer.hover_pwm()
-    assert 30000 < hover < 45000  # the project's CF2.1 at 4.1 V, no battery compensation
+    assert 30000 < hover < 45000  # the project's CF2.1
     peer.set_motors((hover + 4000,) * 4)
     for _ in range(1000):
         pk = peer.step()
@@ -71,3 +72,24 @@ def test_motor_packets_are_recognised_and_nothing_else():
     assert parse_motor_packet(bytes([0x9C, 1])) is None  # "gyro bias found"
     assert parse_motor_packet(struct.pack("<B4H", 0x5C, 1, 2, 3, 4)) is None  # port 5: log
     assert parse_motor_packet(struct.pack("<B4HB", 0x9C, 1, 2, 3, 4, 0)) is None
+
+
+def test_motor_commands_are_battery_compensated_as_on_sim():
+    """The SITL build leaves out the firmware's battery compensation; the peer applies it, so a
+    command gives the thrust it gives on ``sim://``, fresh or sagging battery alike."""
+    sim_hover = SimVehicle().hover_thrust()
+    for vbat in (4.15, 3.7):
+        peer = PhysicsPeer(noise=QUIET, vbat_full=vbat)
+        assert abs(peer.hover_pwm() - sim_hover) <= 2, vbat
+    thrust, raw = [], []
+    for vbat in (4.15, 3.7):
+        peer = PhysicsPeer(noise=QUIET, vbat_full=vbat)
+        peer.set_motors((sim_hover,) * 4)
+        thrust.append(sum(peer._targets))
+        assert peer.pwm == (sim_hover,) * 4  # the command, as the firmware logs it
+        raw.append(4 * motor_thrust_n(pwm=sim_hover, vbat_v=peer.battery.voltage_v,
+                                      c=peer.const))
+    assert thrust[1] == pytest.approx(thrust[0], rel=1e-3)
+    assert raw[1] < 0.85 * raw[0]  # the command taken as the duty: 18 % less thrust at 3.7 V
+    weight = VehicleConstants().mass_kg * GRAVITY_M_S2
+    assert thrust[0] == pytest.approx(weight, rel=2e-3)
