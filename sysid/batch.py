@@ -59,6 +59,7 @@ class BatchRow:
     past: int | None = None
     future: int | None = None
     order: int | None = None
+    focus: str | None = None
     poles: list[complex] = field(default_factory=list)
     fit: list[float] = field(default_factory=list)
     score: float | None = None
@@ -70,7 +71,7 @@ class BatchRow:
     def record(self) -> dict[str, Any]:
         return {"group": self.group, "sessions": self.sessions, "flights": self.flights,
                 "past": self.past, "future": self.future, "order": self.order,
-                "poles": [[float(p.real), float(p.imag)] for p in self.poles],
+                "focus": self.focus, "poles": [[float(p.real), float(p.imag)] for p in self.poles],
                 "validation_fit_percent": self.fit, "score_percent": self.score,
                 "stable": self.stable, "model": self.model, "error": self.error,
                 "seconds": round(self.seconds, 3)}
@@ -137,8 +138,9 @@ def identify_group(groups: list[list[IOData]], *, method: Method, options: Optio
         sel = select(groups, method=method, options=options, workers=workers,
                      choose_focus=choose_focus, **grid)
     return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
-            "order": sel.best.order, "fit": [float(f) for f in sel.best.fit],
-            "score": sel.best.score, "stable": sel.model.is_stable}
+            "order": sel.best.order, "focus": sel.model.provenance.get("focus"),
+            "fit": [float(f) for f in sel.best.fit], "score": sel.best.score,
+            "stable": sel.model.is_stable}
 
 
 def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
@@ -150,12 +152,12 @@ def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
     tmp = out_dir / ".summary.csv.tmp"
     with tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["group", "sessions", "flights", "past", "future", "order", "poles",
+        w.writerow(["group", "sessions", "flights", "past", "future", "order", "focus", "poles",
                     "validation_fit_percent", "score_percent", "stable", "model", "error",
                     "seconds"])
         for r in rows:
             w.writerow([r.group, ";".join(r.sessions), r.flights, _cell(r.past),
-                        _cell(r.future), _cell(r.order),
+                        _cell(r.future), _cell(r.order), r.focus or "",
                         ";".join(f"{p.real:.6g}{p.imag:+.6g}j" for p in r.poles),
                         ";".join(f"{f:.3f}" for f in r.fit),
                         "" if r.score is None else f"{r.score:.3f}", _cell(r.stable),
@@ -197,6 +199,7 @@ def run_batch(
             row.error = _one_line(outcome)
         else:
             row.past, row.future, row.order = outcome["past"], outcome["future"], outcome["order"]
+            row.focus = outcome["focus"]
             row.poles = list(np.sort_complex(outcome["model"].poles()))
             row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
             row.model = str(path)

@@ -83,6 +83,14 @@ def test_batch_group_names_and_no_knobs_selection(sessions, tmp_path):
     assert res.exit_code == 0, res.output
     [row] = json.loads(res.stdout)["groups"]
     assert row["error"] is None and 2 <= row["order"] <= 12 and row["stable"]
+    # the same choice as `sysid identify` with no knobs: horizons, order and focus
+    ident = run("identify", paths[2], "--json")
+    assert ident.exit_code == 0, ident.output
+    chosen = json.loads(ident.stdout)
+    assert [row[k] for k in ("past", "future", "order", "focus")] == [
+        chosen[k] for k in ("past", "future", "order", "focus")]
+    with (out / "summary.csv").open() as fh:
+        assert next(csv.DictReader(fh))["focus"] == row["focus"]
 
 
 def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
