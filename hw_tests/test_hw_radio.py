@@ -23,9 +23,11 @@ def radio_uri(cf_uri: str) -> str:
 
 
 def _parts(uri: str) -> tuple[int, str, str]:
-    """``(channel, data rate, address)`` of ``radio://0/80/2M[/E7E7E7E7E7]``."""
-    fields = uri.removeprefix("radio://").split("/")
-    return int(fields[1]), fields[2], (fields[3] if len(fields) > 3 else "E7E7E7E7E7").upper()
+    """``(channel, data rate, address)`` of a radio URI, as cflib's own radio driver reads it."""
+    from cflib.crtp.radiodriver import RadioDriver
+
+    _, channel, rate, address, _ = RadioDriver.parse_uri(uri)
+    return channel, ("250K", "1M", "2M")[rate], bytes(address).hex().upper()
 
 
 def test_scan_lists_the_dongle_and_the_vehicle(radio_uri):

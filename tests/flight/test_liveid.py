@@ -53,6 +53,24 @@ def _sorted(p: np.ndarray) -> np.ndarray:
     return p[np.lexsort((np.round(p.imag, 9), np.round(p.real, 9)))]
 
 
+def _assert_same_model(live, offline) -> None:
+    """Live and offline models describe the same system, to rounding: the characteristic
+    polynomials of A (well conditioned where clustered poles are not: the stability step puts
+    several at |z| = 0.999, and there 1e-16 in A moves a pole by 1e-7) and the Markov
+    parameters C A^k B (invariant under the state basis)."""
+    np.testing.assert_allclose(np.poly(live.A), np.poly(offline.A), rtol=1e-8, atol=1e-10)
+
+    def markov(m):
+        x, out = m.B, []
+        for _ in range(20):
+            out.append(m.C @ x)
+            x = m.A @ x
+        return np.array(out)
+
+    ml, mo = markov(live), markov(offline)
+    np.testing.assert_allclose(ml, mo, rtol=0, atol=1e-7 * np.abs(mo).max())
+
+
 def _row_poles(row: np.void) -> np.ndarray:
     n = int(row["order"])
     return np.array([row[f"pole_re_{i}"] + 1j * row[f"pole_im_{i}"] for i in range(1, n + 1)])
@@ -111,7 +129,7 @@ def test_final_live_model_equals_offline_iem_of_the_recorded_samples(thesis_flig
     assert start - 0.1 <= g0 + offset and g0 + (n - 1) * dt + offset <= end + 0.1
     assert n * dt == pytest.approx(end - start, abs=0.5)
     offline = iem(detrend_data(data, kind="mean")[0], order=8, past=60, future=17)
-    np.testing.assert_allclose(_sorted(model.poles()), _sorted(offline.poles()), atol=1e-8)
+    _assert_same_model(model, offline)
     np.testing.assert_allclose(_sorted(_row_poles(rows[-1])), _sorted(model.poles()), atol=1e-12)
 
 
@@ -337,4 +355,4 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     model = load_model(result.path.with_name(result.summary["live_id"]["model_file"]))
     offline = iem(detrend_data(_recorded_samples(s, model), kind="mean")[0], order=4, past=15,
                   future=8)
-    np.testing.assert_allclose(_sorted(model.poles()), _sorted(offline.poles()), atol=1e-8)
+    _assert_same_model(model, offline)
