@@ -5,9 +5,9 @@
 :mod:`groundstation.sim.physics` and the noisy BMI088 model of :mod:`groundstation.sim.sensors`.
 No sockets here: :mod:`groundstation.sim.sitl` feeds it the firmware's motor commands and sends
 what it returns. One call of :meth:`PhysicsPeer.step` is one millisecond of vehicle time and
-yields the 1 kHz IMU packet; :meth:`barometer_packet` (50 Hz) and :meth:`pose_packet` (200 Hz,
-the external pose a motion-capture system would send) are due every ``BARO_EVERY`` and
-``POSE_EVERY`` steps.
+yields the 1 kHz IMU packet; :meth:`barometer_packet` (50 Hz), :meth:`pose_packet` (200 Hz,
+the external pose a motion-capture system would send) and :meth:`battery_packet` (10 Hz) are due
+every ``BARO_EVERY``, ``POSE_EVERY`` and ``BATTERY_EVERY`` steps.
 
 Wire formats (little-endian, the header byte first, ``(port << 4) | (3 << 2) | channel``):
 
@@ -15,6 +15,10 @@ Wire formats (little-endian, the header byte first, ``(port << 4) | (3 << 2) | c
   y left, z up) in 1/2048 g, body rates in 4000/65536 deg/s.
 * Barometer: port 9 channel 0, ``<B B 3f``: type 2, pressure (mbar), temperature (deg C),
   altitude (m).
+* Battery: port 9 channel 0, ``<B B f``: type 3, voltage (V). Not CrazySim's: the project's
+  firmware patch ``tools/sitl-pm-battery.patch`` adds it with the ``pm`` log group (``vbat``,
+  ``vbatMV``, ``state``, ``batteryLevel``) that the SITL build otherwise lacks; the firmware's
+  control loop does not step on it.
 * External pose: port 6 channel 1, ``<B B 7f``: id 8, x, y, z (m), qx, qy, qz, qw.
 * Motor command from the firmware: port 9 channel 0, ``<B 4H``, m1..m4 PWM (0..65535), what the
   firmware logs as ``motor.m1..m4``.
@@ -46,6 +50,7 @@ from groundstation.sim.sensors import NoiseModel, Sensors
 
 __all__ = [
     "BARO_EVERY",
+    "BATTERY_EVERY",
     "GYRO_BIAS_FOUND",
     "POSE_EVERY",
     "PhysicsPeer",
@@ -56,6 +61,7 @@ __all__ = [
 DT_S = 0.001
 BARO_EVERY = 20        # steps (ms) between barometer packets: 50 Hz
 POSE_EVERY = 5         # steps (ms) between external-pose packets: 200 Hz
+BATTERY_EVERY = 100    # steps (ms) between battery packets: 10 Hz
 ACC_LSB_PER_G = 2048.0            # ±16 g range
 GYRO_LSB_PER_DPS = 65536.0 / 4000.0  # ±2000 deg/s range
 
@@ -72,6 +78,7 @@ _EXT_POSE_ID = 8
 _IMU = struct.Struct("<BB3h3h")
 _BARO = struct.Struct("<BB3f")
 _POSE = struct.Struct("<BB7f")
+_BATTERY = struct.Struct("<BBf")
 _MOTORS = struct.Struct("<B4H")
 GYRO_BIAS_FOUND = bytes([SIM_HEADER, 1])
 """What the firmware sends once its gyro bias estimate is done (``9c 01``)."""
@@ -146,6 +153,10 @@ class PhysicsPeer:
         z = self.body.z
         pressure_mbar = 1013.25 * (1.0 - 2.25577e-5 * z) ** 5.25588
         return _BARO.pack(SIM_HEADER, 2, pressure_mbar, 25.0, z)
+
+    def battery_packet(self) -> bytes:
+        """The battery voltage under the present load (V), for the firmware's ``pm`` group."""
+        return _BATTERY.pack(SIM_HEADER, 3, self.battery.voltage_v)
 
     def pose_packet(self) -> bytes:
         """The external pose (position m, attitude quaternion body -> world)."""

@@ -37,6 +37,7 @@ from groundstation.errors import GroundStationError, LinkError
 from groundstation.sim.client_policy import ClientLink, check_host
 from groundstation.sim.physics_peer import (
     BARO_EVERY,
+    BATTERY_EVERY,
     GYRO_BIAS_FOUND,
     POSE_EVERY,
     PhysicsPeer,
@@ -297,6 +298,8 @@ class SitlVehicle:
                     sock.sendto(peer.barometer_packet(), fw)
                 if step % POSE_EVERY == 0:
                     sock.sendto(peer.pose_packet(), fw)
+                if step % BATTERY_EVERY == 1:  # from the first step: pm.vbat is never 0
+                    sock.sendto(peer.battery_packet(), fw)
                 if self._bias_step is not None and step - self._bias_step >= _ACC_SCALE_STEPS:
                     self.ready.set()
                 if step % 250 == 0 and self.proc is not None and self.proc.poll() is not None:

@@ -20,7 +20,7 @@ from groundstation.flight import RateLimits, fly_plan
 from groundstation.plan import load_plan
 
 from .checks import check_closed_with_stop, check_setpoints
-from .conftest import SIM_HOOK, SITL_COST, backends, plan_variant, wait_for_stop
+from .conftest import SIM_HOOK, backends, plan_variant, wait_for_stop
 
 
 def _safety_events(s):
@@ -46,7 +46,6 @@ def _check_descent(s, *, thrust_ceiling: int, n: int, slack_s: float = 0.0) -> N
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-@backends(sitl=SITL_COST)
 def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path):
     plan, uri = load_plan("pitch-only"), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
@@ -121,7 +120,6 @@ def test_stop_policy_stops_at_once(flight_uri, tmp_path):
 
 
 @pytest.mark.parametrize("where", ["plan", "api"])
-@backends(sitl=SITL_COST)
 def test_rate_limit_violation_aborts(where, flight_uri, tmp_path):
     # Thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
     # a vehicle resting on the ground has no body rates.
@@ -141,7 +139,6 @@ def test_rate_limit_violation_aborts(where, flight_uri, tmp_path):
     _check_descent(s, thrust_ceiling=34000, n=20)
 
 
-@backends(sitl="the SITL build has no power management (no pm.vbat to check)")
 def test_low_battery_refuses_to_take_off(flight_uri, tmp_path):
     plan = plan_variant("hover-check", **{"min_vbat = 3.8 ": "min_vbat = 4.2 "})
     uri = flight_uri()  # the simulated battery is at most 4.15 V
@@ -208,7 +205,6 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
     assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
 
 
-@backends(sitl=SITL_COST)
 def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
     plan, uri = load_plan("pitch-only"), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
