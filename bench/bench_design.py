@@ -1,4 +1,6 @@
-"""Does the designed next flight identify a better model? (issue 16, item 5) On ``sim://``.
+"""Does the designed next flight identify a better model? (issue 16, item 5) On ``sim://``, or
+on the real firmware in the loop with ``BENCH_DESIGN_BACKEND=sitl`` (``make sitl`` first; real
+time, about 2 minutes a flight; there the third plan, "fits only", is left out).
 
 1. As ``groundstation demo``: fly ``prbs-3axis`` and a second realisation of it (PRBS advanced
    500 chips), identify a model from the first (IEM, past, future and order chosen by
@@ -18,14 +20,17 @@ Prints the median over the runs per plan, axis and measure, the designed-minus-d
 difference and the spread of the default plan's runs (interquartile range: two flights of one
 plan differ by this much). Fails when the design is worse than the default plan on yaw (gyro.z,
 2 s windows, either validation flight, either identification) by more than that spread.
-``BENCH_DESIGN_RUNS`` (default 6) and ``BENCH_DESIGN_SPEED`` (default 20) change the runs and
-the simulation speed.
+``BENCH_DESIGN_RUNS`` (default 6, 3 on SITL) and ``BENCH_DESIGN_SPEED`` (default 20) change the
+runs and the simulation speed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import socket
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -39,17 +44,38 @@ from sysid.auto import select
 from sysid.methods import get_method
 from sysid.session_io import load_session
 
-RUNS = int(os.environ.get("BENCH_DESIGN_RUNS", "6"))
+BACKEND = os.environ.get("BENCH_DESIGN_BACKEND", "sim")
+RUNS = int(os.environ.get("BENCH_DESIGN_RUNS", "3" if BACKEND == "sitl" else "6"))
 SPEED = float(os.environ.get("BENCH_DESIGN_SPEED", "20"))
 GYROS = ("gyro.x", "gyro.y", "gyro.z")
 THESIS = (8, 60, 17)  # order, past, future
 
 
+@contextlib.contextmanager
+def _vehicle(seed: int) -> Iterator[str]:
+    """A fresh vehicle's URI: ``sim://`` at :data:`SPEED`, or the SITL firmware with our physics
+    (noise seed ``seed``) on a free loopback port, stopped afterwards."""
+    if BACKEND != "sitl":
+        yield f"sim://{seed}?speed={SPEED:g}&seed={seed}"
+        return
+    from groundstation.flight.link import install_drivers
+    from groundstation.sim.sitl import SitlVehicle, find_firmware
+
+    install_drivers()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with SitlVehicle(firmware=find_firmware(), port=port, seed=seed) as v:
+        v.wait_ready()
+        yield v.uri
+
+
 def _fly(plan: Plan, *, out: Path, seed: int) -> Path:
-    """Fly on sim://; a flight aborted (on a busy host the link watchdog can fire at high
-    speed) is flown again, up to three times."""
+    """Fly on a fresh vehicle; a flight aborted (on a busy host the link watchdog can fire)
+    is flown again, up to three times."""
     for attempt in range(3):
-        result = fly_plan(plan=plan, out=out, uri=f"sim://{seed}?speed={SPEED:g}&seed={seed}")
+        with _vehicle(seed) as uri:
+            result = fly_plan(plan=plan, out=out, uri=uri)
         if not result.cause or attempt == 2:
             break
         print(f"  {plan.name} on seed {seed} aborted ({result.cause}); flying it again")
@@ -83,7 +109,9 @@ def main() -> int:
         model = _identify(first, "auto")
         model.save(out / "model.h5")
         plans = {"default": base}
-        for label, extra in (("designed", []), ("fits only", ["--max-saturation", "100"])):
+        designs = [("designed", [])] + ([] if BACKEND == "sitl" else
+                                        [("fits only", ["--max-saturation", "100"])])
+        for label, extra in designs:
             path = out / f"{label.replace(' ', '-')}.toml"
             print(f"--- {label}:", flush=True)
             try:  # the command line itself; a user error prints one line and exits 2
@@ -115,7 +143,7 @@ def main() -> int:
 
 
 def _report(fits: dict) -> int:
-    print(f"median over {RUNS} flights of each plan (sim seeds 10..{9 + RUNS}); fit % of "
+    print(f"median over {RUNS} flights of each plan ({BACKEND} seeds 10..{9 + RUNS}); fit % of "
           "gyro.x / gyro.y / gyro.z (roll, pitch, yaw rate) on held-out flights")
     ok = True
     for how, what in (("thesis", "order 8, past 60, future 17"),

@@ -23,17 +23,15 @@ from rich.console import Console
 from cfcommon.cli import FiniteFloat, check_output, output_table
 from sysid.auto import default_grid
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
+from sysid.cli_compare import compare_cmd, resid
 from sysid.cli_progress import progress
 from sysid.cli_support import (
     JSON_OPTION,
     MODEL_SUFFIXES,
     RRD_OPTION,
-    WINDOW_HELP,
     Group,
     check_rrd,
     console,
-    default_compare_mode,
-    experiment_label,
     fit_table,
     fits_json,
     load_flights,
@@ -51,7 +49,6 @@ from sysid.finish import FOCUS_MODES
 from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.model import load_model
 from sysid.order import information_criteria, singular_values, suggest_order
-from sysid.residuals import residuals
 from sysid.session_io import read_metadata
 from sysid.stability import STABILITY_MODES
 from sysid.validate import compare, simulation_window
@@ -124,6 +121,9 @@ def main(verbose: int) -> None:
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
 
+
+main.add_command(compare_cmd)
+main.add_command(resid)
 
 @main.command()
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -275,117 +275,6 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
         yield client
     finally:
         client.close()
-
-
-@main.command("compare")
-@click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
-@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--horizon", type=click.IntRange(min=1), help="k-step-ahead prediction.")
-@click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
-              help="Simulate over windows of this many seconds, each from its own x0.")
-@click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
-              help=WINDOW_HELP)
-@click.option("--detrend", default="mean", show_default=True,
-              type=click.Choice(["mean", "linear", "none"]))
-@click.option("--residuals", "with_residuals", is_flag=True,
-              help="Also print the residual analysis (as `sysid resid`).")
-@JSON_OPTION
-@RRD_OPTION
-def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | None,
-                window_s: float | None, with_residuals: bool, as_json: bool, rrd: Path | None,
-                **opts: Any) -> None:
-    """Fit of a model on sessions: per channel and per session, in percent (NRMSE).
-
-    The model's channel names select the session channels and its dt sets the grid. Without
-    --horizon/--window-s the whole window is simulated from a least-squares initial state,
-    unless the model integrates (a pole at |z| >= 0.995): whole-flight simulation of an
-    integrator only measures its drift, so it is then simulated over 2 s windows. A fit that
-    diverged is "diverged" in tables and null in --json.
-    Each experiment of a session (e.g. its airborne-N phases) is its own row.
-
-    \b
-    Example:
-      sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
-    """
-    check_rrd(rrd, inputs=(model_path, *sessions))
-    model = load_model(model_path)
-    flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
-                    outputs=model.output_names)
-    modes: list[tuple[str, dict[str, Any]]] = []
-    if window_s is not None:
-        modes.append((f"simulation, {window_s:g} s windows", {"window": window_s}))
-    if horizon is not None:
-        modes.append((f"{horizon}-step prediction", {"horizon": horizon}))
-    if not modes:
-        modes = [default_compare_mode(model)]
-        if "windows" in modes[0][0]:
-            radius = float(np.max(np.abs(model.poles())))
-            Console(stderr=True).print(
-                f"model has a pole at |z| = {radius:.4f} (integrating or nearly): "
-                f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
-                "another mode", style="dim")
-    results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
-    if rrd is not None:
-        write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
-                   comparisons=[r for _, r in results])
-    if as_json:
-        click.echo(json.dumps({"model": str(model_path), "modes": [{
-            "mode": label, "overall": fits_json(res), "sessions": [
-                {"path": d.source, "fit_percent": fits_json(res, fits)}
-                for d, fits in zip(flights, res.fits, strict=True)]}
-            for label, res in results],
-            "stable": model.is_stable, "predictor_stable": model.predictor_is_stable},
-            indent=1))
-        return
-    con = console()
-    for label, res in results:
-        rows = [(experiment_label(d.source), f) for d, f in zip(flights, res.fits, strict=True)]
-        con.print(fit_table(console=con, title=f"{label}: fit [%]", names=res.output_names,
-                             rows=[*rows, ("all", res.fit)] if len(rows) > 1 else rows))
-    if not model.predictor_is_stable:
-        con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
-    if with_residuals:
-        click.echo(residuals(model, flights).summary())
-
-
-@main.command("resid")
-@click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
-@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--max-lag", default=25, show_default=True, type=click.IntRange(min=1),
-              help="Largest correlation lag, samples.")
-@click.option("--confidence", default=0.99, show_default=True,
-              type=FiniteFloat(min=0.5, max=0.9999, min_open=True),
-              help="Confidence of the bounds and verdicts.")
-@click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
-              help=WINDOW_HELP)
-@click.option("--detrend", default="mean", show_default=True,
-              type=click.Choice(["mean", "linear", "none"]))
-@JSON_OPTION
-@RRD_OPTION
-def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence: float,
-          as_json: bool, rrd: Path | None, **opts: Any) -> None:
-    """Residual analysis: whiteness of the one-step errors and their correlation with inputs.
-
-    Per output: the autocorrelation at lags 1..--max-lag against +-z/sqrt(N) and a Ljung-Box
-    test (white?), and the cross-correlation with each input at positive lags (past inputs)
-    with a portmanteau test (independent?). Flights are analysed separately and pooled.
-    See docs/sysid.md, "Residual analysis".
-
-    \b
-    Example:
-      sysid resid model.h5 val1.h5 val2.h5 --max-lag 30
-    """
-    check_rrd(rrd, inputs=(model_path, *sessions))
-    model = load_model(model_path)
-    flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
-                           outputs=model.output_names)
-    res = residuals(model, flights, max_lag=max_lag, confidence=confidence)
-    if rrd is not None:
-        write_rrd(path=rrd, name=f"resid {model_path.name}", model=model, residuals=res)
-    if as_json:
-        click.echo(json.dumps({"model": str(model_path), **res.to_json()}, indent=1))
-        return
-    click.echo(res.summary())
 
 
 @main.command()
