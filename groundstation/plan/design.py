@@ -15,10 +15,12 @@ written is the plan checked. The rules, with their equations, are in ``docs/flig
   :math:`\\tau_H = 1 / |\\mathrm{Re}\\,s|` of the slowest that settles within
   the phase (:math:`s = \\ln z / dt`), in whole setpoint ticks, the period at most the phase;
 * amplitude :math:`a = \\min(a_0 (1 + w), 0.9\\,L)` (never below :math:`a_0`, never beyond the
-  limit :math:`L`), :math:`w` the axis' weakness from its fit and the singular values; kept
-  at :math:`a_0` when the flown excitation already drove the model's inputs (the motors) to
-  their limits in more than 1 % of its samples (:func:`saturated`): more amplitude would be
-  clipped, a nonlinearity no linear model explains;
+  limit :math:`L`), :math:`w` the axis' weakness from its fit and the singular values; never
+  raised when the flown excitation already drove the model's inputs (the motors) to their
+  limits in more than 1 % of its samples (:func:`saturated`): more amplitude would be clipped,
+  a nonlinearity no linear model explains. The motors' range is then shared out instead: an
+  axis explained better than the worst gets :math:`a = a_0 (1 - 0.5 (w_{worst} - w))`, the
+  worst keeps :math:`a_0`;
 * seeds as far along the m-sequence from every flown start as the axes' spacing allows.
 """
 
@@ -53,6 +55,7 @@ FIT_GOOD, FIT_POOR = 90.0, 50.0  # % fit: weakness 0 at or above FIT_GOOD, 1 at 
 SV_GOOD = 10.0  # sigma_n / median(discarded sigmas) at or above this: the order is well supported
 LIMIT_SHARE = 0.9  # amplitudes at most 0.9 x the vehicle limit (and at most 2x: weakness <= 1)
 MAX_SATURATION = 0.01  # inputs at their limits in more of the flown excitation: no raise
+HEADROOM = 0.5  # clipped: an axis w less weak than the weakest is scaled by 1 - HEADROOM w
 PLATEAU = 0.01  # an input's extreme value held in more than this share of samples: a limit
 MARK = "# design:"
 
@@ -305,17 +308,29 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
         chains = [e for e in phase.excitation if e.signal == "prbs"]
         timing = prbs_timing(poles=facts.poles, dt=facts.dt, rate_hz=rate, n_ticks=phase.n_ticks,
                              horizon_ticks=facts.horizon_samples * facts.dt * rate)
+        axes = {e.axis: _axis_fit(facts, e.axis) for e in chains if e.axis in _LIMIT}
+        weak = {a: weakness(fit=fit, sv_weakness=w_sv) for a, (_, fit) in axes.items()}
+        worst = max(weak, key=weak.__getitem__) if weak else None
         for e in chains:
             if e.axis not in _LIMIT:
                 continue
-            out, fit = _axis_fit(facts, e.axis)
+            out, fit = axes[e.axis]
             limit = getattr(plan.vehicle, _LIMIT[e.axis])
-            w = weakness(fit=fit, sv_weakness=w_sv)
-            gain = 1.0 if clipped else 1 + w
-            amp = math.floor(min(e.amplitude * gain, LIMIT_SHARE * limit) * 10 + 1e-9) / 10
+            w = weak[e.axis]
             fits_used[out] = "?" if fit is None else f"{fit:.1f}"
+            fit_text = "no fit" if fit is None else f"fit {out} {fit:.1f} %"
+            if clipped:  # no raise; room for the worst-explained axis (module docstring)
+                gain = 1.0 - HEADROOM * (weak[worst] - w)
+                amp = math.floor(e.amplitude * gain * 10 + 1e-9) / 10
+                if amp < e.amplitude:
+                    changes.append(Change(
+                        ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
+                        f"{fit_text}, weakness {w:.2f}; inputs at their limits and "
+                        f"{axes[worst][0]} explained worst (weakness {weak[worst]:.2f}): "
+                        f"x{gain:.2f} to leave it the motors' room"))
+                continue
+            amp = math.floor(min(e.amplitude * (1 + w), LIMIT_SHARE * limit) * 10 + 1e-9) / 10
             if amp > e.amplitude:
-                fit_text = "no fit" if fit is None else f"fit {out} {fit:.1f} %"
                 changes.append(Change(
                     ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
                     f"{fit_text}, weakness {w:.2f}: x{1 + w:.2f}, at most "
@@ -345,7 +360,8 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
              f"model: {len(facts.poles)} states at {facts.dt:g} s; fits: {fits_text} % "
              f"({facts.fit_source})",
              sv_note, sat_note
-             + ("; amplitudes kept: more would be clipped" if clipped else ""),
+             + ("; no amplitude raised (more would be clipped), the better-explained axes "
+                "lowered to leave the worst the motors' room" if clipped else ""),
              "rules and equations: docs/flightplans.md, 'Designing the next flight'")
     header = "".join(f"{MARK} {n}\n" for n in notes)
     earlier = f"{MARK} (earlier design)"
