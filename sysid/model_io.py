@@ -29,7 +29,6 @@ import math
 import os
 import re
 import stat
-import struct
 from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sysid.errors import ModelFileError
+from sysid.mat_guard import check_mat
 
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
@@ -335,65 +335,11 @@ def _save_mat(model: StateSpaceModel, path: Path) -> None:
         savemat(fh, mdict)
 
 
-# MAT-file element types and array classes (MATLAB 5 format): what _check_mat lets through
-_MI_UINT32, _MI_MATRIX = 6, 14
-_MX_CELL, _MX_CHAR = 1, 4
-_MX_NUMBERS = range(6, 16)  # double, single, int8 ... uint64
-
-
-def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int, int]:
-    """``(type, payload start, payload bytes, next position)`` of the MAT element at ``pos``."""
-    if pos + 8 > end:
-        raise ValueError(f"MAT element at byte {pos} is cut off")
-    word, nbytes = struct.unpack_from(order + "II", data, pos)
-    if word >> 16:  # small data element: type and size in one word, data in the next four
-        return word & 0xFFFF, pos + 4, word >> 16, pos + 8
-    after = pos + 8 + nbytes + (-nbytes % 8)
-    if pos + 8 + nbytes > end:
-        raise ValueError(f"MAT element at byte {pos} declares {nbytes} bytes past the end")
-    return word, pos + 8, nbytes, min(after, end)
-
-
-def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool) -> int:
-    """Check the array element at ``pos`` (numbers, text, or at top level a cell of those);
-    the position after it."""
-    kind, start, nbytes, after = _mat_tag(data, pos, order, end)
-    if kind != _MI_MATRIX:  # 15 (compressed) included
-        raise ValueError(f"MAT element of type {kind} at byte {pos}; sysid writes uncompressed "
-                         "arrays only")
-    if nbytes == 0:
-        return after
-    kind, flags, size, p = _mat_tag(data, start, order, start + nbytes)
-    if kind != _MI_UINT32 or size < 4:
-        raise ValueError(f"MAT array at byte {pos} has no array flags")
-    cls = struct.unpack_from(order + "I", data, flags)[0] & 0xFF
-    if not (cls == _MX_CHAR or cls in _MX_NUMBERS or (cls == _MX_CELL and not in_cell)):
-        raise ValueError(f"MAT array of class {cls} at byte {pos}; sysid writes numbers, text "
-                         "and cells of text only")
-    if cls == _MX_CELL:
-        for _ in range(2):  # dimensions, name
-            p = _mat_tag(data, p, order, start + nbytes)[3]
-        while p < start + nbytes:
-            p = _mat_array(data, p, order, end=start + nbytes, in_cell=True)
-    return after
-
-
-def _check_mat(data: bytes) -> None:
-    """Refuse (``ValueError``) a MAT file that scipy would inflate or recurse through: see the
-    module docstring. Nesting is at most one cell deep, so this recursion is bounded too."""
-    order = {b"IM": "<", b"MI": ">"}.get(data[126:128])
-    if len(data) < 128 or order is None:
-        raise ValueError("not a MATLAB 5 .mat file")
-    pos = 128
-    while pos < len(data):
-        pos = _mat_array(data, pos, order, end=len(data), in_cell=False)
-
-
 def _load_mat(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
 
     data = _read_bounded(path)
-    _check_mat(data)
+    check_mat(data)
     m = loadmat(io.BytesIO(data), squeeze_me=False)
     if "format" not in m:
         return {}
