@@ -267,10 +267,11 @@ class LiveIdentifierProcess:
     Same arguments and methods (``append``, ``update``, ``samples``, ``n_samples``,
     ``min_samples``) plus :meth:`close`. ``append`` returns at once (the rows go down a pipe);
     ``update`` and ``samples`` wait for the child while the calling thread holds no
-    interpreter lock. An error in the child (bad rows, too few samples, a failed update) is
-    raised again here by the next ``update`` or ``samples``; a child that died is an
-    ``EOFError``. The settings are checked here first, so a bad one is the same one-line
-    error as :class:`LiveIdentifier`'s.
+    interpreter lock. The child runs at a lower CPU priority (:data:`CHILD_NICENESS`). An
+    error in the child (bad rows, too few samples, a failed update) is raised again here by
+    the next ``update`` or ``samples``; a child that died is an ``EOFError``. The settings
+    are checked here first, so a bad one is the same one-line error as
+    :class:`LiveIdentifier`'s.
 
     The child is ``python -c`` running :func:`_serve` on two pipes, not a
     :mod:`multiprocessing` child: those re-import the caller's main module, and a script
@@ -334,8 +335,18 @@ class LiveIdentifierProcess:
         return value
 
 
+#: How much lower the child's CPU priority is than its parent's (``nice``).
+CHILD_NICENESS = 10
+
+
 def _serve(commands_fd: int, replies_fd: int) -> None:
-    """The child of :class:`LiveIdentifierProcess`: one identifier, commands from a pipe."""
+    """The child of :class:`LiveIdentifierProcess`: one identifier, commands from a pipe.
+
+    It runs :data:`CHILD_NICENESS` steps nicer than the flight: on a busy host the ground
+    station's threads and a real-time firmware in the loop get the CPU first, and an update
+    that falls behind is skipped by the caller (it never holds the flight up)."""
+    if hasattr(os, "nice"):
+        os.nice(CHILD_NICENESS)
     threadpoolctl.threadpool_limits(limits=1)
     commands = Connection(commands_fd, writable=False)
     replies = Connection(replies_fd, readable=False)

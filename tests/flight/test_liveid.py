@@ -336,10 +336,11 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
     assert result.summary["live_id"]["model_file"]
 
 
-# SITL is left out: the real-time firmware beside the identification's child process loses
-# the CPU on a busy host and the flight then ends with a true link loss (seen once under load
-# in a clean-clone CI run). Live identification against SITL passed by hand (poles equal to the
-# offline model within 1e-8); docs/live-id.md.
+# SITL is left out: the real-time firmware beside the identification's child process lost the
+# CPU once on a busy host (a clean-clone CI run) and the flight ended with a true link loss. The
+# child now runs nicer than the flight (sysid.live.CHILD_NICENESS); with "sitl" added to the
+# parameters below this test passed 5 of 5 times by hand, beside one or two busy loops on
+# 2 cores (docs/live-id.md), but one flake in CI costs a landing, so it stays a hand check.
 @pytest.mark.parametrize("flight_uri", ["radio"], indirect=True)
 def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     """The same listener over cflib's radio driver (emulated dongle, 20x): updates recorded,

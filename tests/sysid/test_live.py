@@ -3,13 +3,15 @@ live model equals the offline IEM model of the same samples."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 from sysid import IOData, detrend_data, iem
 from sysid.errors import DataError, DimensionError
 from sysid.factor import build_products
-from sysid.live import LiveIdentifier
+from sysid.live import CHILD_NICENESS, LiveIdentifier, LiveIdentifierProcess
 from tests.sysid.systems import closed_loop, pbsid_example1
 
 
@@ -74,3 +76,24 @@ def test_too_few_samples_and_bad_rows_are_errors() -> None:
         live.append(u=np.ones((3, 3)), y=np.ones((3, 2)))
     with pytest.raises(DataError, match="non-finite"):
         live.append(u=np.full((1, 2), np.nan), y=np.ones((1, 2)))
+
+
+@pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX process priorities")
+def test_the_child_process_identifies_alike_at_a_lower_cpu_priority() -> None:
+    """The engine in its own interpreter gives the same model, and runs nicer than the flight
+    (a real-time firmware in the loop beside it must not be starved)."""
+    data = _experiment()
+    settings = {"n_inputs": 2, "n_outputs": 2, "order": 4, "past": 10, "future": 5,
+                "dt": data.dt}
+    child, here = LiveIdentifierProcess(**settings), LiveIdentifier(**settings)
+    try:
+        for live in (child, here):
+            live.append(u=data.u, y=data.y)
+        remote = child.update()
+        nice = os.getpriority(os.PRIO_PROCESS, child._proc.pid)
+    finally:
+        child.close()
+    assert nice == min(19, os.getpriority(os.PRIO_PROCESS, 0) + CHILD_NICENESS)
+    np.testing.assert_allclose(_sorted_poles(remote.poles), _sorted_poles(here.update().poles),
+                               atol=1e-12)
+    assert child._proc.returncode == 0
