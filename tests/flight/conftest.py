@@ -101,6 +101,12 @@ def wait_for_stop(uri: str, timeout_s: float = 5.0) -> gsim.Simulator:
                          f"stop_count {sim.vehicle.stop_count}")
 
 
+def wall_slack_s(uri: str) -> float:
+    """Extra seconds a timing bound allows on a wall-clock backend (``udp://``: SITL, real time,
+    where a busy host delays single sends); 0 where the simulation clock waits for the flight."""
+    return 0.4 if uri.startswith("udp://") else 0.0
+
+
 def plan_variant(name: str, **replace: str):
     """A shipped plan with text replaced (``old=new`` pairs given as ``{old: new}``)."""
     base = load_plan(name)

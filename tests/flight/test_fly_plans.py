@@ -20,7 +20,7 @@ from .checks import (
     check_log_blocks_jittery,
     check_setpoints,
 )
-from .conftest import BACKENDS, SIM_HOOK, SITL_COST, backends, wait_for_stop
+from .conftest import BACKENDS, SIM_HOOK, SITL_COST, backends, wait_for_stop, wall_slack_s
 
 PLANS = ["hover-check", "pitch-only", "roll-only", "yaw-only", "prbs-3axis"]
 _RADIO_COST = ("the link does not depend on the plan: hover-check checks the three 50 Hz blocks "
@@ -62,7 +62,7 @@ def test_shipped_plan_flies_and_records(name, flight_uri, tmp_path):
     quality = link["quality"][np.isfinite(link["quality"])]
     if not sitl:  # cflib's UDP driver reports no link quality
         assert len(quality) >= plan.duration / 2 and (quality == 100.0).all()  # no drop fault
-    rows = check_setpoints(s, plan, complete=True, slack_s=0.4 if sitl else 0.0)
+    rows = check_setpoints(s, plan, complete=True, slack_s=wall_slack_s(uri))
     assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
     # Phases in order, each lasting the plan's duration on the flight clock.
     phases = s["phases"].data
