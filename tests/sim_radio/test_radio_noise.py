@@ -42,11 +42,11 @@ def test_noise_gives_the_retry_statistics_of_a_real_radio(noise, n_bytes):
     arc, stats = dongle.arc, dongle.stats
     assert arc == 3
     acked = [a for a in acks if a.ack]
-    # Empty acks: the lengths the model assumes. One loaded run of the whole suite saw a 31-byte
-    # ack payload here (cause not found: a sink transfer has no reply, and the run alone or
-    # beside busy loops never shows it). Up to 2 in 2000 cannot move the counts checked below.
+    # Empty acks (the lengths the model assumes), except for the vehicle's boot banner: when its
+    # simulation thread first runs after the radio attached (a loaded host), the console text
+    # (4 CONSOLE packets, port 0) rides on the first acks; a loaded clean-clone run saw it.
     odd = [bytes(a.data) for a in acked if len(a.data) != 1]
-    assert len(odd) <= 2, odd
+    assert len(odd) <= 4 and all(d[0] >> 4 == 0 for d in odd), odd
     p = RadioNoise(**noise).p_attempt(up_bytes=n_bytes, ack_bytes=1)
     # Acked after k retries with (1 - p)^k p, failed after ARC + 1 attempts with (1 - p)^(ARC+1):
     # cflib's view (status byte) per bin, and the dongle's own count agrees with it.
