@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -44,6 +43,7 @@ from sysid import compare
 from sysid.auto import select
 from sysid.methods import get_method
 from sysid.session_io import load_session
+from tests.sim_crtp.helpers import free_udp_port
 
 BACKEND = os.environ.get("BENCH_DESIGN_BACKEND", "sim")
 RUNS = int(os.environ.get("BENCH_DESIGN_RUNS", "3" if BACKEND == "sitl" else "6"))
@@ -64,10 +64,7 @@ def _vehicle(seed: int) -> Iterator[str]:
     from groundstation.sim.sitl import SitlVehicle, find_firmware
 
     install_drivers()
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    with SitlVehicle(firmware=find_firmware(), port=port, seed=seed) as v:
+    with SitlVehicle(firmware=find_firmware(), port=free_udp_port(), seed=seed) as v:
         v.wait_ready()
         yield v.uri
 

@@ -414,10 +414,11 @@ class _Runner:
         k, begun = 0, False
         try:
             blocks = link.plan_blocks(blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S)
-            if link.toc_type(BATTERY_BLOCK[1][0]) is None:  # the SITL firmware has no pm
+            if link.toc_type(BATTERY_BLOCK[1][0]) is None:  # e.g. CrazySim's unpatched SITL
                 del self.slow_blocks[BATTERY_BLOCK[0]]
                 self.event(f"no {BATTERY_BLOCK[1][0]} in the log TOC (no power management, "
-                           "e.g. SITL firmware): battery check skipped", level="warning")
+                           "e.g. an unpatched SITL build): battery check skipped",
+                           level="warning")
             for name, (variables, period) in self.slow_blocks.items():
                 blocks += link.plan_blocks(blocks={name: variables}, period_s=period)
             if self.extra_blocks:  # altitude for the hold, at twice the setpoint rate

@@ -126,3 +126,22 @@ def test_host_stall_freezes_simulation_time(flight_uri, tmp_path):
     s = check_closed_with_stop(result)
     check_setpoints(s, plan, complete=True)  # never more than one period (+20 ms) between two
     check_airborne(s, plan)
+
+
+def test_a_firmware_without_power_management_flies_with_the_battery_check_skipped(
+        sim_uri, tmp_path, monkeypatch):
+    """A TOC without ``pm.vbat`` (CrazySim's SITL build without this project's pm patch): the
+    take-off battery check is skipped with a warning, the flight and its file are complete."""
+    from groundstation.sim.vehicle import SimVehicle
+
+    monkeypatch.setattr(SimVehicle, "LOG_VARIABLES", {
+        k: v for k, v in SimVehicle.LOG_VARIABLES.items() if k != "pm.vbat"})
+    plan, uri = load_plan("hover-check"), sim_uri()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri)
+    assert not result.aborted, result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    assert "battery" not in set(s.dropped())
+    assert any(e.text.startswith("no pm.vbat in the log TOC") and e.level == "warning"
+               for e in s.events())
+    check_setpoints(s, plan, complete=True)
