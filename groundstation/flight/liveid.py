@@ -134,7 +134,8 @@ class LiveIdListener:
 
     ``observers`` get ``begin(listener=self, streams=streams)`` once and ``update(update=)``
     (an :class:`Update`) from the worker thread; one that raises is dropped. ``status`` is a
-    one-line summary of the last update for progress displays.
+    one-line summary of the last update for progress displays; :attr:`caught_up` says whether
+    the worker has handled every batch queued so far.
     """
 
     def __init__(self, *, config: LiveIdConfig, engine: Engine,
@@ -150,6 +151,7 @@ class LiveIdListener:
         self._thread: threading.Thread | None = None
         self._wanted: set[str] = set()
         self.dropped_batches = 0
+        self._queued = self._handled = 0  # batches queued by rows(); handled by the worker
         self.updates = self.skipped = self.failed = 0
         self.status = "live id: waiting for the excitation"
         self.error = ""
@@ -215,7 +217,16 @@ class LiveIdListener:
             if len(self._inbox) == self._inbox.maxlen:
                 self.dropped_batches += 1
             self._inbox.append((stream, rows))
+            self._queued += 1
             self._wake.set()
+
+    @property
+    def caught_up(self) -> bool:
+        """Whether the worker has taken every batch queued so far and run the update that
+        came due with them (or skipped it); False while it works. A flight on a paced clock
+        (``sim://``) can wait on it to run in step with the identification (the tests do)."""
+        alive = self._thread is not None and self._thread.is_alive()
+        return not alive or self._handled >= self._queued
 
     def poll(self) -> tuple[list[tuple[str, list[tuple]]], str]:
         """Rows of the ``live_id`` stream since the last call, and (once) why the excitation
@@ -286,14 +297,17 @@ class LiveIdListener:
             self._wake.wait(0.05)
             self._wake.clear()
             stopping = self._stop.is_set()
+            queued = self._queued  # read before taking: what is handled after this pass
             self._take()
             done = self._advance(stopping=stopping)
             if done or stopping:
                 if self.ident.n_samples >= self.ident.min_samples:
                     self._count_missed()  # due times the worker was too busy for
                     self._update(final=True)
+                self._handled = queued
                 return
             self._maybe_update()
+            self._handled = queued
 
     def _take(self) -> None:
         while self._inbox:

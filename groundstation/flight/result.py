@@ -11,7 +11,7 @@ import numpy as np
 
 from groundstation.errors import FlightAborted
 
-__all__ = ["FlightResult", "block_summary"]
+__all__ = ["FlightResult", "block_summary", "setpoint_summary"]
 
 _FW_WRAP = 1 << 24  # log packets carry 24-bit firmware milliseconds
 LATENCY_ALLOWANCE_S = 0.05
@@ -58,3 +58,16 @@ def block_summary(*, fw_ms: Sequence[int], period_s: float,
         "dropped": int(np.sum(np.round(gaps / period_s) - 1)) + tail,
         "missing_at_end": tail,
     }
+
+
+def setpoint_summary(*, sent_t: Sequence[float], period_s: float, scheduled: int,
+                     planned: int) -> dict[str, Any]:
+    """Setpoints sent (flight times ``sent_t``, s), scheduled and planned, and the jitter of
+    the send period against ``period_s`` in ms (p50, p99, max)."""
+    dt = np.diff(np.asarray(sent_t, dtype=float))
+    jitter = np.abs(dt - period_s) * 1000.0 if len(dt) else np.zeros(1)
+    return {"sent": len(sent_t), "scheduled": scheduled, "planned": planned,
+            "period_s": period_s,
+            "jitter_ms": {"p50": round(float(np.percentile(jitter, 50)), 3),
+                          "p99": round(float(np.percentile(jitter, 99)), 3),
+                          "max": round(float(jitter.max()), 3)}}

@@ -33,10 +33,11 @@ closed, so a link dead before the end shows as dropped packets. A listener that 
 (with an event); the flight goes on. Without its recorder the flight aborts; a session file
 that cannot be created (folder, name) is a one-line error before take-off, nothing flown.
 
-**Sources.** A listener with ``streams()``, ``poll()``, ``finish(path=)`` (live identification,
-:mod:`groundstation.flight.liveid`) adds streams, polled after each setpoint (rows to the
-recorder only; a request to end the excitation: the plan goes on after its last excitation
-phase, no period skipped), and is finished after the stop; its entries join the summary.
+**Sources.** A listener with ``streams()``, ``poll()``, ``finish(path=)``
+(:mod:`groundstation.flight.listeners`; live identification, :mod:`groundstation.flight.liveid`)
+adds streams, polled after each setpoint (rows to the recorder only; a request to end the
+excitation: the plan goes on after its last excitation phase, no period skipped), and is
+finished after the stop; its entries join the summary.
 """
 
 from __future__ import annotations
@@ -47,13 +48,10 @@ import queue
 import threading
 import time
 from collections import defaultdict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
-import numpy as np
-
-from cfsession.schema import StreamSpec
 from cfsession.writer import event_rows, standard_streams
 from groundstation.errors import FlightAborted, GroundStationError, SessionError
 from groundstation.flight.clock import clock_for_uri
@@ -67,8 +65,9 @@ from groundstation.flight.link import (
     install_drivers,
     open_link,
 )
+from groundstation.flight.listeners import FlightListener, Listeners
 from groundstation.flight.realtime import prompt_thread_switches, signal_handlers
-from groundstation.flight.result import FlightResult, block_summary
+from groundstation.flight.result import FlightResult, block_summary, setpoint_summary
 from groundstation.flight.safety import RateLimits
 from groundstation.plan import Plan, Schedule, load_plan
 from groundstation.plan.altitude import AltitudeHold
@@ -93,18 +92,6 @@ def altitude_block_period(setpoint_period_s: float) -> float:
     return max(0.01, round(setpoint_period_s / 2, 2))
 
 
-class FlightListener(Protocol):
-    """Receives a flight as it happens (the recorder, the live view, progress display)."""
-
-    def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None: ...
-
-    def rows(self, stream: str, rows: Sequence[tuple]) -> None:
-        """Rows of ``stream``: tuples in the stream's field order, ``host_time`` first."""
-        ...
-
-    def end(self, *, summary: Mapping[str, Any]) -> None: ...
-
-
 class _Runner:
     """One flight; see the module docstring. Use :func:`fly_plan`."""
 
@@ -114,8 +101,8 @@ class _Runner:
                  tag: str = "") -> None:
         self.plan, self.schedule, self.uri, self.tag = plan, schedule, uri, tag
         self.recorder, self.limits, self.tick_hook = recorder, limits, tick_hook
-        self.listeners: list[FlightListener] = [recorder, *listeners]
-        self.sources: list[Any] = [x for x in listeners if hasattr(x, "poll")]
+        self.listeners = Listeners(recorder=recorder, others=listeners,
+                                   on_error=self._listener_failed)
         self.end_excitation, self.cut = "", {}  # a source's request; what was skipped
         self.connect_timeout_s = connect_timeout_s
         # the only hand-off from cflib's threads: log rows, link events, aborts
@@ -218,34 +205,18 @@ class _Runner:
                 self._cause(f"limit: gyro.{'xyz'[i]} = {v:.0f} deg/s beyond "
                             f"{lim.max_rate_deg_s:g} deg/s for {lim.samples} samples")
 
-    def _call(self, listener: FlightListener, method: str, **kw: Any) -> Any:
-        try:
-            return getattr(listener, method)(**kw)
-        except Exception as exc:
-            self.listeners.remove(listener)
-            if listener in self.sources:
-                self.sources.remove(listener)
-            what = f"{type(listener).__name__}.{method} failed ({type(exc).__name__}: {exc})"
-            log.exception("listener %s", what)
-            if listener is self.recorder:
-                self._cause(f"recording failed: {what}")
-            else:
-                self.event(f"{what}; listener dropped, flight continues", level="error")
-        return None
-
-    def _from_sources(self, method: str, **kw: Any) -> list[Any]:
-        return [x for x in (self._call(s, method, **kw) for s in list(self.sources)) if x]
+    def _listener_failed(self, what: str, recorder: bool) -> None:
+        if recorder:
+            self._cause(f"recording failed: {what}")
+        else:
+            self.event(f"{what}; listener dropped, flight continues", level="error")
 
     def dispatch(self) -> None:
-        for batches, reason in self._from_sources("poll"):
-            for stream, rows in batches:  # the sources' own streams: into the file only
-                if rows and self.recorder in self.listeners:
-                    self._call(self.recorder, "rows", stream=stream, rows=rows)
-            self.end_excitation = self.end_excitation or reason
+        """The sources polled, then every pending row (events of a failed poll included)."""
+        reason = self.listeners.poll()  # always polled: the sources' rows are recorded
+        self.end_excitation = self.end_excitation or reason
         pending, self.pending = self.pending, defaultdict(list)
-        for stream, rows in pending.items():
-            for listener in list(self.listeners):
-                self._call(listener, "rows", stream=stream, rows=rows)
+        self.listeners.deliver(pending)
 
     # ------------------------------------------------------------------ commander
     def send(self, sp: tuple[float, float, float, int], *, phase_id: int, tick: int) -> None:
@@ -427,7 +398,7 @@ class _Runner:
             self.block_periods = {b.name: b.period_s for b in blocks}
             meta = {**link.metadata(), **self._plan_metadata()}
             streams = [*(b.spec() for b in blocks), *standard_streams()]
-            own = [spec for specs in self._from_sources("streams") for spec in specs]
+            own = [spec for specs in self.listeners.from_sources("streams") for spec in specs]
             try:  # the file first: a flight that cannot be recorded is not flown
                 self.recorder.begin(streams=[*streams, *own], metadata=meta)
             except (GroundStationError, SessionError) as exc:
@@ -437,8 +408,7 @@ class _Runner:
                 raise FlightAborted(f"cannot record to {self.recorder.path} "
                                     f"({type(exc).__name__}: {exc}); nothing flown") from None
             begun = True
-            for listener in [x for x in self.listeners if x is not self.recorder]:
-                self._call(listener, "begin", streams=streams, metadata=meta)
+            self.listeners.begin(streams=streams, metadata=meta)
             link.start_blocks(blocks)
             try:
                 if self.preflight():
@@ -463,14 +433,14 @@ class _Runner:
             self.t_close = self.now()
             link.close()
             self.collect()
-            finished = self._from_sources("finish", path=self.recorder.path) if begun else []
+            finished = (self.listeners.from_sources("finish", path=self.recorder.path)
+                        if begun else [])
             summary = self.summary()
             for entries in finished:
                 summary.update(entries)
             if begun:
                 self.dispatch()
-                for listener in list(self.listeners):
-                    self._call(listener, "end", summary=summary)
+                self.listeners.end(summary=summary)
         return FlightResult(path=self.recorder.path, summary=summary,
                             cause=self.causes[0] if self.causes else "")
 
@@ -499,9 +469,6 @@ class _Runner:
 
     def summary(self) -> dict[str, Any]:
         """Duration, packets per block, setpoint count and period jitter, cause, file."""
-        period = self.schedule.period
-        dt = np.diff(np.asarray(self.sent_t))
-        jitter = np.abs(dt - period) * 1000.0 if len(dt) else np.zeros(1)
         end = self.t_close if math.isfinite(self.t_close) else self.now()
         blocks = {name: block_summary(fw_ms=self.fw_ms[name], period_s=p,
                                       silence_s=end - self.last_block.get(name, end))
@@ -515,15 +482,9 @@ class _Runner:
             "cause": self.causes[0] if self.causes else "",
             **({"excitation_cut": self.cut} if self.cut else {}),
             "blocks": blocks,
-            "setpoints": {
-                "sent": len(self.sent_t),
-                "scheduled": self.n_scheduled,
-                "planned": len(self.schedule),
-                "period_s": period,
-                "jitter_ms": {"p50": round(float(np.percentile(jitter, 50)), 3),
-                              "p99": round(float(np.percentile(jitter, 99)), 3),
-                              "max": round(float(jitter.max()), 3)},
-            },
+            "setpoints": setpoint_summary(sent_t=self.sent_t, period_s=self.schedule.period,
+                                          scheduled=self.n_scheduled,
+                                          planned=len(self.schedule)),
         }
 
 
