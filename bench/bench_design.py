@@ -8,7 +8,11 @@ time, about 2 minutes a flight; there the third plan, "fits only", is left out).
    command itself): the design. Once more with ``--max-saturation 100``: the
    amplitudes the fits alone ask for, even where the flown motors were at their limits.
 2. Held-out validation flights, flown once: ``prbs-3axis`` advanced 250 chips (all axes) and
-   ``yaw-only`` (the thesis' yaw validation: PRBS, then a step).
+   ``yaw-only`` (the thesis' yaw validation: PRBS, then a step). When the design sets firmware
+   parameters (``[parameters]``: the attitude D term of an axis whose motor log was aliased,
+   ``groundstation.plan.aliasing``), both are flown a second time with them ("... D off"):
+   a validation flight whose logged input is aliased cannot show any model's quality on that
+   axis, so those are the validation flights that can.
 3. For each of :data:`RUNS` simulator seeds, fly the default plan and the two designed plans
    (same length, same seed), identify a model from each flight
    in two ways (the thesis' order 8, past 60, future 17; and chosen by validation on the
@@ -37,7 +41,7 @@ import numpy as np
 from cfsession import open_session
 from groundstation.cli import main as groundstation
 from groundstation.flight import fly_plan
-from groundstation.plan import Plan, load_plan
+from groundstation.plan import Plan, load_plan, parse_plan
 from groundstation.plan.variants import advance_prbs
 from sysid import compare
 from sysid.auto import select
@@ -130,10 +134,13 @@ def main() -> int:
             except SystemExit as exc:
                 return int(exc.code or 1)
             plans[label] = load_plan(path)
-        vals = {"3-axis": load_session(_fly(advance_prbs(base, chips=250), out=out, seed=3),
-                                       window="excitation"),
-                "yaw-only": load_session(_fly(load_plan("yaw-only"), out=out, seed=4),
-                                         window="excitation")}
+        val_plans = {"3-axis": advance_prbs(base, chips=250), "yaw-only": load_plan("yaw-only")}
+        params = plans["designed"].parameters
+        if params:
+            val_plans |= {f"{k} D off": _with_parameters(p, params)
+                          for k, p in list(val_plans.items())}
+        vals = {k: load_session(_fly(p, out=out, seed=3 + i), window="excitation")
+                for i, (k, p) in enumerate(val_plans.items())}
         # fits[plan][how][val][measure] -> list of (3,) arrays, one per run
         fits: dict = {}
         for run in range(RUNS):
@@ -151,6 +158,13 @@ def main() -> int:
     return _report(fits)
 
 
+def _with_parameters(plan: Plan, params: tuple[tuple[str, float], ...]) -> Plan:
+    """``plan`` flown with the firmware parameters ``params`` (a ``[parameters]`` table)."""
+    table = "".join(f"{name} = {value!r}\n" for name, value in params)
+    return parse_plan(text=f"{plan.text}\n[parameters]\n{table}", source=plan.source,
+                      name=plan.name)
+
+
 def _report(fits: dict) -> int:
     print(f"median over {RUNS} flights of each plan ({BACKEND} seeds 10..{9 + RUNS}); fit % of "
           "gyro.x / gyro.y / gyro.z (roll, pitch, yaw rate) on held-out flights")
@@ -158,7 +172,7 @@ def _report(fits: dict) -> int:
     for how, what in (("thesis", "order 8, past 60, future 17"),
                       ("auto", "chosen by validation (sysid identify)")):
         print(f"identification: {what}")
-        for vname in ("3-axis", "yaw-only"):
+        for vname in fits["default"][how]:
             for measure in ("window", "1-step"):
                 runs = {p: np.asarray(fits[p][how][vname][measure]) for p in fits}
                 med = {p: np.median(r, axis=0) for p, r in runs.items()}

@@ -23,6 +23,7 @@ from rich.table import Table
 from cfcommon.cli import FiniteFloat, check_output, output_console
 from groundstation.errors import GroundStationError, PlanError
 from groundstation.plan import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan, parse_plan
+from groundstation.plan.aliasing import axis_shares
 from groundstation.plan.design import (
     MAX_SATURATION,
     ModelFacts,
@@ -106,6 +107,7 @@ def summarize(plan: Plan, schedule: Schedule) -> dict[str, Any]:
         "hover_thrust": plan.hover_thrust,
         "vehicle": vars(plan.vehicle),
         "safety": vars(plan.safety),
+        "parameters": dict(plan.parameters),
         "phases": phases,
         "prbs": prbs,
         "warnings": warnings,
@@ -175,6 +177,9 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
         else "stop the motors"
     )
     console.print(f"on abort: {abort}")
+    if s["parameters"]:
+        console.print("firmware parameters for the flight (restored after it): " + ", ".join(
+            f"{escape(k)} = {v:g}" for k, v in s["parameters"].items()))
     for w in s["warnings"]:
         console.print(f"[yellow]warning:[/] {escape(w)}")
 
@@ -319,21 +324,25 @@ def _session_plan(path: Path) -> Plan:
                       name=name if isinstance(name, str) and name else "flown")
 
 
-def _measured(model: Any, sessions: tuple[Path, ...]) -> tuple[dict[str, float], str, float]:
+def _measured(model: Any, sessions: tuple[Path, ...]
+              ) -> tuple[dict[str, float], str, float, dict[str, float]]:
     """On ``sessions``: the mean fit per output, simulation over 2 s windows (initial state
-    estimated per window) and 1-step prediction, as ``sysid compare`` reports them, and the
-    share of samples with an input at its limit (:func:`groundstation.plan.design.saturated`)."""
+    estimated per window) and 1-step prediction, as ``sysid compare`` reports them, the
+    share of samples with an input at its limit (:func:`groundstation.plan.design.saturated`)
+    and the top-band share of each axis' motor combination
+    (:func:`groundstation.plan.aliasing.axis_shares`)."""
     from sysid import compare, detrend_data
     from sysid.errors import SysIdError
     from sysid.session_io import load_experiments
     from sysid.validate import simulation_window
 
-    window, one, at = [], [], []
+    window, one, at, inputs = [], [], [], []
     for path in sessions:
         try:
             raw = load_experiments(path, inputs=model.input_names, outputs=model.output_names,
                                    window="auto", dt=model.dt, detrend=None)
             at += [saturated(d.u) for d in raw]
+            inputs += [d.u for d in raw]
             data = [detrend_data(d)[0] for d in raw]
             win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in data))
             window.append(np.ravel(compare(model, data, window=win, warn=False).fit))
@@ -347,7 +356,28 @@ def _measured(model: Any, sessions: tuple[Path, ...]) -> tuple[dict[str, float],
                       if n.startswith("gyro") or len(names) <= 3)
     return ({n: float(f) for n, f in zip(names, w, strict=True)},
             f"2 s windows on {len(sessions)} flown session(s); window/1-step: {shown}",
-            float(np.concatenate(at).mean()))
+            float(np.concatenate(at).mean()),
+            axis_shares(inputs, input_names=model.input_names))
+
+
+def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
+    """The firmware parameters recorded at connect in the flown sessions (``group.name``:
+    value; the last session's value where they differ)."""
+    from cfsession import open_session
+
+    out: dict[str, float] = {}
+    for path in sessions:
+        params = open_session(path).meta.get("params")
+        if isinstance(params, str):  # stored as JSON text
+            try:
+                params = json.loads(params)
+            except ValueError:
+                params = None
+        for group, values in (params.items() if isinstance(params, dict) else ()):
+            for name, value in (values.items() if isinstance(values, dict) else ()):
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    out[f"{group}.{name}"] = float(value)
+    return out
 
 
 @command.command("design", short_help="Design the next flight's excitation from a model.")
@@ -392,12 +422,13 @@ def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
         model = load(model_path)
     except SysIdError as exc:
         raise GroundStationError(str(exc).splitlines()[0]) from None
-    fits, fit_source, share = _measured(model, flown) if flown else (None, "", None)
+    fits, fit_source, share, aliasing = (_measured(model, flown) if flown
+                                         else (None, "", None, None))
     facts = ModelFacts.from_model(model, source=model_path.name, fits=fits,
                                   fit_source=fit_source)
     result = design_plan(base, facts, name=out.stem, flown=_flown_seeds([base, *flown_plans]),
                          saturation=share, max_saturation=max_saturation / 100,
-                         source=str(out))
+                         aliasing=aliasing, firmware=_flown_firmware(flown), source=str(out))
     out.write_text(result.plan.text, encoding="utf-8")
     console = output_console()
     for note in result.notes:

@@ -66,6 +66,7 @@ from groundstation.flight.link import (
     open_link,
 )
 from groundstation.flight.listeners import FlightListener, Listeners
+from groundstation.flight.params import ParamChange, check_parameters, write_parameters
 from groundstation.flight.realtime import prompt_thread_switches, signal_handlers
 from groundstation.flight.result import FlightResult, block_summary, setpoint_summary
 from groundstation.flight.safety import RateLimits
@@ -136,6 +137,7 @@ class _Runner:
         self.slow_blocks = {name: (variables, period)
                             for name, variables, period in (BATTERY_BLOCK, ATTITUDE_BLOCK)}
         self.altitude_m: float | None = None  # last logged altitude for the altitude hold
+        self.params: list[ParamChange] = []  # the plan's [parameters], once written
 
     # ------------------------------------------------------------------ helpers
     def now(self) -> float:
@@ -396,7 +398,10 @@ class _Runner:
                 period = altitude_block_period(self.schedule.period)
                 blocks += link.plan_blocks(blocks=self.extra_blocks, period_s=period)
             self.block_periods = {b.name: b.period_s for b in blocks}
-            meta = {**link.metadata(), **self._plan_metadata()}
+            changes = check_parameters(link.cf, self.plan.parameters)  # before any file
+            meta = {**link.metadata(), **self._plan_metadata(),
+                    **({"plan_parameters": {c.name: {"value": c.value, "was": c.old}
+                                            for c in changes}} if changes else {})}
             streams = [*(b.spec() for b in blocks), *standard_streams()]
             own = [spec for specs in self.listeners.from_sources("streams") for spec in specs]
             try:  # the file first: a flight that cannot be recorded is not flown
@@ -411,7 +416,7 @@ class _Runner:
             self.listeners.begin(streams=streams, metadata=meta)
             link.start_blocks(blocks)
             try:
-                if self.preflight():
+                if self.write_params(changes) and self.preflight():
                     k = self.fly()
             except Exception as exc:
                 log.exception("flight runner error")
@@ -430,6 +435,8 @@ class _Runner:
         finally:
             if begun and not self.stopped:  # every path out ends with the stop
                 self.last_stop()
+            if self.params:
+                self.restore_params()
             self.t_close = self.now()
             link.close()
             self.collect()
@@ -443,6 +450,37 @@ class _Runner:
                 self.listeners.end(summary=summary)
         return FlightResult(path=self.recorder.path, summary=summary,
                             cause=self.causes[0] if self.causes else "")
+
+    def write_params(self, changes: list[ParamChange]) -> bool:
+        """The plan's ``[parameters]`` written (each confirmed), with an event; False after a
+        cause (nothing is flown then)."""
+        if not changes:
+            return True
+        self.params = changes  # restored after the stop, even if only some were written
+        try:
+            write_parameters(self.link.cf, [(c.name, c.value) for c in changes])
+        except GroundStationError as exc:
+            self._cause(f"plan [parameters]: {exc}")
+            return False
+        self.event("parameters set for the flight: " + ", ".join(
+            f"{c.name} = {c.value:g} (was {c.old:g})" for c in changes))
+        return True
+
+    def restore_params(self) -> None:
+        """The firmware's values from before the flight written back (after the stop)."""
+        names = ", ".join(f"{c.name} = {c.old:g}" for c in self.params)
+        if self.link.lost or self.silent or self.link.stuck:
+            self.event(f"parameters not restored (no link): {names} until the Crazyflie "
+                       "restarts", level="warning", source="safety")
+            return
+        try:
+            write_parameters(self.link.cf, [(c.name, c.old) for c in self.params])
+        except Exception as exc:
+            log.exception("restoring parameters failed")
+            self.event(f"parameters not restored ({exc}): {names} until the Crazyflie "
+                       "restarts", level="warning", source="safety")
+            return
+        self.event(f"parameters restored: {names}")
 
     def _tail(self, seconds: float = 0.5) -> None:
         """Keep recording a moment after the stop so the file shows the motors at rest."""

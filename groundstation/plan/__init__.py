@@ -46,6 +46,7 @@ from groundstation.plan.sections import (
     check_thrust,
     read_altitude_hold,
     read_live_id,
+    read_parameters,
     read_phase,
     read_safety,
     read_vehicle,
@@ -84,6 +85,7 @@ _TOP_KEYS = (
     "safety",
     "altitude_hold",
     "live_id",
+    "parameters",
     "phase",
 )
 
@@ -103,6 +105,7 @@ class Plan:
     phases: tuple[PhaseSpec, ...]
     altitude_hold: AltitudeHoldConfig | None = None
     live_id: LiveIdConfig | None = None  # [live_id]: identify while flying (docs/live-id.md)
+    parameters: tuple[tuple[str, float], ...] = ()  # [parameters]: ("group.name", value)
 
     @property
     def n_setpoints(self) -> int:
@@ -221,6 +224,8 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     )
     raw_live = top.get("live_id", dict, default=None)
     live_id = None if raw_live is None else read_live_id(TomlTable(src, ("live_id",), raw_live))
+    raw_params = top.get("parameters", dict, default={})
+    parameters = read_parameters(TomlTable(src, ("parameters",), raw_params))
     raw_phases = top.get("phase", list)
     if len(raw_phases) < 2:
         raise src.error(("phase",), "a plan needs a takeoff and a landing [[phase]]; add them")
@@ -248,6 +253,7 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
         phases=tuple(phases),
         altitude_hold=altitude_hold,
         live_id=live_id,
+        parameters=parameters,
     )
     log.debug("plan %s: %d phases, %d setpoints", plan.name, len(phases), plan.n_setpoints)
     return plan

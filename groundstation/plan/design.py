@@ -21,13 +21,18 @@ written is the plan checked. The rules, with their equations, are in ``docs/flig
   a nonlinearity no linear model explains. The motors' range is then shared out instead: an
   axis explained better than the worst gets :math:`a = a_0 (1 - 0.5 (w_{worst} - w))`, the
   worst keeps :math:`a_0`;
-* seeds as far along the m-sequence from every flown start as the axes' spacing allows.
+* seeds as far along the m-sequence from every flown start as the axes' spacing allows;
+* an axis whose logged motor combination is aliased in the flown sessions (more than 15 % of
+  its power in the top third of the band, with the firmware's attitude D term on that axis:
+  :mod:`groundstation.plan.aliasing`) flies with that D term at 0 (``[parameters]``, restored
+  after the flight).
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -35,8 +40,9 @@ import numpy as np
 
 from groundstation.errors import PlanError
 from groundstation.plan import Plan, parse_plan
+from groundstation.plan.aliasing import d_term_changes
 from groundstation.plan.excitation import LFSR_TAPS, prbs_shift
-from groundstation.plan.toml import dotted, key_lines, set_keys
+from groundstation.plan.toml import dotted, ensure_tables, key_lines, set_keys
 from groundstation.plan.variants import advanced_seed
 
 __all__ = ["AXIS_OUTPUTS", "MAX_SATURATION", "Change", "Design", "ModelFacts", "choose_seeds",
@@ -231,7 +237,9 @@ def choose_seeds(*, register_length: int, n_axes: int, flown: set[tuple[int, int
 def _fmt(value: Any) -> str:
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    return f"{value:.1f}" if isinstance(value, float) else str(value)
+    if isinstance(value, float):
+        return f"{value:.1f}" if value == round(value, 1) else f"{value:.4g}"
+    return str(value)
 
 
 def _strip_comment(line: str) -> str:
@@ -280,13 +288,16 @@ def _axis_fit(facts: ModelFacts, axis: str) -> tuple[str, float | None]:
 
 def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[int, int]],
                 saturation: float | None = None, max_saturation: float = MAX_SATURATION,
-                source: str = "") -> Design:
+                aliasing: Mapping[str, float] | None = None,
+                firmware: Mapping[str, float] | None = None, source: str = "") -> Design:
     """The next flight: ``plan``'s PRBS re-timed, re-scaled and re-seeded from ``facts`` (module
     docstring); ``flown`` holds ``(register_length, seed)`` of every PRBS already flown (the
     ``plan``'s own are added),
     ``saturation`` the share of the flown excitation's samples with an input at its limit (None:
-    not measured); above ``max_saturation`` no amplitude is raised. ``source`` names the new
-    plan in errors (its file)."""
+    not measured); above ``max_saturation`` no amplitude is raised. ``aliasing``: the top-band
+    share of each axis' motor combination in the flown sessions
+    (:func:`groundstation.plan.aliasing.axis_shares`), ``firmware`` the flown firmware's
+    parameters (``group.name``: value). ``source`` names the new plan in errors (its file)."""
     rate = plan.setpoint_rate_hz
     flown = set(flown) | {(e.register_length, e.seed) for p in plan.phases
                           for e in p.excitation if e.signal == "prbs"}  # never fly them again
@@ -354,6 +365,8 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
             changes.append(Change((*base, "seed"), seed, e.seed,
                                   f"{max(1, ((1 << n) - 1) // len(chains))} chips from the "
                                   f"other axes; {far}"))
+    changes += [Change(*c) for c in d_term_changes(plan, aliasing=aliasing or {},
+                                                   firmware=firmware or {})]
     changes = [replace(c, why=f"{c.why}; was {_fmt(c.old)}") for c in changes]
     fits_text = ", ".join(f"{k} {v}" for k, v in fits_used.items())
     notes = (f"designed from {facts.source} by `groundstation plan design` (from {plan.name})",
@@ -362,12 +375,19 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
              sv_note, sat_note
              + ("; no amplitude raised (more would be clipped), the better-explained axes "
                 "lowered to leave the worst the motors' room" if clipped else ""),
+             "motor logs: " + (", ".join(f"{a} {100 * v:.1f} %" for a, v in aliasing.items())
+                               + " of each axis' power in the top third of the band"
+                               if aliasing else "not measured (no flown session, or the "
+                               "model's inputs are not motor.m1..m4)"),
              "rules and equations: docs/flightplans.md, 'Designing the next flight'")
     header = "".join(f"{MARK} {n}\n" for n in notes)
     earlier = f"{MARK} (earlier design)"
     kept = "".join(ln.replace(MARK, earlier) if MARK in ln and earlier not in ln else ln
                    for ln in plan.text.splitlines(keepends=True)
                    if not ln.lstrip().startswith(MARK))  # an earlier design's notes
+    for c in changes:
+        if c.path[0] == "parameters":
+            kept = ensure_tables(kept, path=c.path[:-1])
     text = header + set_keys(kept, edits=[(c.path, c.value, c.why) for c in changes], mark=MARK)
     new = parse_plan(text=text, source=source or f"{name} (designed)", name=name)
     _verify(new, changes)
@@ -383,7 +403,14 @@ def _raw_table(plan: Plan, path: tuple) -> dict:
 
 def _verify(plan: Plan, changes: list[Change]) -> None:
     """Every designed value is in the parsed plan (never fly what was not designed)."""
+    params = dict(plan.parameters)
     for ch in changes:
+        if ch.path[0] == "parameters":
+            got = params.get(".".join(ch.path[1:]))
+            if got is None or not math.isclose(got, ch.value):
+                raise PlanError(f"{plan.source}: could not write {dotted(ch.path)} (got {got}, "
+                                f"wanted {ch.value})")
+            continue
         if ch.path[0] != "phase":
             continue
         spec = next(e for e in plan.phases[ch.path[1]].excitation if e.axis == ch.path[2])

@@ -373,3 +373,30 @@ def read_live_id(t: TomlTable) -> LiveIdConfig:
                           f"{len(outputs)} outputs = {(cfg.future - 1) * len(outputs)}; lower "
                           f"the order or raise future to {-(-cfg.order // len(outputs)) + 1}")
     return cfg
+
+
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+MAX_PARAMETERS = 32
+
+
+def read_parameters(t: TomlTable) -> tuple[tuple[str, float], ...]:
+    """``[parameters]``: firmware parameters for the flight, ``GROUP.NAME = number`` (TOML's
+    dotted keys, so ``pid_attitude.yaw_kd = 0.0`` or a ``[parameters.pid_attitude]`` table).
+    Returned as ``("group.name", value)`` pairs in file order. The runner sets them after
+    connecting, checked against the firmware's TOC, and restores the old values after the
+    stop (:mod:`groundstation.flight.runner`)."""
+    out: list[tuple[str, float]] = []
+    for group, names in t.data.items():
+        path = (*t.path, group)
+        if not _IDENT.fullmatch(group) or not isinstance(names, dict):
+            raise t.src.error(path, f"{group!r} is not a parameter group table; write "
+                              "GROUP.NAME = number, e.g. pid_attitude.yaw_kd = 0.0")
+        for name in names:
+            if not _IDENT.fullmatch(name) or isinstance(names[name], dict):
+                raise t.src.error((*path, name), f"'{group}.{name}' is not a firmware "
+                                  "parameter name; write GROUP.NAME = number")
+            value = TomlTable(t.src, path, names).get(name, float)
+            out.append((f"{group}.{name}", value))
+    if len(out) > MAX_PARAMETERS:
+        raise t.src.error(t.path, f"{len(out)} parameters; at most {MAX_PARAMETERS}")
+    return tuple(out)

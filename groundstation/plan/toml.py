@@ -151,6 +151,21 @@ def set_keys(text: str, *, edits: Sequence[tuple[tuple, Any, str]], mark: str = 
     return doc.as_string()
 
 
+def ensure_tables(text: str, *, path: tuple[str, ...]) -> str:
+    """``text`` with the tables of ``path`` (e.g. ``("parameters", "pid_attitude")``) added
+    where missing, at the end of the file (what :func:`set_keys` needs to add a key there);
+    ``text`` itself when they all exist."""
+    doc = tomlkit.parse(text)
+    table: Any = doc
+    changed = False
+    for k, part in enumerate(path):
+        if part not in table:
+            table[part] = tomlkit.table(is_super_table=k < len(path) - 1)
+            changed = True
+        table = table[part]
+    return doc.as_string() if changed else text
+
+
 def dotted(path: tuple) -> str:
     return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 
 import numpy as np
@@ -273,7 +274,7 @@ def test_a_hand_made_schedule_beyond_the_limits_is_refused():
 
 def test_the_documented_example_and_error_are_what_the_code_does():
     doc = (SHIPPED_PLANS_DIR.parent / "docs" / "flightplans.md").read_text()
-    example = doc.split("```toml\n", 1)[1].split("```", 1)[0]
+    example = doc.split("## Example", 1)[1].split("```toml\n", 1)[1].split("```", 1)[0]
     raw = tomllib.loads(example)
     expected = round(sum(p["duration"] for p in raw["phase"]) * raw["setpoint_rate_hz"])
     assert len(parse_plan(text=example).compile()) == expected
@@ -285,3 +286,27 @@ def test_the_documented_example_and_error_are_what_the_code_does():
             source="flightplans/prbs-3axis.toml",
         )
     assert str(info.value) == documented
+
+
+@pytest.mark.parametrize(("extra", "expect"), [
+    ("[parameters]\npid_attitude.yaw_kd = 0.0\nstabilizer.estimator = 2\n",
+     (("pid_attitude.yaw_kd", 0.0), ("stabilizer.estimator", 2.0))),
+    ("[parameters.pid_rate]\nyaw_kp = 100\n", (("pid_rate.yaw_kp", 100.0),)),
+    ("", ()),
+])
+def test_parameters_are_read_in_file_order(extra, expect):
+    assert parse_plan(text=BASE + "\n" + extra).parameters == expect
+
+
+@pytest.mark.parametrize(("extra", "needle"), [
+    ("[parameters]\nyaw_kd = 0.0\n", "'yaw_kd' is not a parameter group table"),
+    ("[parameters]\npid.a.b = 1\n", "'pid.a' is not a firmware parameter name"),
+    ('[parameters]\npid.kd = "0"\n', "'0' is not a number"),
+    ("[parameters]\npid.kd = inf\n", "not a finite number"),
+    ("[parameters]\npid.kd = true\n", "True is not a number"),
+    ("[parameters]\n" + "".join(f"g.p{i} = 1\n" for i in range(33)), "33 parameters; at most 32"),
+])
+def test_bad_parameters_name_key_and_line(extra, needle):
+    with pytest.raises(PlanError, match=re.escape(needle)) as err:
+        parse_plan(text=BASE + "\n" + extra, source="p.toml")
+    assert str(err.value).startswith("p.toml:") and "\n" not in str(err.value)

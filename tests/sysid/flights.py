@@ -51,15 +51,17 @@ def known_system(seed: int = 6) -> StateSpaceModel:
 def write_flight(path: Path, *, system: StateSpaceModel, seed: int, n: int = 2500,
                  n_drop: int = 5, noise_std: float = 0.05,
                  phases: list[tuple[float, str, str]] | None = None,
-                 metadata: dict[str, object] | None = None) -> Flight:
+                 metadata: dict[str, object] | None = None,
+                 pwm_extra: np.ndarray | None = None) -> Flight:
     """Simulate ``system`` in closed loop for ``n`` samples and write it as a session.
 
     ``phases`` ``(host time, name, kind)`` replace takeoff/excitation/landing (e.g. the
     ``ground-0``/``airborne-1``/... of an imported log); ``metadata`` adds root attributes
-    (``uri``, ``plan_name``, ...) to the default ``uri``."""
+    (``uri``, ``plan_name``, ...) to the default ``uri``; ``pwm_extra`` (n, 4) is added to the
+    logged motor commands only (what the log saw but the vehicle did not feel)."""
     rng = np.random.default_rng(seed)
     exp = closed_loop(system, n_samples=n, rng=rng, gain=0.25, noise_std=noise_std)
-    pwm = np.round(PWM_MID + PWM_GAIN * exp.data.u)
+    pwm = np.round(PWM_MID + PWM_GAIN * exp.data.u + (0 if pwm_extra is None else pwm_extra))
     values = {"motors": pwm, "acc": exp.data.y[:, :3].astype(np.float32).astype(float),
               "gyro": exp.data.y[:, 3:].astype(np.float32).astype(float)}
     specs = [

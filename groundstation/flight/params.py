@@ -1,0 +1,97 @@
+"""Firmware parameters a plan sets for its flight (``[parameters]``), and putting them back.
+
+:func:`check_parameters` runs before anything is recorded: every name must be in the firmware's
+parameter TOC, writable, and an integer where the firmware's type is one; the old values come
+from the values cflib read at connect. :func:`write_parameters` writes values and waits for the
+firmware to confirm each (its reply updates cflib's cache and calls the update callback). The
+runner writes the plan's values before take-off and the old ones after the stop, on every path
+out of the flight (:mod:`groundstation.flight.runner`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from groundstation.errors import LinkError
+
+__all__ = ["CONFIRM_TIMEOUT_S", "ParamChange", "check_parameters", "write_parameters"]
+
+CONFIRM_TIMEOUT_S = 2.0
+"""Longest wait for the firmware to confirm one written parameter."""
+_FLOAT_TYPES = ("float", "double", "FP16")
+
+
+@dataclass(frozen=True)
+class ParamChange:
+    """One parameter of the plan: ``name`` (``group.name``), the plan's ``value``, the firmware's
+    value before the flight (``old``) and its C type."""
+
+    name: str
+    value: float | int
+    old: float | int
+    ctype: str
+
+
+def check_parameters(cf: Any, wanted: Sequence[tuple[str, float]]) -> list[ParamChange]:
+    """The plan's ``(name, value)`` pairs against ``cf``'s parameter TOC (a connected cflib
+    ``Crazyflie``). Raises :class:`LinkError` (one line) for a name the firmware lacks, a
+    read-only one, or a fraction for an integer parameter."""
+    changes = []
+    for name, value in wanted:
+        element = cf.param.toc.get_element_by_complete_name(name)
+        if element is None:
+            raise LinkError(f"plan [parameters]: the firmware has no parameter {name!r}; "
+                            "remove it or check its name (cfclient's Parameters tab lists them)")
+        if element.get_readable_access() == "RO":
+            raise LinkError(f"plan [parameters]: {name} is read-only in the firmware")
+        ctype = element.ctype
+        if ctype not in _FLOAT_TYPES:
+            if not float(value).is_integer():
+                raise LinkError(f"plan [parameters]: {name} is an integer ({ctype}); "
+                                f"{value:g} is not")
+            value = int(value)
+        group, _, short = name.partition(".")
+        text = cf.param.values.get(group, {}).get(short)
+        try:
+            old: float | int = float(text) if ctype in _FLOAT_TYPES else int(text)
+        except (TypeError, ValueError):
+            raise LinkError(f"plan [parameters]: {name} was not read at connect ({text!r}); "
+                            "reconnect") from None
+        changes.append(ParamChange(name=name, value=value, old=old, ctype=ctype))
+    return changes
+
+
+def write_parameters(cf: Any, values: Sequence[tuple[str, float | int]], *,
+                     timeout_s: float = CONFIRM_TIMEOUT_S) -> None:
+    """Write each ``(name, value)`` and wait until the firmware confirms a value equal to it
+    (float parameters to float32 precision). Raises :class:`LinkError` naming the first one
+    not confirmed within ``timeout_s``."""
+    for name, value in values:
+        group, _, short = name.partition(".")
+        done = threading.Event()
+        got: list[str] = []
+
+        def confirmed(_name: str, text: str, got: list[str] = got, done=done) -> None:
+            got.append(text)
+            done.set()
+
+        cf.param.add_update_callback(group=group, name=short, cb=confirmed)
+        try:
+            cf.param.set_value(name, value)
+            ok = done.wait(timeout_s)
+        except (KeyError, AttributeError) as exc:
+            raise LinkError(f"parameter {name}: cflib refused it ({exc})") from None
+        finally:
+            cf.param.remove_update_callback(group=group, name=short, cb=confirmed)
+        try:
+            echo = float(got[-1]) if ok else math.nan
+        except ValueError:
+            echo = math.nan
+        if not math.isclose(echo, float(value), rel_tol=1e-6, abs_tol=1e-9):
+            seen = f"it answered {got[-1]!r}" if got else f"no answer in {timeout_s:g} s"
+            raise LinkError(f"parameter {name} = {value:g} not confirmed by the firmware "
+                            f"({seen})")

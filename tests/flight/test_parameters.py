@@ -1,0 +1,100 @@
+"""A plan's ``[parameters]``: set in the firmware for the flight, put back after the stop.
+
+Known truth: the firmware's own parameter values, read over a second cflib connection after
+the flight (every backend) and from the simulated vehicle during it (``sim://``).
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from cflib.crazyflie import Crazyflie
+from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
+from click.testing import CliRunner
+
+import groundstation.sim as gsim
+from groundstation.cli import main
+from groundstation.errors import LinkError
+from groundstation.flight import fly_plan
+from groundstation.plan import load_plan, parse_plan
+
+from .checks import check_closed_with_stop
+from .conftest import wait_for_stop
+
+SET = "\n[parameters]\npid_attitude.yaw_kd = 0.0\npid_rate.yaw_kp = 100\n"
+NAMES = ("pid_attitude.yaw_kd", "pid_rate.yaw_kp")
+
+
+def _plan(extra: str = SET, name: str = "hover-check"):
+    return parse_plan(text=load_plan(name).text + extra, source=f"{name}+parameters", name=name)
+
+
+def _read_back(uri: str) -> dict[str, float]:
+    with SyncCrazyflie(uri, cf=Crazyflie(rw_cache=None)) as scf:
+        return {n: float(scf.cf.param.get_value(n)) for n in NAMES}
+
+
+def _index(texts: list[str], start: str) -> int:
+    return next(i for i, t in enumerate(texts) if t.startswith(start))
+
+
+def test_parameters_are_set_for_the_flight_and_restored_after_it(flight_uri, tmp_path):
+    uri = flight_uri()
+    during: list[float] = []
+
+    def hook(k: int) -> None:
+        if k == 30 and uri.startswith("sim://"):
+            during.append(gsim.instance(uri).vehicle.read_param("pid_attitude.yaw_kd"))
+
+    result = fly_plan(plan=_plan(), out=tmp_path, uri=uri, tick_hook=hook)
+    assert not result.aborted, result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    texts = [e.text for e in s.events()]
+    set_at = _index(texts, "parameters set for the flight: pid_attitude.yaw_kd = 0 (was 0.35), "
+                           "pid_rate.yaw_kp = 100 (was 120)")
+    back = _index(texts, "parameters restored: pid_attitude.yaw_kd = 0.35, pid_rate.yaw_kp = 120")
+    assert set_at < _index(texts, "phase takeoff") < _index(texts, "stop setpoint sent") < back
+    meta = s.meta["plan_parameters"]
+    meta = json.loads(meta) if isinstance(meta, str) else meta
+    assert meta["pid_rate.yaw_kp"] == {"value": 100.0, "was": 120.0}
+    assert meta["pid_attitude.yaw_kd"]["was"] == pytest.approx(0.35)
+    assert _read_back(uri) == {"pid_attitude.yaw_kd": pytest.approx(0.35),
+                               "pid_rate.yaw_kp": 120.0}
+    if uri.startswith("sim://"):
+        assert during == [0.0]
+
+
+def test_an_aborted_flight_restores_them_after_the_stop(sim_uri, tmp_path):
+    uri = sim_uri()
+
+    def hook(k: int) -> None:
+        if k == 25:
+            raise RuntimeError("injected fault")
+
+    result = fly_plan(plan=_plan(), out=tmp_path, uri=uri, tick_hook=hook)
+    assert result.aborted and "injected fault" in result.cause
+    wait_for_stop(uri)
+    texts = [e.text for e in check_closed_with_stop(result).events()]
+    assert _index(texts, "stop setpoint sent") < _index(texts, "parameters restored")
+    assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
+
+
+@pytest.mark.parametrize(("extra", "needle"), [
+    ("\n[parameters]\npid_attitude.no_such = 1.0\n", "has no parameter 'pid_attitude.no_such'"),
+    ("\n[parameters]\nfirmware.revision0 = 1\n", "firmware.revision0 is read-only"),
+    ("\n[parameters]\nstabilizer.estimator = 1.5\n", "is an integer (uint8_t); 1.5 is not"),
+])
+def test_a_parameter_the_firmware_cannot_take_is_one_line_and_nothing_flown(
+        sim_uri, tmp_path, extra, needle):
+    uri = sim_uri()
+    with pytest.raises(LinkError, match="plan \\[parameters\\]"):
+        fly_plan(plan=_plan(extra), out=tmp_path / "api", uri=uri)
+    plan = tmp_path / "p.toml"
+    plan.write_text(_plan(extra).text, encoding="utf-8")
+    out = tmp_path / "cli"
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", sim_uri(), "--out", str(out)])
+    assert res.exit_code != 0 and needle in res.output and res.output.count("\n") == 1, res.output
+    assert not list(tmp_path.rglob("*.h5"))  # nothing recorded, nothing flown
+    assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
