@@ -15,7 +15,7 @@ its top band, but without a D term nothing is aliased).
 An axis' motor combination is the legacy mixer's column (``m1 = T - r/2 + p/2 + y``, ...).
 Its *top-band share* is the part of its power (Welch periodogram, mean removed) above 2/3 of
 the log's Nyquist frequency. Measured on 40 s PRBS flights of the real firmware in the loop:
-yaw 19-33 % with the D term and 0.1 % without; roll and pitch (no D term) 2-12 % when
+yaw 19-33 % per flight with the D term and 0.1 % without; roll and pitch (no D term) 2-12 % when
 excited, about 35 % on a yaw-only flight; ``sim://`` yaw 0.0-0.1 % (its firmware model has the
 parameter but steps its estimator with the controller).
 """
@@ -41,9 +41,10 @@ D_TERM = {"roll": "pid_attitude.roll_kd", "pitch": "pid_attitude.pitch_kd",
           "yaw_rate": "pid_attitude.yaw_kd"}
 """The attitude PID's D gain of each axis (firmware parameter)."""
 TOP_BAND = 2.0 / 3.0  # of the Nyquist frequency
-ALIAS_SHARE = 0.15
-"""Above this top-band share (with a D term) a motor combination is aliased: under the
-smallest share measured with the D term (19 %), 150 times the share without it."""
+ALIAS_SHARE = 0.05
+"""Above this top-band share (with a D term) a motor combination is aliased: a quarter of the
+smallest share measured with the D term on the firmware in the loop (18.6 %, the mean of two
+flights), 50 times the largest of a D term that aliases nothing (``sim://``, 0.1 %)."""
 _SEGMENT = 256
 
 

@@ -22,7 +22,7 @@ written is the plan checked. The rules, with their equations, are in ``docs/flig
   axis explained better than the worst gets :math:`a = a_0 (1 - 0.5 (w_{worst} - w))`, the
   worst keeps :math:`a_0`;
 * seeds as far along the m-sequence from every flown start as the axes' spacing allows;
-* an axis whose logged motor combination is aliased in the flown sessions (more than 15 % of
+* an axis whose logged motor combination is aliased in the flown sessions (more than 5 % of
   its power in the top third of the band, with the firmware's attitude D term on that axis:
   :mod:`groundstation.plan.aliasing`) flies with that D term at 0 (``[parameters]``, restored
   after the flight).

@@ -58,7 +58,7 @@ def test_sampled_d_term_pulses_are_aliased_and_means_or_no_d_term_are_not():
     names = MOTOR_INPUTS
     got = axis_shares([sampled], input_names=names)
     assert got["yaw_rate"] > 2 * ALIAS_SHARE  # the pulses, sampled at random
-    assert axis_shares([mean], input_names=names)["yaw_rate"] < ALIAS_SHARE / 1.5
+    assert axis_shares([mean], input_names=names)["yaw_rate"] < got["yaw_rate"] / 3
     assert axis_shares([clean], input_names=names)["yaw_rate"] < ALIAS_SHARE / 5
     assert got["roll"] < ALIAS_SHARE  # no D term on roll: smooth
     # inputs that are not the four motors: nothing to say
@@ -74,7 +74,7 @@ def _facts() -> ModelFacts:
 @pytest.mark.parametrize(("plan", "aliasing", "firmware", "expect"), [
     ("prbs-3axis", {"yaw_rate": 0.3, "roll": 0.02}, {"pid_attitude.yaw_kd": 0.35}, 0.35),
     ("prbs-3axis", {"yaw_rate": 0.3}, {"pid_attitude.yaw_kd": 0.0}, None),  # no D term
-    ("prbs-3axis", {"yaw_rate": 0.1}, {"pid_attitude.yaw_kd": 0.35}, None),  # not aliased
+    ("prbs-3axis", {"yaw_rate": 0.03}, {"pid_attitude.yaw_kd": 0.35}, None),  # not aliased
     ("prbs-3axis", {"yaw_rate": 0.3}, {}, None),  # firmware not known
     ("roll-only", {"yaw_rate": 0.3}, {"pid_attitude.yaw_kd": 0.35}, None),  # yaw not excited
 ])
