@@ -365,19 +365,24 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
     assert result.summary["live_id"]["model_file"]
 
 
-# SITL is left out: the real-time firmware beside the identification's child process lost the
-# CPU once on a busy host (a clean-clone CI run) and the flight ended with a true link loss. The
-# child now runs nicer than the flight (sysid.live.CHILD_NICENESS); with "sitl" added to the
-# parameters below this test passed 5 of 5 times by hand, beside one or two busy loops on
-# 2 cores (docs/live-id.md), but one flake in CI costs a landing, so it stays a hand check.
-@pytest.mark.parametrize("flight_uri", ["radio"], indirect=True)
+@pytest.mark.parametrize("flight_uri", ["radio", "sitl"], indirect=True)
 def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
-    """The same listener over cflib's radio driver (emulated dongle, 20x): updates recorded,
-    the final model saved and equal to the offline one of the recorded samples."""
+    """The same listener over cflib's radio driver (emulated dongle, 20x) and against the real
+    firmware in the loop (real time): updates recorded, the final model saved and equal to the
+    offline one of the recorded samples.
+
+    SITL runs on the wall clock beside the identification's child process: on a host busy
+    enough to starve the firmware for half a second the flight ends in a link loss (once in 20
+    runs beside a second test run, docs/live-id.md). Such a flight, and only such, is flown
+    again once on a fresh vehicle; any other failure fails."""
     plan = _plan(15.0, SMALL)
-    lid = live_id_listener(plan)
-    uri = flight_uri()
-    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid])
+    for attempt in range(2):
+        lid = live_id_listener(plan)
+        uri = flight_uri()
+        result = fly_plan(plan=plan, out=tmp_path / str(attempt), uri=uri, listeners=[lid])
+        if not (uri.startswith("udp://") and result.cause.startswith("link lost")):
+            break
+        print(f"SITL flight {attempt + 1}: {result.cause}; flying it again")
     assert not result.aborted, result.cause
     wait_for_stop(uri)
     s = open_session(result.path)
