@@ -26,7 +26,8 @@ plan differ by this much). Fails when the design is worse than the default plan 
 2 s windows, either validation flight, either identification) by more than that spread; when
 there are "D off" validation flights, on those (a flight whose logged yaw input carries pulses
 the vehicle never felt cannot rank models of the vehicle: simulated from those inputs, a model
-that ignores the yaw input scores better than one that has it right).
+that ignores the yaw input scores better than one that has it right); not at all when the
+design changed only the seeds (the same experiment, shifted along the m-sequence).
 ``BENCH_DESIGN_RUNS`` (default 6, 3 on SITL) and ``BENCH_DESIGN_SPEED`` (default 20) change the
 runs and the simulation speed.
 """
@@ -158,7 +159,16 @@ def main() -> int:
                                 vname, {}).setdefault(measure, []).append(f)
                 path.unlink()
             print(f"run {run + 1}/{RUNS} done", flush=True)
-    return _report(fits)
+    return _report(fits, same=_seeds_only(base, plans["designed"]))
+
+
+def _seeds_only(base: Plan, designed: Plan) -> bool:
+    """Whether the design changed nothing but the PRBS seeds: the same experiment, shifted."""
+    def key(plan: Plan) -> tuple:
+        return (plan.parameters, tuple((e.axis, e.signal, e.amplitude, e.register_length,
+                                        e.clock_period) for p in plan.phases
+                                       for e in p.excitation))
+    return key(base) == key(designed)
 
 
 def _with_parameters(plan: Plan, params: tuple[tuple[str, float], ...]) -> Plan:
@@ -168,7 +178,7 @@ def _with_parameters(plan: Plan, params: tuple[tuple[str, float], ...]) -> Plan:
                       name=plan.name)
 
 
-def _report(fits: dict) -> int:
+def _report(fits: dict, *, same: bool = False) -> int:
     print(f"median over {RUNS} flights of each plan ({BACKEND} seeds 10..{9 + RUNS}); fit % of "
           "gyro.x / gyro.y / gyro.z (roll, pitch, yaw rate) on held-out flights")
     ok = True
@@ -194,4 +204,9 @@ def _report(fits: dict) -> int:
                     ok &= bool(med["designed"][2] - med["default"][2] >= -(q3 - q1)[2])
     print("(on yaw-only, roll and pitch are barely excited: their fits there are not "
           "meaningful; its gyro.z is the yaw validation)")
+    if same:
+        print("the design changed only the PRBS seeds (the model explains every axis alike and "
+              "the motors were at their limits): the same experiment, so the differences above "
+              "are flight-to-flight spread; nothing to judge")
+        return 0
     return 0 if ok else 1
