@@ -375,7 +375,7 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     enough to starve the firmware for half a second the flight ends in a link loss (once in 20
     runs beside a second test run, docs/live-id.md). Such a flight, and only such, is flown
     again once on a fresh vehicle; any other failure fails."""
-    plan = _plan(15.0, SMALL)
+    plan = _plan(8.0, SMALL)
     for attempt in range(2):
         lid = live_id_listener(plan)
         uri = flight_uri()

@@ -27,7 +27,9 @@ NAMES = ("pid_attitude.yaw_kd", "pid_rate.yaw_kp")
 
 
 def _plan(extra: str = SET, name: str = "hover-check"):
-    return parse_plan(text=load_plan(name).text + extra, source=f"{name}+parameters", name=name)
+    """``name`` with a 2 s hover (the firmware in the loop flies in real time) and ``extra``."""
+    text = load_plan(name).text.replace("duration = 5.0 ", "duration = 2.0 ", 1)
+    return parse_plan(text=text + extra, source=f"{name}+parameters", name=name)
 
 
 def _read_back(uri: str) -> dict[str, float]:
