@@ -10,15 +10,19 @@ out of the flight (:mod:`groundstation.flight.runner`).
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from groundstation.errors import LinkError
+from groundstation.errors import GroundStationError, LinkError
 
-__all__ = ["CONFIRM_TIMEOUT_S", "ParamChange", "check_parameters", "write_parameters"]
+__all__ = ["CONFIRM_TIMEOUT_S", "ParamChange", "check_parameters", "restore_after_flight",
+           "set_for_flight", "write_parameters"]
+
+log = logging.getLogger(__name__)
 
 CONFIRM_TIMEOUT_S = 2.0
 """Longest wait for the firmware to confirm one written parameter."""
@@ -95,3 +99,35 @@ def write_parameters(cf: Any, values: Sequence[tuple[str, float | int]], *,
             seen = f"it answered {got[-1]!r}" if got else f"no answer in {timeout_s:g} s"
             raise LinkError(f"parameter {name} = {value:g} not confirmed by the firmware "
                             f"({seen})")
+
+
+def set_for_flight(cf: Any, changes: Sequence[ParamChange], *,
+                   event: Callable[..., None]) -> str:
+    """Write the plan's values; an event lists them. Returns "" or the cause to abort with."""
+    if not changes:
+        return ""
+    try:
+        write_parameters(cf, [(c.name, c.value) for c in changes])
+    except GroundStationError as exc:
+        return f"plan [parameters]: {exc}"
+    event("parameters set for the flight: " + ", ".join(
+        f"{c.name} = {c.value:g} (was {c.old:g})" for c in changes))
+    return ""
+
+
+def restore_after_flight(cf: Any, changes: Sequence[ParamChange], *, event: Callable[..., None],
+                         link_up: bool) -> None:
+    """Write the values from before the flight back (after the stop), with an event; never
+    raises: a failure (or no link) is a warning event saying they stay until a restart."""
+    names = ", ".join(f"{c.name} = {c.old:g}" for c in changes)
+    why = "no link"
+    if link_up:
+        try:
+            write_parameters(cf, [(c.name, c.old) for c in changes])
+            event(f"parameters restored: {names}")
+            return
+        except Exception as exc:
+            log.exception("restoring parameters failed")
+            why = str(exc)
+    event(f"parameters not restored ({why}): {names} until the Crazyflie restarts",
+          level="warning", source="safety")

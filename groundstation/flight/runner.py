@@ -66,7 +66,12 @@ from groundstation.flight.link import (
     open_link,
 )
 from groundstation.flight.listeners import FlightListener, Listeners
-from groundstation.flight.params import ParamChange, check_parameters, write_parameters
+from groundstation.flight.params import (
+    ParamChange,
+    check_parameters,
+    restore_after_flight,
+    set_for_flight,
+)
 from groundstation.flight.realtime import prompt_thread_switches, signal_handlers
 from groundstation.flight.result import FlightResult, block_summary, setpoint_summary
 from groundstation.flight.safety import RateLimits
@@ -436,7 +441,9 @@ class _Runner:
             if begun and not self.stopped:  # every path out ends with the stop
                 self.last_stop()
             if self.params:
-                self.restore_params()
+                restore_after_flight(self.link.cf, self.params, event=self.event,
+                                     link_up=not (self.link.lost or self.silent or
+                                                  self.link.stuck))
             self.t_close = self.now()
             link.close()
             self.collect()
@@ -452,35 +459,14 @@ class _Runner:
                             cause=self.causes[0] if self.causes else "")
 
     def write_params(self, changes: list[ParamChange]) -> bool:
-        """The plan's ``[parameters]`` written (each confirmed), with an event; False after a
-        cause (nothing is flown then)."""
-        if not changes:
-            return True
-        self.params = changes  # restored after the stop, even if only some were written
-        try:
-            write_parameters(self.link.cf, [(c.name, c.value) for c in changes])
-        except GroundStationError as exc:
-            self._cause(f"plan [parameters]: {exc}")
-            return False
-        self.event("parameters set for the flight: " + ", ".join(
-            f"{c.name} = {c.value:g} (was {c.old:g})" for c in changes))
-        return True
-
-    def restore_params(self) -> None:
-        """The firmware's values from before the flight written back (after the stop)."""
-        names = ", ".join(f"{c.name} = {c.old:g}" for c in self.params)
-        if self.link.lost or self.silent or self.link.stuck:
-            self.event(f"parameters not restored (no link): {names} until the Crazyflie "
-                       "restarts", level="warning", source="safety")
-            return
-        try:
-            write_parameters(self.link.cf, [(c.name, c.old) for c in self.params])
-        except Exception as exc:
-            log.exception("restoring parameters failed")
-            self.event(f"parameters not restored ({exc}): {names} until the Crazyflie "
-                       "restarts", level="warning", source="safety")
-            return
-        self.event(f"parameters restored: {names}")
+        """The plan's ``[parameters]`` written (:func:`~.params.set_for_flight`); False after a
+        cause (nothing is flown then). Restored after the stop, even if only some were
+        written."""
+        self.params = changes
+        failed = set_for_flight(self.link.cf, changes, event=self.event)
+        if failed:
+            self._cause(failed)
+        return not failed
 
     def _tail(self, seconds: float = 0.5) -> None:
         """Keep recording a moment after the stop so the file shows the motors at rest."""

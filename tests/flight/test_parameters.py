@@ -83,6 +83,20 @@ def test_an_aborted_flight_restores_them_after_the_stop(sim_uri, tmp_path):
     assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
 
 
+def test_a_lost_link_leaves_them_set_and_says_so(sim_uri, tmp_path):
+    """No link after the flight: nothing can be written back; a warning names the values the
+    firmware keeps until it restarts (they were never left unrecorded)."""
+    uri = sim_uri(cut_at=3.0)
+    result = fly_plan(plan=_plan(), out=tmp_path, uri=uri)
+    assert result.aborted and "link lost" in result.cause
+    events = [e for e in check_closed_with_stop(result).events()
+              if e.text.startswith("parameters not restored")]
+    assert len(events) == 1 and events[0].level == "warning" and events[0].source == "safety"
+    assert "pid_attitude.yaw_kd = 0.35, pid_rate.yaw_kp = 120 until the Crazyflie restarts" in (
+        events[0].text)
+    assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 100.0  # still set
+
+
 @pytest.mark.parametrize(("extra", "needle"), [
     ("\n[parameters]\npid_attitude.no_such = 1.0\n", "has no parameter 'pid_attitude.no_such'"),
     ("\n[parameters]\nfirmware.revision0 = 1\n", "firmware.revision0 is read-only"),
