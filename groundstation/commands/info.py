@@ -57,8 +57,26 @@ def describe(session: Session) -> dict[str, Any]:
             for p in session.phases()
         ],
         "events": len(session.events()),
+        **({"parameters": params} if (params := _plan_parameters(session)) else {}),
         **({"live_id": live_id(session)} if "live_id" in session else {}),
     }
+
+
+def _plan_parameters(session: Session) -> dict[str, Any]:
+    """The plan's ``[parameters]`` as flown: ``{name: {"value": v, "was": old}}`` (untrusted
+    file: anything else is left out)."""
+    raw = session.meta.get("plan_parameters")
+    if isinstance(raw, str):
+        try:
+            raw = json.loads(raw)
+        except ValueError:
+            return {}
+    if not isinstance(raw, dict):
+        return {}
+    return {str(k): v for k, v in raw.items()
+            if isinstance(v, dict) and all(isinstance(v.get(x), int | float)
+                                           and not isinstance(v.get(x), bool)
+                                           for x in ("value", "was"))}
 
 
 def live_id(session: Session) -> dict[str, Any]:
@@ -173,6 +191,9 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
+    if d.get("parameters"):
+        out.print("firmware parameters for the flight: " + escape(", ".join(
+            f"{k} = {v['value']:g} (was {v['was']:g})" for k, v in d["parameters"].items())))
     if "live_id" in d:
         for line in _live_id_text(d["live_id"]):
             out.print(escape(line))

@@ -66,6 +66,10 @@ def test_parameters_are_set_for_the_flight_and_restored_after_it(flight_uri, tmp
                                "pid_rate.yaw_kp": 120.0}
     if uri.startswith("sim://"):
         assert during == [0.0]
+    info = CliRunner().invoke(main, ["info", str(result.path)])
+    assert "firmware parameters for the flight: pid_attitude.yaw_kd = 0 (was 0.35)" in info.output
+    as_json = json.loads(CliRunner().invoke(main, ["info", str(result.path), "--json"]).stdout)
+    assert as_json["parameters"]["pid_rate.yaw_kp"] == {"value": 100.0, "was": 120.0}
 
 
 def test_an_aborted_flight_restores_them_after_the_stop(sim_uri, tmp_path):
