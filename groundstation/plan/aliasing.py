@@ -12,6 +12,10 @@ I terms stay). The check therefore needs both: a top-band share above :data:`ALI
 a D term in the flown firmware (an axis that is hardly excited has a large share of noise in
 its top band, but without a D term nothing is aliased).
 
+A log locked in phase to the estimator's steps is not detected: every sample then hits (or
+misses) the pulses alike, a bias that follows the rate rather than broadband noise
+(``docs/flightplans.md``, "Aliased motor logs").
+
 An axis' motor combination is the legacy mixer's column (``m1 = T - r/2 + p/2 + y``, ...).
 Its *top-band share* is the part of its power (Welch periodogram, mean removed) above 2/3 of
 the log's Nyquist frequency. Measured on 40 s PRBS flights of the real firmware in the loop:
