@@ -118,3 +118,17 @@ def test_a_parameter_the_firmware_cannot_take_is_one_line_and_nothing_flown(
     assert res.exit_code != 0 and needle in res.output and res.output.count("\n") == 1, res.output
     assert not list(tmp_path.rglob("*.h5"))  # nothing recorded, nothing flown
     assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
+
+
+@pytest.mark.parametrize("meta", ["{not json", '["a"]', {"a.b": {"value": "x", "was": 1}},
+                                  {"a.b": {"value": True, "was": 1.0}}, {"a.b": 3}])
+def test_info_reads_a_hostile_parameters_attribute_without_failing(tmp_path, meta):
+    from tests.sysid.flights import known_system, write_flight
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=0, n=600,
+                          metadata={"plan_parameters": meta})
+    res = CliRunner().invoke(main, ["info", str(flight.path), "--json"])
+    assert res.exit_code == 0, res.output
+    assert "parameters" not in json.loads(res.stdout)
+    text = CliRunner().invoke(main, ["info", str(flight.path)])
+    assert text.exit_code == 0 and "firmware parameters" not in text.output

@@ -123,3 +123,24 @@ def test_plan_design_reads_the_flown_motors_and_firmware(tmp_path):
     assert check.exit_code == 0 and "pid_attitude.yaw_kd = 0" in check.output
     show = CliRunner().invoke(main, ["plan", "show", str(out)])
     assert "parameters.pid_attitude.yaw_kd: the motors' yaw_rate combination" in show.output
+
+
+@pytest.mark.parametrize("params", ["[1, 2", "[1, 2]", {"pid_attitude": "x"},
+                                    {"pid_attitude": {"yaw_kd": "0.35"}}])
+def test_hostile_recorded_parameters_mean_no_firmware_knowledge(tmp_path, params):
+    """A flown session whose parameters attribute is damaged: the design goes on without the
+    firmware's values (so no D term is changed) instead of failing."""
+    system = known_system()
+    model = tmp_path / "model.json"
+    system.replace(input_names=list(MOTOR_INPUTS),
+                   output_names=["acc.x", "acc.y", "acc.z", *GYROS]).save(model)
+    rng = np.random.default_rng(1)
+    pulses = np.outer(rng.choice([0.0, 3000.0, -3000.0], size=2500, p=[0.6, 0.2, 0.2]), YAW)
+    flown = write_flight(tmp_path / "f.h5", system=system, seed=0, pwm_extra=pulses,
+                         metadata={"params": params, "plan_text": load_plan("prbs-3axis").text,
+                                   "plan_name": "prbs-3axis"})
+    out = tmp_path / "next.toml"
+    res = CliRunner().invoke(main, ["plan", "design", "--model", str(model), "--out", str(out),
+                                    "--flown", str(flown.path)])
+    assert res.exit_code == 0, res.output
+    assert "yaw_rate" in res.output and "[parameters" not in out.read_text(encoding="utf-8")

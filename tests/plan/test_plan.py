@@ -310,3 +310,15 @@ def test_bad_parameters_name_key_and_line(extra, needle):
     with pytest.raises(PlanError, match=re.escape(needle)) as err:
         parse_plan(text=BASE + "\n" + extra, source="p.toml")
     assert str(err.value).startswith("p.toml:") and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("body", [
+    "pid = [1, 2]", 'pid = { kd = [0.1] }', "pid.kd = 1e400", 'pid.kd = 2024-01-01',
+    '"pid attitude".kd = 1', 'pid."yaw kd" = 1', "pid.kd = { x = 1 }", "pid = 3",
+    'pid.kd = "nan"', "[parameters.pid.inner]\nkd = 1",
+])
+def test_hostile_parameters_are_one_line_plan_errors(body):
+    text = BASE + "\n[parameters]\n" + body + "\n"
+    with pytest.raises(PlanError) as err:
+        parse_plan(text=text, source="p.toml")
+    assert "\n" not in str(err.value) and str(err.value).startswith("p.toml")
