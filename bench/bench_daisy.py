@@ -3,7 +3,7 @@
 Protocol of ``shared/reference/benchmarks.md`` (``tests/sysid/daisy.py``): means removed,
 first 2/3 identify, last 1/3 validate by simulation from x0 = 0, mean fit over outputs, best
 over orders 2..10 among stable models, past = future = 20, D estimated. The project's best is
-over IEM and PO-MOESP with prediction and simulation focus (and their PEM refinement with
+over IEM, PO-MOESP and PARSIM-K with prediction and simulation focus (and their PEM refinement with
 ``BENCH_DAISY_PEM=1``: slow on cstr); SIPPY 1.0.1's over N4SID, MOESP, CVA, PARSIM-K/S/P.
 Target (issue 10): project >= SIPPY on every set. ``BENCH_DAISY_SETS=dryer,cstr`` picks sets.
 """
@@ -100,7 +100,7 @@ def main() -> int:
             (s_fit, s_how), (c_fit, c_how), (k_fit, k_how) = (
                 (SIPPY_BEST[name], "benchmarks.md"), (np.nan, ""), (np.nan, ""))
         t_sippy = time.perf_counter() - t0
-        diff = fit - s_fit
+        diff = round(fit, 2) - round(s_fit, 2)  # figures to 0.01 %, as benchmarks.md has them
         ok &= diff >= 0
         moesp = _po_moesp_best(name)
         ok_moesp &= moesp >= 0 and not moesp < c_fit - 1.0

@@ -1,4 +1,4 @@
-"""Closed-loop subspace identification: IEM and PO-MOESP.
+"""Closed-loop subspace identification: IEM, PARSIM-K and PO-MOESP.
 
 >>> import sysid
 >>> data = sysid.IOData(u=u, y=y, dt=0.02)                       # doctest: +SKIP
@@ -21,6 +21,7 @@ from sysid.iem import iem
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
 from sysid.order import InformationCriteria, information_criteria, singular_values
+from sysid.parsim import parsim_k
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
 from sysid.residuals import ResidualResult, residuals
 from sysid.sweep import SweepResult, select_order, sweep
@@ -49,6 +50,7 @@ __all__ = [
     "information_criteria",
     "iodata_from_streams",
     "load_model",
+    "parsim_k",
     "po_moesp",
     "residuals",
     "select_order",

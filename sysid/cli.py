@@ -135,7 +135,7 @@ main.add_command(resid)
 @click.option("--future", type=click.IntRange(min=2),
               help="Future horizon, samples (default: chosen by validation).")
 @click.option("--feedthrough/--no-feedthrough", default=None,
-              help="Estimate D (default: no for iem, yes for po-moesp).")
+              help="Estimate D (default: no for iem, yes for po-moesp and parsim-k).")
 @click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
               help="Score the model on this session (1-step and windowed simulation); "
                    "repeatable.")

@@ -28,12 +28,13 @@ from sysid.finish import Focus
 from sysid.iem import iem, iem_signals
 from sysid.model import StateSpaceModel
 from sysid.moesp import moesp_factor, po_moesp
+from sysid.parsim import parsim_k, parsim_k_singular_values
 from sysid.stability import Stability
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "IEMOptions", "MOESPOptions", "Method", "MethodName",
-           "Options", "get_method", "method_loggers"]
+           "Options", "ParsimOptions", "get_method", "method_loggers"]
 
-MethodName = Literal["iem", "po-moesp"]
+MethodName = Literal["iem", "po-moesp", "parsim-k"]
 #: The method the API and the command line use when none is named.
 DEFAULT_METHOD: MethodName = "iem"
 
@@ -86,7 +87,17 @@ class MOESPOptions(_Checked):
     pem: bool = False
 
 
-Options = IEMOptions | MOESPOptions
+@dataclass(frozen=True)
+class ParsimOptions(_Checked):
+    """Options of :func:`sysid.parsim.parsim_k`."""
+
+    feedthrough: bool = True
+    focus: Focus = "prediction"
+    stability: Stability = "auto"
+    pem: bool = False
+
+
+Options = IEMOptions | MOESPOptions | ParsimOptions
 
 
 def _iem_sv(products: DataProducts, options: IEMOptions) -> np.ndarray:
@@ -107,7 +118,7 @@ class Method:
 
     name: MethodName
     function: Callable[..., StateSpaceModel]
-    options_type: type[IEMOptions] | type[MOESPOptions]
+    options_type: type[IEMOptions] | type[MOESPOptions] | type[ParsimOptions]
     sv_function: Callable[[DataProducts, Any], np.ndarray]
     shares_futures: bool
     description: str
@@ -171,6 +182,10 @@ METHODS: dict[str, Method] = {
     "po-moesp": Method(name="po-moesp", function=po_moesp, options_type=MOESPOptions,
                        sv_function=_moesp_sv, shares_futures=False,
                        description="PO-MOESP (open loop; biased under feedback)"),
+    "parsim-k": Method(name="parsim-k", function=parsim_k, options_type=ParsimOptions,
+                       sv_function=lambda products, options: parsim_k_singular_values(products),
+                       shares_futures=False,
+                       description="PARSIM-K (closed loop, predictor form; as SIPPY's)"),
 }
 
 
