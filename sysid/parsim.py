@@ -109,7 +109,16 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     a_k = np.linalg.lstsq(ob[:-ell], ob[ell:], rcond=None)[0]
     c = ob[:ell]
     flights = [(fl.u / products.u_scale, fl.y / products.y_scale) for fl in products.flights]
-    fit = predictor_fit(a_k=a_k, c=c, flights=flights, feedthrough=feedthrough, residuals=True)
+    radius = float(np.max(np.abs(np.linalg.eigvals(a_k))))
+    if not radius < 1.0:  # the predictor fit needs a stable predictor; its regressors diverge
+        raise OrderError(f"PARSIM-K: the predictor A_K of order {order} has a pole at |z| = "
+                         f"{radius:.3g}; try a lower order or longer horizons")
+    try:
+        fit = predictor_fit(a_k=a_k, c=c, flights=flights, feedthrough=feedthrough,
+                            residuals=True)
+    except np.linalg.LinAlgError as exc:
+        raise OrderError(f"PARSIM-K: the predictor fit of order {order} failed ({exc}); try "
+                         "another order") from None
     if fit is None:
         raise OrderError(f"PARSIM-K: the predictor A_K of order {order} is not safely "
                              "diagonalisable; try another order")

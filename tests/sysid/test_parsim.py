@@ -56,6 +56,8 @@ def test_registered_with_options_focus_and_order_limits(tmp_path):
     assert sv.shape == (20,) and sv[3] > 5 * sv[4]  # order 4 stands out
     with pytest.raises(OrderError):
         method.identify(ex.data, order=30, past=10, future=10)
+    with pytest.raises(OrderError, match="predictor A_K of order 10 has a pole"):
+        parsim_k(ex.data, order=10, past=3, future=6)  # beyond what short horizons support
     flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=0)
     res = CliRunner().invoke(main, ["identify", str(flight.path), "--method", "parsim-k",
                                     "--order", "4", "--past", "10", "--future", "10", "--json"])
