@@ -43,10 +43,9 @@ from sysid.stability import Stability, check_stability, stabilize
 __all__ = ["parsim_k", "parsim_k_singular_values"]
 
 
-def _solve(gram: np.ndarray, rows: np.ndarray, cols: np.ndarray, lhs: np.ndarray) -> np.ndarray:
+def _solve(gram: np.ndarray, cols: np.ndarray, lhs: np.ndarray) -> np.ndarray:
     """``lhs @ pinv-solve(G[cols, cols])``: the least-squares coefficients on the rows
     ``cols`` of the signal whose cross-Gram with them is ``lhs``."""
-    del rows
     return np.linalg.lstsq(gram[np.ix_(cols, cols)], lhs.T, rcond=None)[0].T
 
 
@@ -60,7 +59,7 @@ def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
     u = [products.rows(block=p + i, kind="u") for i in range(f)]
     y = [products.rows(block=p + i, kind="y") for i in range(f)]
     first = np.concatenate([z, u[0]])
-    theta = _solve(g, y[0], first, g[np.ix_(y[0], first)])
+    theta = _solve(g, first, g[np.ix_(y[0], first)])
     gammas, h, gk = [theta[:, :pc]], [theta[:, pc:]], [None]
     r = np.concatenate([z, u[0], y[0]])
     m = products.n_inputs
@@ -68,7 +67,7 @@ def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
         cross = g[np.ix_(y[i], r)] - h[0] @ g[np.ix_(u[i], r)]
         for j in range(1, i):
             cross = cross - h[j] @ g[np.ix_(u[i - j], r)] - gk[j] @ g[np.ix_(y[i - j], r)]
-        theta = _solve(g, y[i], r, cross)
+        theta = _solve(g, r, cross)
         gammas.append(theta[:, :pc])
         h.append(theta[:, pc:pc + m])
         gk.append(theta[:, pc + m:])

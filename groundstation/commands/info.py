@@ -65,12 +65,7 @@ def describe(session: Session) -> dict[str, Any]:
 def _plan_parameters(session: Session) -> dict[str, Any]:
     """The plan's ``[parameters]`` as flown: ``{name: {"value": v, "was": old}}`` (untrusted
     file: anything else is left out)."""
-    raw = session.meta.get("plan_parameters")
-    if isinstance(raw, str):
-        try:
-            raw = json.loads(raw)
-        except ValueError:
-            return {}
+    raw = session.json_meta("plan_parameters")
     if not isinstance(raw, dict):
         return {}
     return {str(k): v for k, v in raw.items()

@@ -367,12 +367,7 @@ def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
 
     out: dict[str, float] = {}
     for path in sessions:
-        params = open_session(path).meta.get("params")
-        if isinstance(params, str):  # stored as JSON text
-            try:
-                params = json.loads(params)
-            except ValueError:
-                params = None
+        params = open_session(path).json_meta("params")
         for group, values in (params.items() if isinstance(params, dict) else ()):
             for name, value in (values.items() if isinstance(values, dict) else ()):
                 if isinstance(value, int | float) and not isinstance(value, bool):

@@ -34,6 +34,7 @@ from cfsession.schema import CFLIB_TYPES, StreamSpec, log_block_spec
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
 from groundstation.flight.clock import Clock
+from groundstation.flight.params import typed_value
 
 __all__ = [
     "BATTERY_BLOCK",
@@ -263,8 +264,7 @@ class Link:
             for name, text in values.items():
                 try:
                     ctype = self.cf.param.toc.get_element(group, name).ctype
-                    value: float | int | str = float(text) if ctype in ("float", "double",
-                                                                        "FP16") else int(text)
+                    value: float | int | str = typed_value(text, ctype)
                 except (AttributeError, KeyError, TypeError, ValueError):
                     value = text  # keep what cflib read rather than lose it
                 out.setdefault(group, {})[name] = value

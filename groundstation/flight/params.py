@@ -20,7 +20,7 @@ from typing import Any
 from groundstation.errors import GroundStationError, LinkError
 
 __all__ = ["CONFIRM_TIMEOUT_S", "ParamChange", "check_parameters", "restore_after_flight",
-           "set_for_flight", "write_parameters"]
+           "set_for_flight", "typed_value", "write_parameters"]
 
 log = logging.getLogger(__name__)
 
@@ -29,15 +29,20 @@ CONFIRM_TIMEOUT_S = 2.0
 _FLOAT_TYPES = ("float", "double", "FP16")
 
 
+def typed_value(text: Any, ctype: str) -> float | int:
+    """A parameter value as cflib keeps it (its text) made a number of the TOC's C type;
+    ``ValueError``/``TypeError`` for text that is not one."""
+    return float(text) if ctype in _FLOAT_TYPES else int(text)
+
+
 @dataclass(frozen=True)
 class ParamChange:
-    """One parameter of the plan: ``name`` (``group.name``), the plan's ``value``, the firmware's
-    value before the flight (``old``) and its C type."""
+    """One parameter of the plan: ``name`` (``group.name``), the plan's ``value`` and the
+    firmware's value before the flight (``old``)."""
 
     name: str
     value: float | int
     old: float | int
-    ctype: str
 
 
 def check_parameters(cf: Any, wanted: Sequence[tuple[str, float]]) -> list[ParamChange]:
@@ -61,11 +66,11 @@ def check_parameters(cf: Any, wanted: Sequence[tuple[str, float]]) -> list[Param
         group, _, short = name.partition(".")
         text = cf.param.values.get(group, {}).get(short)
         try:
-            old: float | int = float(text) if ctype in _FLOAT_TYPES else int(text)
+            old = typed_value(text, ctype)
         except (TypeError, ValueError):
             raise LinkError(f"plan [parameters]: {name} was not read at connect ({text!r}); "
                             "reconnect") from None
-        changes.append(ParamChange(name=name, value=value, old=old, ctype=ctype))
+        changes.append(ParamChange(name=name, value=value, old=old))
     return changes
 
 
