@@ -237,7 +237,9 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
               help="Abort when a gyro axis exceeds this, deg/s [default: the plan's "
                    "safety.max_rate_deg_s, else 1000].")
 @click.option("--timeout", "timeout_s", type=FiniteFloat(min=0.5), default=10.0,
-              show_default=True, help="Seconds to wait for the connection.")
+              show_default=True,
+              help="Seconds the vehicle may stay silent while connecting (a connection that "
+                   "keeps answering may take up to 120 s in all).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--emulated-radio", is_flag=True,
               help="Fly radio:// through an emulated Crazyradio PA to a simulated Crazyflie on "

@@ -34,11 +34,13 @@ from cfsession.schema import CFLIB_TYPES, StreamSpec, log_block_spec
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
 from groundstation.flight.clock import Clock
+from groundstation.flight.drivers import install_drivers
 from groundstation.flight.params import typed_value
 
 __all__ = [
     "BATTERY_BLOCK",
     "BLOCK_PERIOD_S",
+    "CONNECT_LIMIT_S",
     "DEFAULT_URI",
     "FLIGHT_BLOCKS",
     "LOG_MAX_BYTES",
@@ -56,6 +58,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
+CONNECT_LIMIT_S = 120.0
+"""Longest a connection may take in all while the vehicle keeps answering (seconds)."""
 URI_SCHEMES = ("radio", "usb", "udp", "sim")
 """The link URI schemes the ground station flies over (cflib's drivers plus the simulator's)."""
 _OTHER_SCHEMES = ("tcp", "prrt")  # cflib has drivers for these too; rarely used, not advertised
@@ -137,26 +141,6 @@ def plan_blocks(
                             f"the {LOG_MAX_BYTES} a log packet holds; split it into two blocks")
         out.append(block)
     return out
-
-
-_drivers_lock = threading.Lock()
-_drivers_ready = False
-
-
-def install_drivers() -> None:
-    """cflib's link drivers plus the simulator's ``sim://`` (idempotent)."""
-    global _drivers_ready
-    with _drivers_lock:
-        if _drivers_ready:
-            return
-        import cflib.crtp
-
-        import groundstation.sim  # the simulated Crazyflie is one more link driver
-
-        if not cflib.crtp.CLASSES:
-            cflib.crtp.init_drivers()
-        groundstation.sim.install()
-        _drivers_ready = True
 
 
 class _Caller:
@@ -386,11 +370,14 @@ def _connect_advice(why: str) -> str:
 
 
 def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
-              cancel: threading.Event | None = None) -> Link:
+              limit_s: float = CONNECT_LIMIT_S, cancel: threading.Event | None = None) -> Link:
     """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
 
-    ``timeout_s`` is wall-clock seconds; setting ``cancel`` (Ctrl-C while connecting) gives up
-    at once. Failure raises a one-line :class:`LinkError`.
+    ``timeout_s`` is the longest the vehicle may stay silent while connecting (wall-clock
+    seconds without a packet from it: nothing at that address, or a link that lost a request
+    and cannot resend); a connection that keeps answering may take longer, a slow link or a
+    starved host fetching a large TOC, but at most ``limit_s`` in all. Setting ``cancel``
+    (Ctrl-C while connecting) gives up at once. Failure raises a one-line :class:`LinkError`.
     """
     check_uri(uri)
     install_drivers()
@@ -409,21 +396,34 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
 
     cf.connection_failed.add_callback(failed)
     cf.connection_lost.add_callback(failed)
+    heard = [time.monotonic()]  # when the vehicle last sent anything
+
+    def answered(_pk: Any) -> None:
+        heard[0] = time.monotonic()
+
+    cf.packet_received.add_callback(answered)
     link = Link(cf=cf, uri=uri, clock=clock, post=post)
-    t0 = time.monotonic()
+    t0 = heard[0] = time.monotonic()
     cf.open_link(uri)
-    deadline = time.monotonic() + timeout_s
-    while not ready.wait(0.05) and time.monotonic() < deadline:
+    while not ready.wait(0.05):
+        now = time.monotonic()
         if cancel is not None and cancel.is_set():
             failure.append("connect cancelled")
-            break
-    ok = ready.is_set() and not failure
-    if not ok:
+        elif now - heard[0] > timeout_s:
+            failure.append(f"no answer within {timeout_s:g} s")
+        elif now - t0 > limit_s:
+            failure.append(f"the vehicle answers but the connection was not complete after "
+                           f"{limit_s:g} s")
+        else:
+            continue
+        break
+    cf.packet_received.remove_callback(answered)
+    if failure:
         try:
             cf.close_link()
         except Exception:
             log.debug("close after failed connect", exc_info=True)
-        why = failure[0] if failure else f"no answer within {timeout_s:g} s"
+        why = failure[0]
         raise LinkError(f"cannot connect to {uri}: {why}; {_connect_advice(why)}")
     cf.connection_failed.remove_callback(failed)
     cf.connection_lost.remove_callback(failed)

@@ -1,0 +1,139 @@
+"""Connecting over ``udp://`` when datagrams are lost or slow.
+
+Known truth: a proxy between cflib and :class:`~groundstation.sim.UdpServer` that drops chosen
+requests or holds every answer. cflib's own UDP driver never resends, so one lost request is a
+connection that waits for ever; the ground station's driver resends as cflib does on the radio,
+and a connection that keeps answering is not cut by the silence timeout.
+"""
+
+from __future__ import annotations
+
+import queue
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+import pytest
+from cflib.crtp.udpdriver import UdpDriver
+
+from groundstation.errors import LinkError
+from groundstation.flight.clock import MonotonicClock
+from groundstation.flight.drivers import ResendingUdpDriver, install_drivers
+from groundstation.flight.link import open_link
+from groundstation.sim import UdpServer
+from tests.sim_crtp.helpers import free_udp_port
+
+
+class Proxy:
+    """``udp://127.0.0.1:port`` in front of ``target``: client datagram ``n`` (from 0, probes
+    included) is dropped when ``drop(n)``; every answer waits ``delay_s`` first."""
+
+    def __init__(self, target: tuple[str, int], *, drop: Callable[[int], bool] = lambda n: False,
+                 delay_s: float = 0.0) -> None:
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.front.bind(("127.0.0.1", 0))
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back.connect(target)
+        for s in (self.front, self.back):
+            s.settimeout(0.1)
+        self.drop, self.delay_s = drop, delay_s
+        self.client: tuple[str, int] | None = None
+        self.sent = self.dropped = 0
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
+        for t in self._threads:
+            t.start()
+
+    @property
+    def uri(self) -> str:
+        return f"udp://127.0.0.1:{self.front.getsockname()[1]}"
+
+    def _up(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, self.client = self.front.recvfrom(64)
+            except (TimeoutError, OSError):
+                continue
+            n, self.sent = self.sent, self.sent + 1
+            if self.drop(n):
+                self.dropped += 1
+            else:
+                self.back.send(data)
+
+    def _down(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self.back.recv(64)
+            except (TimeoutError, OSError):
+                continue
+            time.sleep(self.delay_s)
+            if self.client is not None:
+                self.front.sendto(data, self.client)
+
+    def close(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2)
+        self.front.close()
+        self.back.close()
+
+
+@pytest.fixture
+def server():
+    install_drivers()
+    with UdpServer(port=free_udp_port(), seed=3) as srv:
+        yield srv
+
+
+def _connect(uri: str, **kw):
+    return open_link(uri=uri, clock=MonotonicClock(), post=queue.SimpleQueue().put, **kw)
+
+
+def _every_seventh_of_the_first_hundred(n: int) -> bool:
+    return n < 100 and n % 7 == 3
+
+
+def test_lost_requests_are_resent_and_the_connection_completes(server):
+    proxy = Proxy(("127.0.0.1", server.endpoints[0].port), drop=_every_seventh_of_the_first_hundred)
+    try:
+        link = _connect(proxy.uri, timeout_s=10.0)
+        try:
+            assert isinstance(link.cf.link, ResendingUdpDriver)
+            assert float(link.cf.param.get_value("pid_rate.roll_kp")) == pytest.approx(250.0)
+        finally:
+            link.close()
+    finally:
+        proxy.close()
+    assert proxy.dropped >= 10  # the connection crossed every dropped request
+
+
+def test_cflib_udp_driver_waits_for_ever_on_a_lost_request(server, monkeypatch):
+    """The failure the resending driver removes: cflib's own UDP driver, the same losses."""
+    import cflib.crtp
+
+    monkeypatch.setattr(cflib.crtp, "CLASSES", [UdpDriver])
+    proxy = Proxy(("127.0.0.1", server.endpoints[0].port), drop=_every_seventh_of_the_first_hundred)
+    try:
+        with pytest.raises(LinkError, match=r"^cannot connect to udp://.*: (no answer within 1 s|"
+                                             r"the vehicle answers but .* after 3 s);"):
+            _connect(proxy.uri, timeout_s=1.0, limit_s=3.0)
+    finally:
+        proxy.close()
+
+
+def test_a_slow_connection_that_keeps_answering_is_not_cut_by_the_silence_timeout(server):
+    """Each answer 20 ms late: the connection takes several times ``timeout_s`` in all, with no
+    silence as long as it; the whole connection is bounded by ``limit_s``."""
+    proxy = Proxy(("127.0.0.1", server.endpoints[0].port), delay_s=0.02)
+    try:
+        t0 = time.monotonic()
+        link = _connect(proxy.uri, timeout_s=1.0)
+        took = time.monotonic() - t0
+        link.close()
+        assert took > 1.0  # longer than the silence allowed: the timeout is not the total
+        with pytest.raises(LinkError, match=r"the vehicle answers but the connection was not "
+                                            r"complete after 0.5 s; "):
+            _connect(proxy.uri, timeout_s=1.0, limit_s=0.5)
+    finally:
+        proxy.close()
