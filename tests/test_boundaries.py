@@ -225,16 +225,16 @@ def test_a_forbidden_import_is_reported(tmp_path, monkeypatch):
 
 
 def test_nothing_outside_sim_knows_about_the_simulator():
-    """Only the link installs the sim:// driver, as one more link driver among cflib's (and the
-    `groundstation sim` command serves simulated vehicles over UDP). The emulated Crazyradio's one
-    hook is the USB backend choice (``usb_backend``, used by dongle.py and scan) and the
-    ``--emulated-radio`` flags of fly and scan."""
+    """Only the flight's driver list installs the sim:// driver, as one more link driver among
+    cflib's (and the `groundstation sim` command serves simulated vehicles over UDP). The
+    emulated Crazyradio's one hook is the USB backend choice (``usb_backend``, used by dongle.py
+    and scan) and the ``--emulated-radio`` flags of fly and scan."""
     users = sorted(p.relative_to(ROOT).as_posix() for p in _sources("groundstation")
                    if "sim" not in p.relative_to(ROOT / "groundstation").parts[:1]
                    and "groundstation.sim" in p.read_text(encoding="utf-8"))
     assert users == ["groundstation/commands/fly.py", "groundstation/commands/scan.py",
                      "groundstation/commands/sim.py", "groundstation/dongle.py",
-                     "groundstation/flight/link.py"], users
+                     "groundstation/flight/drivers.py"], users
 
 
 def _loaded_after(*modules: str) -> list[str]:

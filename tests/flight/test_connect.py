@@ -19,7 +19,7 @@ from cflib.crtp.udpdriver import UdpDriver
 
 from groundstation.errors import LinkError
 from groundstation.flight.clock import MonotonicClock
-from groundstation.flight.drivers import ResendingUdpDriver, install_drivers
+from groundstation.flight.drivers import install_drivers, resending_udp_driver
 from groundstation.flight.link import open_link
 from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port
@@ -99,7 +99,8 @@ def test_lost_requests_are_resent_and_the_connection_completes(server):
     try:
         link = _connect(proxy.uri, timeout_s=10.0)
         try:
-            assert isinstance(link.cf.link, ResendingUdpDriver)
+            assert isinstance(link.cf.link, resending_udp_driver())
+            assert link.cf.link.needs_resending
             assert float(link.cf.param.get_value("pid_rate.roll_kp")) == pytest.approx(250.0)
         finally:
             link.close()
