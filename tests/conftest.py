@@ -2,10 +2,28 @@
 
 Under ``pytest -n 2 --dist loadfile`` (``make test``) every test that runs the real firmware in
 the loop (a ``sitl`` parameter, or anything under ``tests/sitl/``) goes to one xdist scope, so at
-most one real-time firmware runs at a time and the other worker keeps the rest of the suite.
+most one real-time firmware runs at a time and the other worker keeps the rest of the suite;
+that scope is sent first, being the longest. Connects cache the firmware's TOCs in a folder of
+the run (:func:`pytest_configure`).
 """
 
 from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+
+from groundstation.flight.drivers import TOC_CACHE_ENV
+
+
+def pytest_configure(config):
+    """cflib's TOC cache in a folder of this run, not the user's ``~/.cache`` (each xdist worker
+    and the commands it starts share one)."""
+    os.environ[TOC_CACHE_ENV] = tempfile.mkdtemp(prefix="groundstation-toc-")
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(os.environ.pop(TOC_CACHE_ENV, ""), ignore_errors=True)
 
 
 def _is_sitl(nodeid: str) -> bool:
@@ -21,5 +39,13 @@ def pytest_xdist_make_scheduler(config, log):
     class _SitlTogether(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return "sitl" if _is_sitl(nodeid) else super()._split_scope(nodeid)
+
+        def _assign_work_unit(self, node) -> None:
+            # The firmware's scope is the longest (real time, about 4 min): first, so the
+            # other worker's files fill the time beside it instead of trailing after it.
+            if "sitl" in self.workqueue and not getattr(self, "_sitl_sent", False):
+                self.workqueue.move_to_end("sitl", last=False)
+                self._sitl_sent = True
+            super()._assign_work_unit(node)
 
     return _SitlTogether(config, log)

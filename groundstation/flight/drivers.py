@@ -1,5 +1,5 @@
-"""cflib's link drivers as the ground station uses them: cflib's own, ``sim://``, and a UDP
-driver that resends.
+"""cflib's link drivers as the ground station uses them (cflib's own, ``sim://``, and a UDP
+driver that resends) and the folder where cflib caches the firmware's TOCs.
 
 cflib resends a request whose answer does not come within 0.2 s (TOC and parameter reads,
 parameter writes, log-block commands) only on links whose driver sets ``needs_resending``; its
@@ -11,14 +11,27 @@ waiting, ``src/hal/src/socketlink.c``). :func:`resending_udp_driver` is cflib's 
 cflib's resending switched on, put in its place for ``udp://`` URIs. Setpoints and log packets
 expect no answer and are never resent; an answer that was only late arrives twice, which
 cflib's TOC, parameter and log code ignore as they do on the radio.
+
+:func:`toc_cache_dir` is where cflib keeps the log and parameter TOCs it fetched, one JSON file
+per TOC checksum (as cfclient does): a second connect to the same firmware reads only the
+parameter values (0.7 s instead of 1.9 s against the firmware in the loop). A firmware with
+another TOC has another checksum and is fetched again; a damaged file is fetched again too.
+``GROUNDSTATION_TOC_CACHE`` names another folder, or ``off``.
 """
 
 from __future__ import annotations
 
+import logging
+import os
 import threading
+from pathlib import Path
 from typing import Any
 
-__all__ = ["install_drivers", "resending_udp_driver"]
+__all__ = ["TOC_CACHE_ENV", "install_drivers", "resending_udp_driver", "toc_cache_dir"]
+
+log = logging.getLogger(__name__)
+
+TOC_CACHE_ENV = "GROUNDSTATION_TOC_CACHE"
 
 _lock = threading.Lock()
 _ready = False
@@ -64,3 +77,28 @@ def install_drivers() -> None:
         if resending not in classes:
             classes.append(resending)
         _ready = True
+
+
+def toc_cache_dir() -> Path | None:
+    """The TOC cache folder (created if missing): ``$GROUNDSTATION_TOC_CACHE``, else
+    ``$XDG_CACHE_HOME/groundstation/toc`` (``~/.cache/...``); None when it is ``off``, empty,
+    or cannot be created (then every connect fetches the TOCs)."""
+    env = os.environ.get(TOC_CACHE_ENV)
+    if env is not None:
+        if env.strip().lower() in ("", "off", "0", "no", "none"):
+            return None
+        folder = Path(env).expanduser()
+    else:
+        base = os.environ.get("XDG_CACHE_HOME")
+        if not base:
+            try:
+                base = str(Path.home() / ".cache")
+            except RuntimeError:  # no home folder
+                return None
+        folder = Path(base) / "groundstation" / "toc"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        log.debug("no TOC cache at %s: %s", folder, exc)
+        return None
+    return folder if os.access(folder, os.W_OK) else None

@@ -34,7 +34,7 @@ from cfsession.schema import CFLIB_TYPES, StreamSpec, log_block_spec
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
 from groundstation.flight.clock import Clock
-from groundstation.flight.drivers import install_drivers
+from groundstation.flight.drivers import install_drivers, toc_cache_dir
 from groundstation.flight.params import typed_value
 
 __all__ = [
@@ -386,7 +386,8 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
 
     # Without a cache folder cflib warns on every connect that it cannot save the TOC.
     logging.getLogger("cflib.crazyflie.toccache").setLevel(logging.ERROR)
-    cf = Crazyflie(rw_cache=None)
+    cache = toc_cache_dir()
+    cf = Crazyflie(rw_cache=None if cache is None else str(cache))
     ready, failure = threading.Event(), []
     cf.fully_connected.add_callback(lambda _uri: ready.set())
 

@@ -1,4 +1,4 @@
-"""Connecting over ``udp://`` when datagrams are lost or slow.
+"""Connecting over ``udp://`` when datagrams are lost or slow, and the TOC cache.
 
 Known truth: a proxy between cflib and :class:`~groundstation.sim.UdpServer` that drops chosen
 requests or holds every answer. cflib's own UDP driver never resends, so one lost request is a
@@ -19,7 +19,7 @@ from cflib.crtp.udpdriver import UdpDriver
 
 from groundstation.errors import LinkError
 from groundstation.flight.clock import MonotonicClock
-from groundstation.flight.drivers import install_drivers, resending_udp_driver
+from groundstation.flight.drivers import TOC_CACHE_ENV, install_drivers, resending_udp_driver
 from groundstation.flight.link import open_link
 from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port
@@ -138,3 +138,41 @@ def test_a_slow_connection_that_keeps_answering_is_not_cut_by_the_silence_timeou
             _connect(proxy.uri, timeout_s=1.0, limit_s=0.5)
     finally:
         proxy.close()
+
+
+def test_the_tocs_are_cached_and_a_damaged_cache_file_is_fetched_again(server, tmp_path,
+                                                                       monkeypatch):
+    """First connect: both TOCs fetched and saved (one file per checksum). Second: far fewer
+    datagrams (only the parameter values). Damaged files: fetched again, same values."""
+    cache = tmp_path / "toc"
+    monkeypatch.setenv(TOC_CACHE_ENV, str(cache))
+    proxy = Proxy(("127.0.0.1", server.endpoints[0].port))
+    sent, values = [], []
+    try:
+        for damage in (False, False, True):
+            if damage:
+                for f in cache.glob("*.json"):
+                    f.write_text('{"log": [')
+            before = proxy.sent
+            link = _connect(proxy.uri)
+            values.append(float(link.cf.param.get_value("pid_rate.roll_kp")))
+            link.close()
+            sent.append(proxy.sent - before)  # one server client: the proxy's socket
+    finally:
+        proxy.close()
+    assert len(list(cache.glob("*.json"))) == 2  # the log and the parameter TOC
+    assert sent[1] < 0.7 * sent[0] and sent[2] == pytest.approx(sent[0], rel=0.1), sent
+    assert values == [250.0] * 3
+
+
+def test_toc_cache_off(server, tmp_path, monkeypatch):
+    cache = tmp_path / "toc"
+    monkeypatch.setenv(TOC_CACHE_ENV, "off")
+    link = _connect(server.uris[0])
+    link.close()
+    monkeypatch.setenv(TOC_CACHE_ENV, str(cache / "a-file"))
+    cache.mkdir()
+    (cache / "a-file").write_text("")  # not a folder: no cache, the connect goes on
+    link = _connect(server.uris[0])
+    link.close()
+    assert not list(cache.glob("**/*.json"))
