@@ -278,12 +278,14 @@ class Link:
             self._configs.append(conf)
 
     # ------------------------------------------------------------------ commander
-    def _bounded(self, fn: Callable[[], Any], *, what: str) -> None:
+    def _bounded(self, fn: Callable[[], Any], *, what: str, always: bool = False) -> None:
         """``fn()`` (a cflib call) unless the link is stuck; one that does not return within
-        :data:`SEND_TIMEOUT_S` makes the link lost and stuck (posted as ``"lost"``)."""
+        :data:`SEND_TIMEOUT_S` makes the link lost and stuck (posted as ``"lost"``). Sends are
+        bounded on the radio only (the only driver whose send can block); ``always`` bounds
+        ``fn`` on every driver."""
         if self.stuck:
             return
-        if not hasattr(self.cf.link, "out_queue"):  # only the radio driver's send can block
+        if not always and not hasattr(self.cf.link, "out_queue"):
             fn()
             return
         if self._caller is None:
@@ -329,10 +331,14 @@ class Link:
             if not self.lost:
                 for conf in self._configs:
                     conf.stop()
+            for timer in list(getattr(self.cf, "_answer_patterns", {}).values()):
+                timer.cancel()  # cflib's pending resends: none may fire into the close
             self.cf.close_link()
 
         try:
-            self._bounded(close, what="link close")
+            # on every driver: cflib can deadlock closing a link while one of its resend
+            # timers sends (the send lock is not released when the link vanishes under it)
+            self._bounded(close, what="link close", always=True)
         except Exception:  # closing must not hide the flight's own outcome
             log.exception("closing the link to %s failed", self.uri)
         if self.stuck:
@@ -420,10 +426,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
         break
     cf.packet_received.remove_callback(answered)
     if failure:
-        try:
-            cf.close_link()
-        except Exception:
-            log.debug("close after failed connect", exc_info=True)
+        link.close()  # bounded (Link.close)
         why = failure[0]
         raise LinkError(f"cannot connect to {uri}: {why}; {_connect_advice(why)}")
     cf.connection_failed.remove_callback(failed)

@@ -123,9 +123,14 @@ def test_cflib_udp_driver_waits_for_ever_on_a_lost_request(server, monkeypatch):
         proxy.close()
 
 
+# Closing mid-connect races cflib's parameter thread: it finds the link gone between its check
+# and its send (AttributeError in cflib's thread), and cflib's send lock stays taken, which would
+# hang the close for ever; the ground station's close is bounded (Link.close).
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_a_slow_connection_that_keeps_answering_is_not_cut_by_the_silence_timeout(server):
     """Each answer 20 ms late: the connection takes several times ``timeout_s`` in all, with no
-    silence as long as it; the whole connection is bounded by ``limit_s``."""
+    silence as long as it; the whole connection is bounded by ``limit_s``, and giving up in the
+    middle of it returns (the close cannot hang)."""
     proxy = Proxy(("127.0.0.1", server.endpoints[0].port), delay_s=0.02)
     try:
         t0 = time.monotonic()
