@@ -16,11 +16,14 @@ cflib's TOC, parameter and log code ignore as they do on the radio.
 per TOC checksum (as cfclient does): a second connect to the same firmware reads only the
 parameter values (0.7 s instead of 1.9 s against the firmware in the loop). A firmware with
 another TOC has another checksum and is fetched again; a damaged file is fetched again too.
-``GROUNDSTATION_TOC_CACHE`` names another folder, or ``off``.
+``GROUNDSTATION_TOC_CACHE`` names another folder, or ``off``. cflib's reader evaluates each
+element's ``__class__`` text as Python, so a cache file whose elements are not plainly cflib's
+TOC elements is removed before cflib can read it (:func:`toc_cache_dir`).
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import threading
@@ -101,4 +104,41 @@ def toc_cache_dir() -> Path | None:
     except OSError as exc:
         log.debug("no TOC cache at %s: %s", folder, exc)
         return None
-    return folder if os.access(folder, os.W_OK) else None
+    if not os.access(folder, os.W_OK):
+        return None
+    for path in folder.glob("*.json"):
+        if not _plain_toc_file(path):
+            log.warning("removing %s from the TOC cache: not a TOC cflib wrote", path.name)
+            try:
+                path.unlink()
+            except OSError:
+                return None  # a file cflib would evaluate stays: no cache
+    return folder
+
+
+_TOC_CLASSES = {"LogTocElement", "ParamTocElement"}
+_TOC_FIELDS = {"__class__", "ident", "group", "name", "ctype", "pytype", "access", "extended"}
+
+
+def _plain_toc_file(path: Path) -> bool:
+    """Whether ``path`` is JSON whose every object with a ``__class__`` is a cflib TOC element
+    of plain values (what cflib's cache writes); damaged JSON passes (cflib fetches again)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError):
+        return False
+    except ValueError:
+        return True
+
+    def plain(obj: Any) -> bool:
+        if isinstance(obj, dict):
+            if "__class__" in obj:
+                return (obj["__class__"] in _TOC_CLASSES and set(obj) <= _TOC_FIELDS
+                        and all(isinstance(v, str | int | float | bool | None)
+                                for v in obj.values()))
+            return all(plain(v) for v in obj.values())
+        if isinstance(obj, list):
+            return all(plain(v) for v in obj)
+        return True
+
+    return plain(data)

@@ -8,6 +8,7 @@ and a connection that keeps answering is not cut by the silence timeout.
 
 from __future__ import annotations
 
+import json
 import queue
 import socket
 import threading
@@ -181,3 +182,23 @@ def test_toc_cache_off(server, tmp_path, monkeypatch):
     link = _connect(server.uris[0])
     link.close()
     assert not list(cache.glob("**/*.json"))
+
+
+def test_a_cache_file_that_would_run_code_is_removed_before_cflib_reads_it(server, tmp_path,
+                                                                         monkeypatch):
+    """cflib's cache reader evaluates each element's ``__class__`` as Python: a crafted file
+    under the right checksum name is removed, nothing runs, the TOC is fetched again."""
+    cache, mark = tmp_path / "toc", tmp_path / "ran"
+    monkeypatch.setenv(TOC_CACHE_ENV, str(cache))
+    _connect(server.uris[0]).close()
+    files = sorted(cache.glob("*.json"))
+    assert len(files) == 2
+    payload = f'exec("import pathlib; pathlib.Path({str(mark)!r}).touch()")'
+    for f in files:
+        f.write_text(json.dumps({"pid_rate": {"roll_kp": {"__class__": payload, "ident": 0}}}))
+    link = _connect(server.uris[0])
+    value = float(link.cf.param.get_value("pid_rate.roll_kp"))
+    link.close()
+    assert not mark.exists() and value == 250.0
+    assert sorted(cache.glob("*.json")) == files  # fetched again and saved again, plainly
+    assert all("exec" not in f.read_text() for f in files)
