@@ -365,30 +365,28 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
     assert result.summary["live_id"]["model_file"]
 
 
-# SITL is left out: the real-time firmware beside the identification's child process lost the
-# CPU in clean-clone CI runs and the flight ended in a true link loss. With the child niced
-# (sysid.live.CHILD_NICENESS) and one re-flight after a link loss it still failed twice in a row
-# once, beside a second test run on 2 cores (2026-11-25), so it stays a hand check
-# (docs/live-id.md); the re-flight below stays for whoever adds "sitl" by hand.
-@pytest.mark.parametrize("flight_uri", ["radio"], indirect=True)
+@pytest.mark.parametrize("flight_uri", ["radio", "sitl"], indirect=True)
 def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     """The same listener over cflib's radio driver (emulated dongle, 20x) and against the real
     firmware in the loop (real time): updates recorded, the final model saved and equal to the
     offline one of the recorded samples.
 
-    SITL runs on the wall clock beside the identification's child process: on a host busy
-    enough to starve the firmware for half a second the flight ends in a link loss (once in 20
-    runs beside a second test run, docs/live-id.md). Such a flight, and only such, is flown
-    again once on a fresh vehicle; any other failure fails."""
+    SITL runs on the wall clock beside the identification's child process: a host busy enough
+    to starve the firmware for half a second ends the flight in a true link loss (docs/live-id.md:
+    once in 20 runs beside a second test run, and twice in a row once). The live model is then
+    the final update of what was recorded up to the loss, and what this test checks holds for
+    it all the same, so such a flight is accepted; only one that lost the link before the first
+    update is flown again (once). Any other abort fails."""
     plan = _plan(8.0, SMALL)
-    for attempt in range(2):
+    for _attempt in range(2):
         lid = live_id_listener(plan)
         uri = flight_uri()
-        result = fly_plan(plan=plan, out=tmp_path / str(attempt), uri=uri, listeners=[lid])
-        if not (uri.startswith("udp://") and result.cause.startswith("link lost")):
+        result = fly_plan(plan=plan, out=tmp_path / str(_attempt), uri=uri, listeners=[lid])
+        lost = uri.startswith("udp://") and result.cause.startswith("link lost")
+        if not (lost and lid.updates <= 1):  # the final update alone: nothing before the loss
             break
-        print(f"SITL flight {attempt + 1}: {result.cause}; flying it again")
-    assert not result.aborted, result.cause
+        print(f"SITL flight {_attempt + 1}: {result.cause} before any update; flying it again")
+    assert not result.aborted or lost, result.cause
     wait_for_stop(uri)
     s = open_session(result.path)
     assert lid.error == "" and len(s["live_id"]) == lid.updates >= 1
