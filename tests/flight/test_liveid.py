@@ -29,9 +29,11 @@ from groundstation.flight.liveid import Engine, LiveIdListener
 from groundstation.live import open_view
 from groundstation.liveid_view import LiveIdView, send_rows
 from groundstation.plan import LiveIdConfig, load_plan, parse_plan
+from groundstation.sim import UdpServer
 from sysid import detrend_data, iem
 from sysid.model_io import load as load_model
 from sysid.preprocess import Stream, iodata_from_streams
+from tests.sim_crtp.helpers import free_udp_port
 from tests.viz.rrd import load as load_rrd
 from tests.viz.rrd import views as rrd_views
 
@@ -388,9 +390,29 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
         print(f"SITL flight {_attempt + 1}: {result.cause} before any update; flying it again")
     assert not result.aborted or lost, result.cause
     wait_for_stop(uri)
+    _check_final_model_is_offline(result, lid)
+
+
+def _check_final_model_is_offline(result, lid) -> None:
+    """Updates recorded; the saved live model equals IEM (order 4, past 15, future 8) of the
+    samples rebuilt from the file."""
     s = open_session(result.path)
     assert lid.error == "" and len(s["live_id"]) == lid.updates >= 1
     model = load_model(result.path.with_name(result.summary["live_id"]["model_file"]))
     offline = iem(detrend_data(_recorded_samples(s, model), kind="mean")[0], order=4, past=15,
                   future=8)
     _assert_same_model(model, offline)
+
+
+def test_live_id_over_the_udp_simulator(tmp_path):
+    """``groundstation sim``'s UDP server (cflib's UDP driver, real time): the same checks. A
+    link loss (a host stall on the wall clock) is accepted once updates came, as on SITL."""
+    install_drivers()
+    plan = _plan(6.0, SMALL)
+    with UdpServer(port=free_udp_port(), seed=4) as server:
+        lid = live_id_listener(plan)
+        result = fly_plan(plan=plan, out=tmp_path, uri=server.uris[0], listeners=[lid])
+    lost = result.cause.startswith("link lost") and lid.updates >= 2
+    assert not result.aborted or lost, result.cause
+    assert lid.updates >= 2  # at least one update before the final one
+    _check_final_model_is_offline(result, lid)
