@@ -412,6 +412,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
     link = Link(cf=cf, uri=uri, clock=clock, post=post)
     t0 = heard[0] = time.monotonic()
     cf.open_link(uri)
+    heard[0] = max(heard[0], time.monotonic())  # the silence counts once the link is open
     while not ready.wait(0.05):
         now = time.monotonic()
         if cancel is not None and cancel.is_set():
