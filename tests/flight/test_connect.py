@@ -80,6 +80,14 @@ class Proxy:
         self.back.close()
 
 
+@pytest.fixture(autouse=True)
+def no_toc_cache(monkeypatch):
+    """Every connect fetches the TOCs (130 requests to the simulator; 46 with them cached), so
+    the drop and delay figures below do not depend on which tests ran before in this process;
+    the cache tests name their own folder."""
+    monkeypatch.setenv(TOC_CACHE_ENV, "off")
+
+
 @pytest.fixture
 def server():
     install_drivers()
