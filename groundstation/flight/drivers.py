@@ -15,7 +15,8 @@ cflib's TOC, parameter and log code ignore as they do on the radio.
 :func:`toc_cache_dir` is where cflib keeps the log and parameter TOCs it fetched, one JSON file
 per TOC checksum (as cfclient does): a second connect to the same firmware reads only the
 parameter values (0.7 s instead of 1.9 s against the firmware in the loop). A firmware with
-another TOC has another checksum and is fetched again; a damaged file is fetched again too.
+another TOC has another checksum and is fetched again; a damaged file is removed and fetched
+again.
 ``GROUNDSTATION_TOC_CACHE`` names another folder, or ``off``. cflib's reader evaluates each
 element's ``__class__`` text as Python, so a cache file whose elements are not plainly cflib's
 TOC elements is removed before cflib can read it (:func:`toc_cache_dir`).
@@ -122,13 +123,12 @@ _TOC_FIELDS = {"__class__", "ident", "group", "name", "ctype", "pytype", "access
 
 def _plain_toc_file(path: Path) -> bool:
     """Whether ``path`` is JSON whose every object with a ``__class__`` is a cflib TOC element
-    of plain values (what cflib's cache writes); damaged JSON passes (cflib fetches again)."""
+    of plain values (what cflib's cache writes). Damaged JSON is not: cflib's decoder evaluates
+    each object as it is parsed, before the damage further on is found."""
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError):
+    except (OSError, ValueError):  # UnicodeDecodeError is a ValueError
         return False
-    except ValueError:
-        return True
 
     def plain(obj: Any) -> bool:
         if isinstance(obj, dict):

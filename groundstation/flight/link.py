@@ -403,14 +403,14 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
 
     cf.connection_failed.add_callback(failed)
     cf.connection_lost.add_callback(failed)
-    heard = [time.monotonic()]  # when the vehicle last sent anything
+    heard = [-math.inf]  # when the vehicle last sent anything
 
     def answered(_pk: Any) -> None:
         heard[0] = time.monotonic()
 
     cf.packet_received.add_callback(answered)
     link = Link(cf=cf, uri=uri, clock=clock, post=post)
-    t0 = heard[0] = time.monotonic()
+    t0 = time.monotonic()
     cf.open_link(uri)
     heard[0] = max(heard[0], time.monotonic())  # the silence counts once the link is open
     while not ready.wait(0.05):

@@ -195,15 +195,19 @@ def test_toc_cache_off(server, tmp_path, monkeypatch):
 def test_a_cache_file_that_would_run_code_is_removed_before_cflib_reads_it(server, tmp_path,
                                                                          monkeypatch):
     """cflib's cache reader evaluates each element's ``__class__`` as Python: a crafted file
-    under the right checksum name is removed, nothing runs, the TOC is fetched again."""
+    under the right checksum name, whole or damaged after the crafted element, is removed,
+    nothing runs, the TOC is fetched again."""
     cache, mark = tmp_path / "toc", tmp_path / "ran"
     monkeypatch.setenv(TOC_CACHE_ENV, str(cache))
     _connect(server.uris[0]).close()
     files = sorted(cache.glob("*.json"))
     assert len(files) == 2
     payload = f'exec("import pathlib; pathlib.Path({str(mark)!r}).touch()")'
-    for f in files:
-        f.write_text(json.dumps({"pid_rate": {"roll_kp": {"__class__": payload, "ident": 0}}}))
+    crafted = json.dumps({"pid_rate": {"roll_kp": {"__class__": payload, "ident": 0}}})
+    # whole, and cut short after the crafted object (cflib's decoder runs it before it finds
+    # that the file is damaged)
+    for f, text in zip(files, (crafted, crafted[:-2]), strict=True):
+        f.write_text(text)
     link = _connect(server.uris[0])
     value = float(link.cf.param.get_value("pid_rate.roll_kp"))
     link.close()

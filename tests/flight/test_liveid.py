@@ -380,14 +380,14 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     it all the same, so such a flight is accepted; only one that lost the link before the first
     update is flown again (once). Any other abort fails."""
     plan = _plan(8.0, SMALL)
-    for _attempt in range(2):
+    for attempt in range(2):
         lid = live_id_listener(plan)
         uri = flight_uri()
-        result = fly_plan(plan=plan, out=tmp_path / str(_attempt), uri=uri, listeners=[lid])
+        result = fly_plan(plan=plan, out=tmp_path / str(attempt), uri=uri, listeners=[lid])
         lost = uri.startswith("udp://") and result.cause.startswith("link lost")
         if not (lost and lid.updates <= 1):  # the final update alone: nothing before the loss
             break
-        print(f"SITL flight {_attempt + 1}: {result.cause} before any update; flying it again")
+        print(f"SITL flight {attempt + 1}: {result.cause} before any update; flying it again")
     assert not result.aborted or lost, result.cause
     wait_for_stop(uri)
     _check_final_model_is_offline(result, lid)
