@@ -30,6 +30,12 @@ that ignores the yaw input scores better than one that has it right); not at all
 design changed only the seeds (the same experiment, shifted along the m-sequence).
 ``BENCH_DESIGN_RUNS`` (default 6, 3 on SITL) and ``BENCH_DESIGN_SPEED`` (default 20) change the
 runs and the simulation speed.
+
+On ``sim://`` every flight sets ``stabilizer.estimator = 2`` (``[parameters]``), the Kalman
+estimator the firmware in the loop runs (its external position source selects it): its 100 Hz
+attitude steps are what aliases the yaw motor log. ``BENCH_DESIGN_ESTIMATOR=1`` flies the
+simulator's complementary estimator instead (the attitude at every controller tick: nothing
+aliased, nothing for the design to turn off).
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ from tests.sim_crtp.helpers import free_udp_port
 BACKEND = os.environ.get("BENCH_DESIGN_BACKEND", "sim")
 RUNS = int(os.environ.get("BENCH_DESIGN_RUNS", "3" if BACKEND == "sitl" else "6"))
 SPEED = float(os.environ.get("BENCH_DESIGN_SPEED", "20"))
+ESTIMATOR = () if BACKEND == "sitl" else (
+    ("stabilizer.estimator", float(os.environ.get("BENCH_DESIGN_ESTIMATOR", "2"))),)
 GYROS = ("gyro.x", "gyro.y", "gyro.z")
 MAX_LOG_GAP_S = 0.25  # a longer gap in a flight's logs (fw time): flown again
 THESIS = (8, 60, 17)  # order, past, future
@@ -120,7 +128,8 @@ def _gyro_fits(model, val) -> dict[str, np.ndarray]:
 def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench-design-") as tmp:
         out = Path(tmp)
-        base = load_plan("prbs-3axis")
+        base = _with_parameters(load_plan("prbs-3axis"), ESTIMATOR)
+        (out / "base.toml").write_text(base.text, encoding="utf-8")
         first = _fly(base, out=out, seed=1)
         second = _fly(advance_prbs(base, chips=500), out=out, seed=2)
         model = _identify(first, "auto")
@@ -132,17 +141,21 @@ def main() -> int:
             path = out / f"{label.replace(' ', '-')}.toml"
             print(f"--- {label}:", flush=True)
             try:  # the command line itself; a user error prints one line and exits 2
-                groundstation(["plan", "design", "--model", str(out / "model.h5"), "--from",
-                               "prbs-3axis", "--flown", str(first), "--flown", str(second),
-                               "--out", str(path), *extra], standalone_mode=False)
+                groundstation(["plan", "design", "--model", str(out / "model.h5"),
+                               "--from", str(out / "base.toml"), "--flown", str(first),
+                               "--flown", str(second), "--out", str(path), *extra],
+                              standalone_mode=False)
             except SystemExit as exc:
                 return int(exc.code or 1)
             plans[label] = load_plan(path)
-        val_plans = {"3-axis": advance_prbs(base, chips=250), "yaw-only": load_plan("yaw-only")}
+        val_plans = {"3-axis": advance_prbs(load_plan("prbs-3axis"), chips=250),
+                     "yaw-only": load_plan("yaw-only")}
         params = plans["designed"].parameters
-        if params:
+        if params != base.parameters:
             val_plans |= {f"{k} D off": _with_parameters(p, params)
                           for k, p in list(val_plans.items())}
+        val_plans = {k: p if k.endswith("D off") else _with_parameters(p, ESTIMATOR)
+                     for k, p in val_plans.items()}
         vals = {k: load_session(_fly(p, out=out, seed=3 + i), window="excitation")
                 for i, (k, p) in enumerate(val_plans.items())}
         # fits[plan][how][val][measure] -> list of (3,) arrays, one per run
@@ -172,7 +185,10 @@ def _seeds_only(base: Plan, designed: Plan) -> bool:
 
 
 def _with_parameters(plan: Plan, params: tuple[tuple[str, float], ...]) -> Plan:
-    """``plan`` flown with the firmware parameters ``params`` (a ``[parameters]`` table)."""
+    """``plan`` flown with the firmware parameters ``params`` (a ``[parameters]`` table; the
+    plan has none: none of the shipped plans has)."""
+    if not params:
+        return plan
     table = "".join(f"{name} = {value!r}\n" for name, value in params)
     return parse_plan(text=f"{plan.text}\n[parameters]\n{table}", source=plan.source,
                       name=plan.name)

@@ -57,12 +57,12 @@ def describe(session: Session) -> dict[str, Any]:
             for p in session.phases()
         ],
         "events": len(session.events()),
-        **({"parameters": params} if (params := _plan_parameters(session)) else {}),
+        **({"parameters": params} if (params := flown_parameters(session)) else {}),
         **({"live_id": live_id(session)} if "live_id" in session else {}),
     }
 
 
-def _plan_parameters(session: Session) -> dict[str, Any]:
+def flown_parameters(session: Session) -> dict[str, Any]:
     """The plan's ``[parameters]`` as flown: ``{name: {"value": v, "was": old}}`` (untrusted
     file: anything else is left out)."""
     raw = session.json_meta("plan_parameters")

@@ -361,17 +361,21 @@ def _measured(model: Any, sessions: tuple[Path, ...]
 
 
 def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
-    """The firmware parameters recorded at connect in the flown sessions (``group.name``:
-    value; the last session's value where they differ)."""
+    """The firmware parameters the sessions were flown with (``group.name``: value): those
+    recorded at connect, with the plan's ``[parameters]`` set for the flight over them; the
+    last session's value where they differ."""
     from cfsession import open_session
+    from groundstation.commands.info import flown_parameters
 
     out: dict[str, float] = {}
     for path in sessions:
-        params = open_session(path).json_meta("params")
+        session = open_session(path)
+        params = session.json_meta("params")
         for group, values in (params.items() if isinstance(params, dict) else ()):
             for name, value in (values.items() if isinstance(values, dict) else ()):
                 if isinstance(value, int | float) and not isinstance(value, bool):
                     out[f"{group}.{name}"] = float(value)
+        out |= {name: float(v["value"]) for name, v in flown_parameters(session).items()}
     return out
 
 

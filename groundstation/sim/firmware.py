@@ -7,8 +7,10 @@ Faithful to the conventions of crazyflie-firmware (``pid.c``, ``attitude_pid_con
 * The estimator's pitch is the *legacy* pitch ``theta_legacy = -theta`` (positive nose up), and the
   rate loop is fed ``(gyro.x, -gyro.y, gyro.z)``; the yaw output is negated before mixing.
 * PID (``pid.c``): ``e = desired - measured``, ``u = kp e + ki sat(int e dt, i_limit)
-  + kd lpf(de/dt)``, the derivative passed through a 2nd-order Butterworth low-pass (20 Hz for
-  the rate loop, 10 Hz for the attitude loop); rate outputs saturate to ``+-32767``.
+  + kd lpf(de/dt)``, the rate loop's derivative passed through a 2nd-order Butterworth low-pass
+  at 20 Hz, the attitude loop's unfiltered (``ATTITUDE_LPF_ENABLE`` is false in the firmware:
+  with the Kalman estimator's 100 Hz attitude steps the yaw D term gives one-tick pulses, see
+  ``SimVehicle``); rate outputs saturate to ``+-32767``.
 * Mixer: ``r = roll/2``, ``p = pitch/2``; ``m1 = T - r + p + y``, ``m2 = T - r - p - y``,
   ``m3 = T + r - p + y``, ``m4 = T + r + p - y``; if one exceeds 65535 all four are reduced by the
   excess, then each is clipped at 0.
@@ -44,22 +46,23 @@ FLIGHT_THRESHOLD_PWM = 1000
 class Pid:
     """One ``pid.c`` loop (units of the caller: deg and deg/s in, deg/s or PWM counts out)."""
 
-    __slots__ = ("_a1", "_a2", "_b0", "_b1", "_b2", "_d1", "_d2", "dt", "i_limit", "integ",
-                 "kd", "ki", "kp", "out_limit", "prev_error")
+    __slots__ = ("_a1", "_a2", "_b0", "_b1", "_b2", "_d1", "_d2", "dt", "filtered", "i_limit",
+                 "integ", "kd", "ki", "kp", "out_limit", "prev_error")
 
     def __init__(self, *, kp: float, ki: float, kd: float, i_limit: float, out_limit: float,
                  dt: float, cutoff_hz: float) -> None:
         self.kp, self.ki, self.kd = kp, ki, kd
         self.i_limit, self.out_limit, self.dt = i_limit, out_limit, dt
-        # lpf2p.c: 2nd-order Butterworth, direct form II.
-        fr = (1.0 / dt) / cutoff_hz
-        ohm = math.tan(math.pi / fr)
-        c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
-        self._b0 = ohm * ohm / c
-        self._b1 = 2.0 * self._b0
-        self._b2 = self._b0
-        self._a1 = 2.0 * (ohm * ohm - 1.0) / c
-        self._a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
+        self.filtered = cutoff_hz > 0.0   # pid.c's enableDFilter; 0 Hz: unfiltered
+        self._a1 = self._a2 = self._b0 = self._b1 = self._b2 = 0.0
+        if self.filtered:  # lpf2p.c: 2nd-order Butterworth, direct form II.
+            ohm = math.tan(math.pi * cutoff_hz * dt)
+            c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+            self._b0 = ohm * ohm / c
+            self._b1 = 2.0 * self._b0
+            self._b2 = self._b0
+            self._a1 = 2.0 * (ohm * ohm - 1.0) / c
+            self._a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
         self.reset()
 
     def reset(self) -> None:
@@ -72,9 +75,12 @@ class Pid:
         """One update with ``error = desired - measured``; returns the (limited) output."""
         dt = self.dt
         deriv = (error - self.prev_error) / dt
-        d0 = deriv - self._d1 * self._a1 - self._d2 * self._a2
-        fd = d0 * self._b0 + self._d1 * self._b1 + self._d2 * self._b2
-        self._d2, self._d1 = self._d1, d0
+        if self.filtered:
+            d0 = deriv - self._d1 * self._a1 - self._d2 * self._a2
+            fd = d0 * self._b0 + self._d1 * self._b1 + self._d2 * self._b2
+            self._d2, self._d1 = self._d1, d0
+        else:
+            fd = deriv
         integ = self.integ + error * dt
         lim = self.i_limit
         if lim != 0.0:
@@ -114,7 +120,7 @@ class PidController:
             rate = name.endswith("_rate")
             self.pids[name] = Pid(kp=kp, ki=ki, kd=kd, i_limit=il,
                                   out_limit=RATE_LIMIT if rate else 0.0, dt=dt,
-                                  cutoff_hz=20.0 if rate else 10.0)
+                                  cutoff_hz=20.0 if rate else 0.0)
         self._ordered = tuple(self.pids[n] for n in ("roll", "pitch", "yaw", "roll_rate",
                                                        "pitch_rate", "yaw_rate"))
         self.reset(yaw_deg=0.0)

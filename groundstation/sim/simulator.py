@@ -350,8 +350,9 @@ class Simulator:
         failed = False
         while not self._stop.is_set():
             self._process_rx()
-            if math.isinf(self.speed):
-                target = v.firmware_ms + _CHUNK_MS
+            if math.isinf(self.speed):  # flat out, but held for a scheduler like any speed
+                target = self._paced_target(v.firmware_ms + _CHUNK_MS)
+                held = target <= v.firmware_ms
             else:
                 target = base_ms + int((time.perf_counter() - base_wall) * self.speed * 1000.0)
                 if target - v.firmware_ms > _MAX_LAG_MS:  # host too slow: let time slip
@@ -384,6 +385,9 @@ class Simulator:
                 break
             if not math.isinf(self.speed):
                 self._wake.wait(self._sleep_s(base_wall, base_ms))
+                self._wake.clear()
+            elif held:  # until the scheduler's next sleep_until (or a packet)
+                self._wake.wait(_WAKE_S)
                 self._wake.clear()
         with self.cond:
             self.cond.notify_all()

@@ -39,6 +39,8 @@ log = logging.getLogger(__name__)
 
 _DT_S = 0.001          # physics / stabilizer tick
 _PID_DT_S = 0.002      # attitude and rate loops, 500 Hz
+_KALMAN_PERIOD_MS = 10  # estimator_kalman.c PREDICT_RATE 100 Hz
+_KALMAN = 2             # stabilizer.estimator: 1 complementary, 2 Kalman
 _FIRMWARE_REVISION0 = 0x2024_0A00   # arbitrary but stable identifier of the emulated build
 
 
@@ -65,6 +67,14 @@ class SimVehicle:
     ``gyro_vib_dps=0``), ``auto_arm`` (default True, as on a CF2.1) or ``start_z_m`` (start at rest
     in the air at this height with the motors spinning at hover thrust, as if released from a
     hand; for hover tests. Send setpoints at once or the motors spin down).
+
+    The estimator is the parameter ``stabilizer.estimator``, as on the firmware. ``1``
+    (complementary, the default) gives the controller the true attitude at every 500 Hz tick.
+    ``2`` (Kalman) changes the attitude only when the estimator predicts, every 10 ms
+    (``PREDICT_RATE``), at instants that wander by a controller tick against the firmware's
+    ms clock (the logs' clock); the attitude D term (``pid_attitude.yaw_kd``, unfiltered as in
+    the firmware) turns each step into a one-tick pulse of the motor commands, which a 50 Hz log
+    samples at random: the aliasing ``groundstation.plan.aliasing`` detects (docs/simulator.md).
     """
 
     LOG_VARIABLES: ClassVar[dict[str, str]] = {
@@ -142,6 +152,8 @@ class SimVehicle:
         self._targets = (0.0, 0.0, 0.0, 0.0)
         self._control = (0.0, 0.0, 0.0, 0.0)   # thrust, roll, pitch, yaw (mixer inputs)
         self._att = (0.0, 0.0, 0.0)             # roll, legacy pitch, yaw, deg
+        self._predict_ms = 0                    # the Kalman estimator's next prediction
+        self._predict_rng = random.Random(seed ^ 0x6B616C6D)  # its timing, apart from the noise
         self._emergency_stop = False
         self._low_warned = False
         self.stop_count = 0
@@ -192,9 +204,16 @@ class SimVehicle:
         pwm = self._pwm
         out = self._duty_pwm
         sensors.sample(body=body, duty=(out[0] + out[1] + out[2] + out[3]) / 262140.0)
-        roll, pitch, yaw = body.euler_deg()
-        pitch = -pitch                                    # legacy CF2 convention
-        self._att = (roll, pitch, yaw)
+        if self._params["stabilizer.estimator"] != _KALMAN:
+            roll, pitch, yaw = body.euler_deg()
+            self._att = (roll, -pitch, yaw)                  # legacy CF2 pitch convention
+        elif now >= self._predict_ms:
+            roll, pitch, yaw = body.euler_deg()
+            self._att = (roll, -pitch, yaw)
+            # The next prediction 10 ms on, give or take a controller tick: a random walk of
+            # its phase against the ms clock, mean period 10 ms.
+            self._predict_ms = now + _KALMAN_PERIOD_MS + self._predict_rng.choice((-2, 0, 0, 2))
+        roll, pitch, yaw = self._att
         cmd = self.commander
         sp = cmd.current(now_ms=now)
         sup = self.supervisor

@@ -11,8 +11,10 @@ from groundstation.flight.clock import clock_for_uri
 from groundstation.sim.simulator import _PACE_HOLD_S, _PACE_LEAD_MS
 
 
-def test_busy_scheduler_freezes_simulated_time(sim_uri):
-    clock = clock_for_uri(sim_uri)  # speed 20: 0.1 s wall would be 2 s of simulated time
+@pytest.mark.parametrize("speed", ["20", "inf"])
+def test_busy_scheduler_freezes_simulated_time(sim_uri, speed):
+    """At 20x, 0.1 s of wall time would be 2 s of simulated time; flat out, about 4 s."""
+    clock = clock_for_uri(sim_uri.replace("speed=20", f"speed={speed}"))
     t = clock.now() + 0.5
     clock.sleep_until(t)
     assert clock.now() >= t

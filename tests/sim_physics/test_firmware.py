@@ -154,3 +154,43 @@ def test_unknown_override_is_a_one_line_error():
         SimVehicle(mass=0.03)
     with pytest.raises(SimConfigError, match="vbat_full"):
         SimVehicle(vbat_full=5.0)
+
+
+
+def _yawing(v: SimVehicle, *, seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    """Yawing at 60 deg/s for ``seconds``: the firmware ms at which ``stabilizer.yaw`` changed,
+    and at each of those the jump of the yaw motor combination (m1 - m2 + m3 - m4) from that
+    controller tick to the next."""
+    thrust = v.hover_thrust()
+    rows = []
+    for i in range(round(seconds * 1000)):
+        if i % 10 == 0:
+            v.commander_rpyt(roll=0.0, pitch=0.0, yawrate=60.0, thrust=thrust)
+        v.advance(0.001)
+        m = v.motors_pwm
+        rows.append((v.firmware_ms, v.read_log("stabilizer.yaw"), m[0] - m[1] + m[2] - m[3]))
+    ms, yaw, motors = np.array(rows, dtype=float).T
+    at = np.flatnonzero(np.diff(yaw) != 0)[:-1] + 1
+    return ms[at].astype(int), np.abs(motors[at] - motors[at + 2])
+
+
+@pytest.mark.parametrize("estimator", [1, 2])
+def test_estimator_parameter_sets_when_the_attitude_changes(hovering, estimator):
+    """``stabilizer.estimator = 2`` (Kalman): the attitude the controller sees changes at the
+    estimator's 100 Hz, at instants that wander against the ms clock (the 50 Hz log's), and
+    the unfiltered yaw D term makes each change a one-tick pulse of the yaw motor commands;
+    ``pid_attitude.yaw_kd = 0`` removes it. 1 (complementary): every 500 Hz controller tick,
+    no pulses."""
+    hovering.write_param("stabilizer.estimator", estimator)
+    fly(hovering, seconds=0.5)
+    changes, jumps = _yawing(hovering, seconds=4.0)
+    gaps = np.diff(changes)
+    if estimator == 1:
+        assert set(gaps) == {2}
+    else:
+        assert set(gaps) <= {8, 10, 12} and abs(gaps.mean() - 10.0) < 0.5
+        assert len(set(changes % 20)) == 10      # at every phase of a 50 Hz log period
+    assert (np.median(jumps) > 10_000) == (estimator == 2), np.median(jumps)  # 52 000 : 170
+    hovering.write_param("pid_attitude.yaw_kd", 0.0)
+    _, jumps = _yawing(hovering, seconds=1.0)
+    assert np.median(jumps) < 2000          # gyro noise through the rate loop: about 340

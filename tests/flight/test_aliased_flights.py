@@ -1,0 +1,87 @@
+"""Aliased motor logs from flights, and the designed flight that has none (issue 16, item 5).
+
+Known truth: the simulated firmware with the Kalman estimator (``stabilizer.estimator = 2``)
+steps its attitude at 100 Hz, and its unfiltered yaw D term turns each step into a one-tick
+pulse of the motor commands, which the 50 Hz motor log samples at random; with the
+complementary estimator, or with ``pid_attitude.yaw_kd = 0``, there are no pulses
+(``tests/sim_physics/test_firmware.py`` checks that at the firmware's tick). Here the whole
+path: the flight, its session, ``plan design`` and the designed flight.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from groundstation.cli import main
+from groundstation.flight import fly_plan
+from groundstation.plan import load_plan
+from groundstation.plan.aliasing import ALIAS_SHARE, axis_shares
+from sysid.methods import get_method
+from sysid.session_io import load_session
+
+
+def _fly(path: Path, *, uri: str, out: Path) -> Path:
+    result = fly_plan(plan=load_plan(str(path)), out=out, uri=uri)
+    result.raise_if_aborted()
+    return result.path
+
+
+def _yaw_share(session: Path) -> float:
+    data = load_session(session, window="excitation")
+    return axis_shares([data.u], input_names=data.input_names)["yaw_rate"]
+
+
+@pytest.mark.parametrize("estimator", [2, 1])
+def test_design_turns_off_the_yaw_d_term_where_the_flight_was_aliased(sim_uri, tmp_path,
+                                                                      estimator):
+    base = tmp_path / "flown.toml"
+    base.write_text(load_plan("prbs-3axis").text
+                    + f"\n[parameters]\nstabilizer.estimator = {estimator}\n", encoding="utf-8")
+    flown = _fly(base, uri=sim_uri(speed="inf", seed=1), out=tmp_path)
+    share = _yaw_share(flown)
+    assert (share > ALIAS_SHARE) == (estimator == 2), share   # 10-12 % against 0.7-0.9 %
+    iem = get_method("iem")
+    model = iem.identify([load_session(flown, window="excitation")], order=8, past=60,
+                         future=17, options=iem.options())
+    model.save(tmp_path / "model.h5")
+    designed = tmp_path / "next.toml"
+    res = CliRunner().invoke(main, ["plan", "design", "--model", str(tmp_path / "model.h5"),
+                                    "--from", str(base), "--flown", str(flown),
+                                    "--out", str(designed)])
+    assert res.exit_code == 0, res.output
+    params = dict(load_plan(str(designed)).parameters)
+    if estimator == 1:
+        assert params == {"stabilizer.estimator": 1}
+        return
+    assert params == {"stabilizer.estimator": 2, "pid_attitude.yaw_kd": 0.0}
+    again = _fly(designed, uri=sim_uri(speed="inf", seed=2), out=tmp_path)
+    assert _yaw_share(again) < ALIAS_SHARE / 10                # 0.04-0.07 %
+    # Designed again from the flight without the D term: nothing more to turn off, and the
+    # flown value (0, set for the flight) is what the design sees, not the one at connect.
+    res = CliRunner().invoke(main, ["plan", "design", "--model", str(tmp_path / "model.h5"),
+                                    "--from", str(designed), "--flown", str(again),
+                                    "--out", str(tmp_path / "third.toml")])
+    assert res.exit_code == 0, res.output
+    assert dict(load_plan(str(tmp_path / "third.toml")).parameters) == params
+
+
+def test_design_judges_the_d_term_the_flight_was_flown_with(sim_uri, tmp_path):
+    """A D term the plan set for the flight (``pid_attitude.roll_kd``, 0 in the firmware at
+    connect) is the one the design sees, and turns off where it aliased."""
+    base = tmp_path / "flown.toml"
+    base.write_text(load_plan("prbs-3axis").text + "\n[parameters]\nstabilizer.estimator = 2\n"
+                    "pid_attitude.roll_kd = 0.35\n", encoding="utf-8")
+    flown = _fly(base, uri=sim_uri(speed="inf", seed=3), out=tmp_path)
+    data = load_session(flown, window="excitation")
+    iem = get_method("iem")
+    iem.identify([data], order=8, past=60, future=17, options=iem.options()).save(
+        tmp_path / "model.h5")
+    res = CliRunner().invoke(main, ["plan", "design", "--model", str(tmp_path / "model.h5"),
+                                    "--from", str(base), "--flown", str(flown),
+                                    "--out", str(tmp_path / "next.toml")])
+    assert res.exit_code == 0, res.output
+    assert dict(load_plan(str(tmp_path / "next.toml")).parameters) == {
+        "stabilizer.estimator": 2, "pid_attitude.roll_kd": 0.0, "pid_attitude.yaw_kd": 0.0}
