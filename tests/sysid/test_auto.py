@@ -133,3 +133,39 @@ def test_score_follows_horizon_or_window_and_no_stable_model_keeps_each_grid() -
                orders=[40], choose_focus=True)
     assert [r.rows[0].error is not None for r in err.value.results] == [True, True]
     assert err.value.plan.grid["orders"] == [40] and "last 30 %" in err.value.plan.rule
+
+
+def _plant_that_changes(seed: int, *, n: int = 1000, cut: int = 700) -> sysid.IOData:
+    """A first-order plant, stable (pole 0.9, open loop, small input) on the first 70 %, then
+    unstable (pole 1.3, held by feedback u = r - 0.8 y, input 10 times larger) on the rest: the
+    identification part says 0.9, all the data say about 1.27."""
+    rng = np.random.default_rng(seed)
+    r = rng.standard_normal(n)
+    r[cut:] *= 10.0
+    e = 0.1 * rng.standard_normal(n)
+    x, u, y = 0.0, np.empty(n), np.empty(n)
+    for t in range(n):
+        late = t >= cut
+        y[t] = x + e[t]
+        u[t] = r[t] - (0.8 * y[t] if late else 0.0)
+        x = (1.3 if late else 0.9) * x + u[t] + 0.5 * e[t]
+    return sysid.IOData(u=u[:, None], y=y[:, None], dt=0.01)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_chosen_model_stays_stable_when_all_the_data_tip_a_pole_out(seed) -> None:
+    """The default model is stable (issue 10, item 3): the chosen row is stable, and when its
+    settings on all the data give a pole far outside (kept by ``stability="auto"`` as a
+    genuinely unstable plant), the model the sweep scored comes back, with a warning."""
+    meth = get_method("iem")
+    d = _plant_that_changes(seed)
+    everything = meth.identify([d], order=1, past=10, future=6, options=meth.options())
+    assert np.abs(everything.poles()).max() > 1.2       # what all the data say (1.26-1.27)
+    sel = select([[d]], method=meth, options=meth.options(), orders=[1])
+    assert sel.best.stable and sel.model.is_stable
+    assert abs(abs(sel.model.poles()[0]) - 0.9) < 0.03  # the identification part's plant
+    assert sel.model.provenance["n_samples"][0] < 700   # identified on that part only
+    assert any("kept the stable model the sweep scored" in w for w in sel.warnings)
+    # the model returned is the one scored (its poles to numerical precision)
+    np.testing.assert_allclose(np.sort_complex(sel.model.poles()),
+                               np.sort_complex(sel.best.poles), atol=1e-9)
