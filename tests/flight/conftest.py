@@ -107,6 +107,15 @@ def wall_slack_s(uri: str) -> float:
     return 0.4 if uri.startswith("udp://") else 0.0
 
 
+def one_variant_on_sitl(request: pytest.FixtureRequest, *, first: bool, why: str) -> None:
+    """Skip a test's other variants on ``sitl``, with ``why`` as the reason: the real-time
+    firmware is one serial scope of the suite (``tests/conftest.py``), where a flight costs its
+    length, and variants that differ only on the ground station's side (which ``sim`` and
+    ``radio`` run in full) fly once there. ``first`` says this variant is the one kept."""
+    if not first and request.node.callspec.params.get("flight_uri") == "sitl":
+        pytest.skip(f"sitl: {why}; the other variant flies here, every variant on sim and radio")
+
+
 def plan_variant(name: str, **replace: str):
     """A shipped plan with text replaced (``old=new`` pairs given as ``{old: new}``)."""
     base = load_plan(name)

@@ -20,7 +20,14 @@ from groundstation.flight import RateLimits, fly_plan
 from groundstation.plan import load_plan
 
 from .checks import check_closed_with_stop, check_setpoints
-from .conftest import SIM_HOOK, backends, plan_variant, wait_for_stop, wall_slack_s
+from .conftest import (
+    SIM_HOOK,
+    backends,
+    one_variant_on_sitl,
+    plan_variant,
+    wait_for_stop,
+    wall_slack_s,
+)
 
 
 def _safety_events(s):
@@ -46,7 +53,9 @@ def _check_descent(s, *, thrust_ceiling: int, n: int, slack_s: float = 0.0) -> N
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path):
+def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
+    one_variant_on_sitl(request, first=sig == signal.SIGINT,
+                        why="SIGTERM and SIGINT take one path, in the ground station")
     plan, uri = load_plan("pitch-only"), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     before = signal.getsignal(sig)
@@ -120,7 +129,10 @@ def test_stop_policy_stops_at_once(flight_uri, tmp_path):
 
 
 @pytest.mark.parametrize("where", ["plan", "api"])
-def test_rate_limit_violation_aborts(where, flight_uri, tmp_path):
+def test_rate_limit_violation_aborts(where, flight_uri, tmp_path, request):
+    one_variant_on_sitl(request, first=where == "plan",
+                        why="a limit from the plan or the API is checked alike, in the ground "
+                            "station")
     # Thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
     # a vehicle resting on the ground has no body rates.
     edits = {"hover_thrust = 39000": "hover_thrust = 40500"}
