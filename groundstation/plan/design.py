@@ -14,6 +14,8 @@ written is the plan checked. The rules, with their equations, are in ``docs/flig
   of the fastest mode below the setpoints' Nyquist frequency,
   :math:`\\tau_H = 1 / |\\mathrm{Re}\\,s|` of the slowest that settles within
   the phase (:math:`s = \\ln z / dt`), in whole setpoint ticks, the period at most the phase;
+  the chip lengthened beyond the flown one only by a model that explains every excited axis
+  well (:func:`_doubt`: a model missing the fast modes over-estimates :math:`\\tau_L`);
 * amplitude :math:`a = \\min(a_0 (1 + w), 0.9\\,L)` (never below :math:`a_0`, never beyond the
   limit :math:`L`), :math:`w` the axis' weakness from its fit and the singular values; never
   raised when the flown excitation already drove the model's inputs (the motors) to their
@@ -139,10 +141,12 @@ class Design:
 
 
 def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
-                horizon_ticks: float = 0.0) -> tuple[int, int, str, str] | None:
+                horizon_ticks: float = 0.0, max_clock: int | None = None,
+                untrusted: str = "") -> tuple[int, int, str, str] | None:
     """``(clock ticks, register length, why clock, why register)`` from the model's modes
     (module docstring); None when no mode below the setpoints' Nyquist frequency settles
-    within the phase."""
+    within the phase. ``max_clock`` (ticks) caps the chip, with ``untrusted`` saying why: the
+    flown chip, when the model is not trusted to lengthen it (:func:`design_plan`)."""
     z = np.asarray(poles, dtype=complex)
     z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
     s = np.log(z) / dt  # continuous-time equivalents, rad/s
@@ -157,6 +161,11 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
     why_clock = (f"chip {clock * tick:g} s <= 2.78 tau_L / alpha_s = 2.78 x {tau_l:.3g} s / "
                  f"{ALPHA_S:g} = {SWITCH * tau_l / ALPHA_S:.3g} s (fastest mode below the "
                  f"setpoint Nyquist)" + (", at least one tick" if clock == 1 else ""))
+    if max_clock is not None and clock > max_clock:
+        why_clock = (f"chip {max_clock * tick:g} s as flown: the model's fastest mode below the "
+                     f"setpoint Nyquist (tau_L = {tau_l:.3g} s) would allow "
+                     f"{clock * tick:g} s, but {untrusted}")
+        clock = max_clock
     want = 2 * math.pi * BETA_S * tau_h
     need = max(want, horizon_ticks * tick) / (clock * tick)
     fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
@@ -192,6 +201,26 @@ def weakness(*, fit: float | None, sv_weakness: float) -> float:
     values' weakness, whichever is larger."""
     w = 0.0 if fit is None else (FIT_GOOD - fit) / (FIT_GOOD - FIT_POOR)
     return float(min(1.0, max(0.0, w, sv_weakness)))
+
+
+def _doubt(axes: dict[str, tuple[str, float | None]], *, sv_weak: float) -> str:
+    """Why the model is not trusted to lengthen the PRBS chip ("" when it is). Rivera and
+    Jun's rule wants a *low* estimate of the time constants; a model that explains an excited
+    axis poorly (fit below ``FIT_GOOD``), whose fits are unknown, or whose order the singular
+    values support weakly may miss the fast modes that a short chip excites (a 5-state model
+    of a ``sim://`` flight saw nothing faster than 1.7 s and asked for 2.2 s chips at +-25 deg
+    of roll). Shortening the chip is always allowed."""
+    miss = "it may miss the fast modes a short chip excites"
+    unknown = [out for out, fit in axes.values() if fit is None]
+    if unknown:
+        return f"the model's fit of {', '.join(unknown)} is not known: {miss}"
+    poor = [f"{out} at {fit:.1f} %" for out, fit in axes.values()
+            if fit is not None and fit < FIT_GOOD]
+    if poor:
+        return f"the model explains {', '.join(poor)} (below {FIT_GOOD:g} %): {miss}"
+    if sv_weak > 0.0:
+        return f"the singular values support its order weakly (weakness {sv_weak:.2f}): {miss}"
+    return ""
 
 
 def sv_weakness(facts: ModelFacts) -> tuple[float, str]:
@@ -315,12 +344,18 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
         raise PlanError(f"{plan.source}: plan '{plan.name}' has no PRBS excitation to design; "
                         "start from one that has (e.g. --from prbs-3axis)")
     fits_used: dict[str, str] = {}
+    chip_notes: list[str] = []
     for i, phase in prbs_phases:
         chains = [e for e in phase.excitation if e.signal == "prbs"]
-        timing = prbs_timing(poles=facts.poles, dt=facts.dt, rate_hz=rate, n_ticks=phase.n_ticks,
-                             horizon_ticks=facts.horizon_samples * facts.dt * rate)
         axes = {e.axis: _axis_fit(facts, e.axis) for e in chains if e.axis in _LIMIT}
         weak = {a: weakness(fit=fit, sv_weakness=w_sv) for a, (_, fit) in axes.items()}
+        doubt, flown_clock = _doubt(axes, sv_weak=w_sv), min(e.clock_period for e in chains)
+        rule = {"poles": facts.poles, "dt": facts.dt, "rate_hz": rate, "n_ticks": phase.n_ticks,
+                "horizon_ticks": facts.horizon_samples * facts.dt * rate}
+        timing = prbs_timing(**rule)
+        if doubt and timing and timing[0] > flown_clock:
+            timing = prbs_timing(**rule, max_clock=flown_clock, untrusted=doubt)
+            chip_notes.append(f"phase[{i}] PRBS {timing[2]}")
         worst = max(weak, key=weak.__getitem__) if weak else None
         for e in chains:
             if e.axis not in _LIMIT:
@@ -379,6 +414,7 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                                + " of each axis' power in the top third of the band"
                                if aliasing else "not measured (no flown session, or the "
                                "model's inputs are not motor.m1..m4)"),
+             *chip_notes,
              "rules and equations: docs/flightplans.md, 'Designing the next flight'")
     header = "".join(f"{MARK} {n}\n" for n in notes)
     earlier = f"{MARK} (earlier design)"

@@ -80,6 +80,37 @@ def test_prbs_timing_follows_the_rule():
                        n_ticks=1023) is None
 
 
+@pytest.mark.parametrize(("fits", "sv", "clock", "why"), [
+    # every axis explained well, order well supported: Rivera and Jun's chip, 2.78 x 2 s / 2
+    ({g: 95.0 for g in GYROS}, None, 27, "fastest mode below the setpoint Nyquist"),
+    # one axis explained poorly: the model may miss fast modes, the flown chip stays
+    ({"gyro.x": 95.0, "gyro.y": 95.0, "gyro.z": 60.0}, None, 1, "gyro.z at 60.0 %"),
+    ({}, None, 1, "is not known"),                                 # no fits
+    ({g: 95.0 for g in GYROS}, [10.0, 2.0] + [1.0] * 10, 1, "singular values"),
+])
+def test_only_a_model_that_explains_every_axis_lengthens_the_chip(fits, sv, clock, why):
+    """A slow model (2 and 20 s) would stretch the thesis' 0.1 s chips to 2.7 s at +-25 deg
+    of roll; only a model trusted on every axis may (a low-order model of a flight can miss
+    the fast modes: Rivera and Jun's rule wants a low estimate of the time constants)."""
+    new = design_plan(load_plan("prbs-3axis"), _facts(taus=(2.0, 20.0), fits=fits, sv=sv),
+                      name="next", flown=set()).plan
+    assert {e.clock_period for e in new.phases[2].excitation} == {clock}
+    assert why in new.text
+    assert "2.78 x 2 s / 2" in new.text or "would allow 2.7 s" in new.text
+
+
+def test_an_untrusted_model_still_shortens_the_chip():
+    base = load_plan("prbs-3axis")
+    slow = parse_plan(text=base.text.replace("clock_period = 1", "clock_period = 4"),
+                      source="slow.toml")
+    assert {e.clock_period for e in slow.phases[2].excitation} == {4}
+    # a 0.1 s mode: chip <= 0.139 s -> one tick, though yaw is explained poorly
+    new = design_plan(slow, _facts(taus=(0.1, 2.0), fits={"gyro.x": 95.0, "gyro.y": 95.0,
+                                                             "gyro.z": 40.0}),
+                      name="next", flown=set()).plan
+    assert {e.clock_period for e in new.phases[2].excitation} == {1}
+
+
 def test_designed_plan_passes_check_and_show_explains_it(tmp_path):
     model = _model(tmp_path / "m.json", fits={"gyro.x": 95.0, "gyro.y": 95.0, "gyro.z": 60.0})
     out = tmp_path / "next.toml"
@@ -88,14 +119,16 @@ def test_designed_plan_passes_check_and_show_explains_it(tmp_path):
     plan = load_plan(out)
     assert plan.name == "next"
     prbs = [e for e in plan.phases[2].excitation]
-    assert {(e.clock_period, e.register_length) for e in prbs} == {(2, 8)}
+    # yaw explained at 60 % only: the chip stays as flown (one tick); the period still follows
+    # the slowest mode: 37.7 s = 377 chips of 0.1 s -> 9 bits
+    assert {(e.clock_period, e.register_length) for e in prbs} == {(1, 9)}
     check = _run("plan", "check", out)
     assert check.exit_code == 0 and "warning" not in check.output, check.output
     show = _run("plan", "show", out, "--width", "60")
     assert show.exit_code == 0
     assert "designed from m.json" in show.output
-    for key in ("phase[2].roll.clock_period", "phase[2].yaw_rate.amplitude",
-                "phase[2].pitch.seed"):
+    for key in ("phase[2].roll.register_length", "phase[2].yaw_rate.amplitude",
+                "phase[2].pitch.seed", "gyro.z at 60.0 %"):
         assert key in show.output
     # the shipped plan's comments and layout are kept: every line is there unchanged, or is a
     # changed value that now says why
@@ -221,8 +254,13 @@ def test_inline_tables_and_defaulted_keys_are_written(tmp_path):
     plan = parse_plan(text=text, source="inline.toml", name="inline")
     design = design_plan(plan, _facts(fits={"gyro.x": 50.0}), name="inline", flown={(5, 1)})
     roll = design.plan.phases[1].excitation[0]
-    assert (roll.clock_period, roll.amplitude) == (2, 27.0) and roll.seed != 1
-    assert {c.path[-1] for c in design.changes} >= {"clock_period", "amplitude", "seed"}
+    assert (roll.clock_period, roll.amplitude) == (1, 27.0) and roll.seed != 1
+    assert {c.path[-1] for c in design.changes} >= {"amplitude", "seed"}
+    # explained well: the amplitude stays, the defaulted chip is lengthened and written
+    design = design_plan(plan, _facts(fits={"gyro.x": 95.0}), name="inline", flown={(5, 1)})
+    roll = design.plan.phases[1].excitation[0]
+    assert (roll.clock_period, roll.amplitude) == (2, 20.0) and roll.seed != 1
+    assert {c.path[-1] for c in design.changes} >= {"clock_period", "seed"}
 
 
 @pytest.mark.parametrize(("case", "needle"), [
