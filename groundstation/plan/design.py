@@ -43,7 +43,8 @@ import numpy as np
 from groundstation.errors import PlanError
 from groundstation.plan import Plan, parse_plan
 from groundstation.plan.aliasing import d_term_changes
-from groundstation.plan.excitation import LFSR_TAPS, prbs_shift
+from groundstation.plan.excitation import prbs_shift
+from groundstation.plan.timing import prbs_timing
 from groundstation.plan.toml import dotted, ensure_tables, key_lines, set_keys
 from groundstation.plan.variants import advanced_seed
 
@@ -56,9 +57,6 @@ AXIS_OUTPUTS = {"roll": ("gyro.x", "controller.r_roll", "stateEstimate.roll", "s
                 "yaw_rate": ("gyro.z", "controller.r_yaw")}
 """Model outputs that measure each setpoint axis, in order of preference."""
 _LIMIT = {"roll": "max_roll_deg", "pitch": "max_pitch_deg", "yaw_rate": "max_yaw_rate_deg_s"}
-SWITCH, ALPHA_S, BETA_S = 2.78, 2.0, 3.0
-"""PRBS power is down by half at 2.78 / T_sw rad/s; closed loop alpha_s times faster than the
-open loop; beta_s time constants to settle (Rivera and Jun 2000)."""
 FIT_GOOD, FIT_POOR = 90.0, 50.0  # % fit: weakness 0 at or above FIT_GOOD, 1 at or below FIT_POOR
 SV_GOOD = 10.0  # sigma_n / median(discarded sigmas) at or above this: the order is well supported
 LIMIT_SHARE = 0.9  # amplitudes at most 0.9 x the vehicle limit (and at most 2x: weakness <= 1)
@@ -138,48 +136,6 @@ class Design:
     plan: Plan
     changes: tuple[Change, ...]
     notes: tuple[str, ...]
-
-
-def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
-                horizon_ticks: float = 0.0, max_clock: int | None = None,
-                untrusted: str = "") -> tuple[int, int, str, str] | None:
-    """``(clock ticks, register length, why clock, why register)`` from the model's modes
-    (module docstring); None when no mode below the setpoints' Nyquist frequency settles
-    within the phase. ``max_clock`` (ticks) caps the chip, with ``untrusted`` saying why: the
-    flown chip, when the model is not trusted to lengthen it (:func:`design_plan`)."""
-    z = np.asarray(poles, dtype=complex)
-    z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
-    s = np.log(z) / dt  # continuous-time equivalents, rad/s
-    speed, decay = np.abs(s), -1.0 / s.real  # natural frequency; decay time constant, s
-    tick, phase_s = 1.0 / rate_hz, n_ticks / rate_hz
-    band = speed <= math.pi * rate_hz  # at or below the setpoints' Nyquist frequency
-    settles = band & (decay <= phase_s)  # slower modes act as integrators over the phase
-    if not settles.any():
-        return None
-    tau_l, tau_h = float(1.0 / speed[band].max()), float(decay[settles].max())
-    clock = max(1, math.floor(SWITCH * tau_l / ALPHA_S / tick + 1e-9))
-    why_clock = (f"chip {clock * tick:g} s <= 2.78 tau_L / alpha_s = 2.78 x {tau_l:.3g} s / "
-                 f"{ALPHA_S:g} = {SWITCH * tau_l / ALPHA_S:.3g} s (fastest mode below the "
-                 f"setpoint Nyquist)" + (", at least one tick" if clock == 1 else ""))
-    if max_clock is not None and clock > max_clock:
-        why_clock = (f"chip {max_clock * tick:g} s as flown: the model's fastest mode below the "
-                     f"setpoint Nyquist (tau_L = {tau_l:.3g} s) would allow "
-                     f"{clock * tick:g} s, but {untrusted}")
-        clock = max_clock
-    want = 2 * math.pi * BETA_S * tau_h
-    need = max(want, horizon_ticks * tick) / (clock * tick)
-    fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
-    if not fits:
-        raise PlanError(f"an excitation phase of {phase_s:g} s cannot hold one period of a "
-                        f"PRBS with {clock * tick:g} s chips; lengthen it to at least "
-                        f"{3 * clock * tick:g} s")
-    n = next((n for n in fits if (1 << n) - 1 >= need), fits[-1])
-    period_s = ((1 << n) - 1) * clock * tick
-    why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period_s:g} s vs 2 pi beta_s "
-               f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
-    if (1 << n) - 1 < need:
-        why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
-    return clock, n, why_clock, why_reg
 
 
 def saturated(u: np.ndarray) -> np.ndarray:

@@ -1,0 +1,71 @@
+"""PRBS clock period and register length from a model's modes (Rivera and Jun 2000, "An
+integrated identification and control design methodology for multivariable process system
+applications"); the rule and its figures are in ``docs/flightplans.md`` ("Designing the next
+flight"), the caller that decides when a model is trusted to lengthen the chip is
+:func:`groundstation.plan.design.design_plan`.
+
+With :math:`s = \\ln z / dt` per pole, the modes at or below the setpoints' Nyquist frequency
+count: :math:`\\tau_L = 1 / \\max |s|` (the fastest) and
+:math:`\\tau_H = \\max 1 / |\\mathrm{Re}\\,s|` over those that settle within the phase (the
+slowest); then
+
+* chip :math:`T_{sw} = P / f_s \\le 2.78\\,\\tau_L / \\alpha_s`, in whole setpoint ticks P;
+* period :math:`N T_{sw} \\ge 2\\pi \\beta_s \\tau_H` with :math:`N = 2^n - 1`, at most the phase.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from groundstation.errors import PlanError
+from groundstation.plan.excitation import LFSR_TAPS
+
+__all__ = ["ALPHA_S", "BETA_S", "SWITCH", "prbs_timing"]
+
+SWITCH, ALPHA_S, BETA_S = 2.78, 2.0, 3.0
+"""PRBS power is down by half at 2.78 / T_sw rad/s; closed loop alpha_s times faster than the
+open loop; beta_s time constants to settle (Rivera and Jun 2000)."""
+
+
+def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
+                horizon_ticks: float = 0.0, max_clock: int | None = None,
+                untrusted: str = "") -> tuple[int, int, str, str] | None:
+    """``(clock ticks, register length, why clock, why register)`` from the model's modes
+    (module docstring); None when no mode below the setpoints' Nyquist frequency settles
+    within the phase. ``max_clock`` (ticks) caps the chip, with ``untrusted`` saying why: the
+    flown chip, when the model is not trusted to lengthen it (:func:`design_plan`)."""
+    z = np.asarray(poles, dtype=complex)
+    z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
+    s = np.log(z) / dt  # continuous-time equivalents, rad/s
+    speed, decay = np.abs(s), -1.0 / s.real  # natural frequency; decay time constant, s
+    tick, phase_s = 1.0 / rate_hz, n_ticks / rate_hz
+    band = speed <= math.pi * rate_hz  # at or below the setpoints' Nyquist frequency
+    settles = band & (decay <= phase_s)  # slower modes act as integrators over the phase
+    if not settles.any():
+        return None
+    tau_l, tau_h = float(1.0 / speed[band].max()), float(decay[settles].max())
+    clock = max(1, math.floor(SWITCH * tau_l / ALPHA_S / tick + 1e-9))
+    why_clock = (f"chip {clock * tick:g} s <= 2.78 tau_L / alpha_s = 2.78 x {tau_l:.3g} s / "
+                 f"{ALPHA_S:g} = {SWITCH * tau_l / ALPHA_S:.3g} s (fastest mode below the "
+                 f"setpoint Nyquist)" + (", at least one tick" if clock == 1 else ""))
+    if max_clock is not None and clock > max_clock:
+        why_clock = (f"chip {max_clock * tick:g} s as flown: the model's fastest mode below the "
+                     f"setpoint Nyquist (tau_L = {tau_l:.3g} s) would allow "
+                     f"{clock * tick:g} s, but {untrusted}")
+        clock = max_clock
+    want = 2 * math.pi * BETA_S * tau_h
+    need = max(want, horizon_ticks * tick) / (clock * tick)
+    fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
+    if not fits:
+        raise PlanError(f"an excitation phase of {phase_s:g} s cannot hold one period of a "
+                        f"PRBS with {clock * tick:g} s chips; lengthen it to at least "
+                        f"{3 * clock * tick:g} s")
+    n = next((n for n in fits if (1 << n) - 1 >= need), fits[-1])
+    period_s = ((1 << n) - 1) * clock * tick
+    why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period_s:g} s vs 2 pi beta_s "
+               f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
+    if (1 << n) - 1 < need:
+        why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
+    return clock, n, why_clock, why_reg
