@@ -22,7 +22,8 @@ that blocks for ever) and virtual datasets; datasets whose declared size exceeds
 could hold (chunked: the allocated chunks plus slack; contiguous: its storage; any: more than
 :data:`MAX_EXPANSION` times the file size); stream datasets that are not one-dimensional or
 whose fields are not numbers or fixed-length text; more than :data:`MAX_OBJECTS` streams or
-attributes; attributes larger than :data:`MAX_ATTR_BYTES`.
+attributes. Attributes larger than :data:`MAX_ATTR_BYTES`, or of a type other than numbers and
+text, are skipped unread and listed as problems.
 """
 
 from __future__ import annotations
@@ -52,6 +53,13 @@ MAX_EXPANSION = 1000
 MAX_OBJECTS = 1024
 """Most streams in a file, and most attributes on one object."""
 MAX_ATTR_BYTES = 1 << 20
+_ATTR_CLASSES = (h5py.h5t.INTEGER, h5py.h5t.FLOAT, h5py.h5t.STRING)
+"""Attribute types read: numbers and text. Others are skipped unread: a damaged string type
+that reads as a variable-length sequence crashed the interpreter inside HDF5."""
+_CLASS_NAMES = {h5py.h5t.TIME: "time", h5py.h5t.BITFIELD: "bitfield",
+                h5py.h5t.OPAQUE: "opaque", h5py.h5t.COMPOUND: "compound",
+                h5py.h5t.REFERENCE: "reference", h5py.h5t.ENUM: "enum",
+                h5py.h5t.VLEN: "variable-length sequence", h5py.h5t.ARRAY: "array"}
 MAX_CHUNK_BYTES = 16 << 20
 MAX_ROW_BYTES = 1 << 16
 _CHUNK_SLACK = 2  # chunks a killed writer may have resized into but not yet written
@@ -222,9 +230,15 @@ def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],
     out: dict[str, Any] = {}
     for name in names:
         try:
-            size = attrs.get_id(name).get_storage_size()
+            aid = attrs.get_id(name)
+            size = aid.get_storage_size()
             if size > MAX_ATTR_BYTES:
                 problems.append(f"{where}: attribute {name!r} skipped ({size} bytes)")
+                continue
+            kind = aid.get_type().get_class()
+            if kind not in _ATTR_CLASSES:
+                problems.append(f"{where}: attribute {name!r} skipped (HDF5 type class "
+                                f"{_CLASS_NAMES.get(kind, kind)}, not a number or text)")
                 continue
             out[name] = attrs[name]
         except Exception as exc:

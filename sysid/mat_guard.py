@@ -3,20 +3,28 @@
 scipy's ``loadmat`` inflates compressed elements (one may grow a thousandfold) and recurses in C
 through nested cells (9 MB of them crashed the interpreter). :func:`check_mat` walks the element
 tags in Python first and lets through only what :func:`sysid.model_io.save` writes: MATLAB 5,
-uncompressed arrays of numbers or text, and at top level cells of those. Every element must
-fit inside its parent; anything else is a ``ValueError`` naming the byte where it is.
+uncompressed real arrays of numbers or text, and at top level cells of those. Every element must
+fit inside its parent, and every array hold the subelements of its class at the sizes its
+dimensions say (a complex flag with no imaginary part crashed scipy's reader); anything else is
+a ``ValueError`` naming the byte where it is.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 
 __all__ = ["check_mat"]
 
 # MAT-file element types and array classes (MATLAB 5 format): what check_mat lets through
-_MI_UINT32, _MI_MATRIX = 6, 14
+_MI_INT8, _MI_INT32, _MI_UINT32, _MI_MATRIX = 1, 5, 6, 14
 _MX_CELL, _MX_CHAR = 1, 4
 _MX_NUMBERS = range(6, 16)  # double, single, int8 ... uint64
+#: Bytes per value of the element types a numeric array's data may be stored in.
+_NUMBER_BYTES = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
+#: Bytes per character of the element types a char array's data may be stored in (UTF-8: 1-4).
+_CHAR_BYTES = {1: (1, 1), 2: (1, 1), 4: (2, 2), 16: (1, 4), 17: (2, 2), 18: (4, 4)}
+_FLAG_BITS = 0x0E  # complex, global, logical: sysid writes none of them
 
 
 def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int, int]:
@@ -25,6 +33,8 @@ def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int
         raise ValueError(f"MAT element at byte {pos} is cut off")
     word, nbytes = struct.unpack_from(order + "II", data, pos)
     if word >> 16:  # small data element: type and size in one word, data in the next four
+        if word >> 16 > 4:
+            raise ValueError(f"MAT small element at byte {pos} declares {word >> 16} bytes")
         return word & 0xFFFF, pos + 4, word >> 16, pos + 8
     after = pos + 8 + nbytes + (-nbytes % 8)
     if pos + 8 + nbytes > end:
@@ -32,27 +42,58 @@ def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int
     return word, pos + 8, nbytes, min(after, end)
 
 
+def _header(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int]:
+    """``(class, number of values, position after the name)`` of the array whose payload
+    starts at ``pos``: its flags (no complex, global or logical bit), dimensions and name."""
+    kind, flags, size, p = _mat_tag(data, pos, order, end)
+    if kind != _MI_UINT32 or size != 8:
+        raise ValueError(f"MAT array at byte {pos} has no array flags")
+    word = struct.unpack_from(order + "I", data, flags)[0]
+    if word >> 8 & _FLAG_BITS:
+        raise ValueError(f"MAT array at byte {pos} is complex, global or logical; sysid writes "
+                         "real arrays only")
+    kind, dims, size, p = _mat_tag(data, p, order, end)
+    if kind != _MI_INT32 or size < 8 or size % 4:
+        raise ValueError(f"MAT array at byte {pos} has no dimensions")
+    shape = struct.unpack_from(f"{order}{size // 4}i", data, dims)
+    if min(shape) < 0:
+        raise ValueError(f"MAT array at byte {pos} has a negative dimension")
+    kind, _, _, p = _mat_tag(data, p, order, end)
+    if kind != _MI_INT8:
+        raise ValueError(f"MAT array at byte {pos} has no name")
+    return word & 0xFF, math.prod(shape), p
+
+
 def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool) -> int:
-    """Check the array element at ``pos`` (numbers, text, or at top level a cell of those);
-    the position after it."""
+    """Check the array element at ``pos`` (numbers, text, or at top level a cell of those):
+    every subelement present, of its type and of the size its dimensions say, nothing after
+    them; the position after the array."""
     kind, start, nbytes, after = _mat_tag(data, pos, order, end)
     if kind != _MI_MATRIX:  # 15 (compressed) included
         raise ValueError(f"MAT element of type {kind} at byte {pos}; sysid writes uncompressed "
                          "arrays only")
     if nbytes == 0:
         return after
-    kind, flags, size, p = _mat_tag(data, start, order, start + nbytes)
-    if kind != _MI_UINT32 or size < 4:
-        raise ValueError(f"MAT array at byte {pos} has no array flags")
-    cls = struct.unpack_from(order + "I", data, flags)[0] & 0xFF
-    if not (cls == _MX_CHAR or cls in _MX_NUMBERS or (cls == _MX_CELL and not in_cell)):
+    stop = start + nbytes
+    cls, count, p = _header(data, start, order, stop)
+    if cls == _MX_CELL and not in_cell:
+        for _ in range(count):
+            p = _mat_array(data, p, order, end=stop, in_cell=True)
+    elif cls == _MX_CHAR or cls in _MX_NUMBERS:
+        kind, _, size, p = _mat_tag(data, p, order, stop)
+        if cls == _MX_CHAR:
+            low, high = _CHAR_BYTES.get(kind, (0, -1))
+            fits = low * count <= size <= high * count
+        else:
+            fits = kind in _NUMBER_BYTES and size == _NUMBER_BYTES[kind] * count
+        if not fits:
+            raise ValueError(f"MAT array at byte {pos}: {size} bytes of type {kind} for "
+                             f"{count} values")
+    else:
         raise ValueError(f"MAT array of class {cls} at byte {pos}; sysid writes numbers, text "
                          "and cells of text only")
-    if cls == _MX_CELL:
-        for _ in range(2):  # dimensions, name
-            p = _mat_tag(data, p, order, start + nbytes)[3]
-        while p < start + nbytes:
-            p = _mat_array(data, p, order, end=start + nbytes, in_cell=True)
+    if p < stop:
+        raise ValueError(f"MAT array at byte {pos} has more elements than it declares")
     return after
 
 

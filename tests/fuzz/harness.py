@@ -27,6 +27,7 @@ import os
 import random
 import select
 import shutil
+import signal
 import socket
 import struct
 import subprocess
@@ -295,8 +296,62 @@ def importers(rng: random.Random, work: Path) -> str:
     return "imported" if outcome.ok else "refused"
 
 
+# ------------------------------------------------------------------------- model files
+
+
+@functools.cache
+def _model_bases(work: Path) -> dict[str, bytes]:
+    """A small identified-looking model (names, units, provenance) in each of its formats."""
+    import numpy as np
+
+    from sysid.model import StateSpaceModel
+
+    rng = np.random.default_rng(0)
+    model = StateSpaceModel(
+        A=np.diag([0.9, 0.5, -0.3]), B=rng.standard_normal((3, 2)), C=rng.standard_normal((2, 3)),
+        D=np.zeros((2, 2)), K=0.1 * rng.standard_normal((3, 2)), dt=0.02,
+        input_names=["motor.m1", "motor.m2"], output_names=["gyro.x", "gyro.z"],
+        provenance={"method": "iem", "order": 3, "past": 10, "future": 5,
+                    "singular_values": [3.0, 2.0, 1.0, 0.1, 0.05],
+                    "fit_percent": {"simulation": {"gyro.x": 80.0, "gyro.z": 40.0}}})
+    out = {}
+    for suffix in (".h5", ".json", ".mat"):
+        path = work / f"model-clean{suffix}"
+        model.save(path)
+        out[suffix] = path.read_bytes()
+    return out
+
+
+def model_reader(rng: random.Random, work: Path) -> str:
+    """A damaged model file (HDF5, JSON or MAT) through what reads one: ``sysid``'s loader, the
+    model's poles and a simulation (``sysid compare``), and ``plan design``'s facts."""
+    import numpy as np
+
+    import sysid
+    from groundstation.plan.design import ModelFacts
+    from sysid.errors import SysIdError
+
+    suffix, clean = rng.choice(sorted(_model_bases(work).items()))
+    path = work / f"case{suffix}"
+    path.write_bytes(_mutate(rng, clean))
+    try:
+        model = sysid.load_model(path)
+    except SysIdError as exc:
+        one_line(exc)
+        return "refused"
+    model.poles()
+    ModelFacts.from_model(model, source=path.name)
+    data = sysid.IOData(u=np.ones((50, model.n_inputs)), y=np.ones((50, model.n_outputs)),
+                        dt=model.dt)
+    try:
+        sysid.compare(model, data, horizon=1, warn=False)
+    except SysIdError as exc:
+        one_line(exc)
+    return "read"
+
+
 TARGETS: dict[str, Target] = {"session": session_reader, "udp": udp_simulator,
-                              "importers": importers}
+                              "importers": importers, "model": model_reader}
 
 
 # ------------------------------------------------------------------------- running
@@ -323,7 +378,8 @@ def _child(target: str, seed: int, cases: int) -> None:
 
 def supervise(*, target: str, seed: int, cases: int, timeout_s: float = 10.0) -> dict:
     """Run a target's cases in a child process; returns counts per outcome, failures (with
-    their tracebacks), hangs (cases past ``timeout_s``) and the slowest case's seconds."""
+    their tracebacks; a child that dies mid-run, e.g. a segfault in a C reader, is one),
+    hangs (cases past ``timeout_s``) and the slowest case's seconds."""
     cmd = [sys.executable, "-m", "tests.fuzz.harness", "--child", "--target", target,
            "--seed", str(seed), "--cases", str(cases)]
     root = Path(__file__).resolve().parents[2]
@@ -341,7 +397,13 @@ def supervise(*, target: str, seed: int, cases: int, timeout_s: float = 10.0) ->
                 report["hangs"].append(current)
                 break
             line = proc.stdout.readline()
-            if not line:
+            if not line:  # the child is gone: done, or killed by what the case did
+                code = proc.wait()
+                if report["cases"] < cases:
+                    why = (f"signal {signal.Signals(-code).name}" if code < 0 else
+                           f"exit code {code}")
+                    report["failures"].append((current, f"the process died ({why}): a "
+                                                        "crash in native code"))
                 break
             msg = json.loads(line)
             if msg.get("start"):

@@ -320,6 +320,15 @@ def _mat_vars(path: Path) -> dict[str, object]:
     return {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
 
 
+def _mat_flip(path: Path, *, offset: int, value: int) -> None:
+    """Set byte ``offset`` of the first array's payload (byte 136 of the file) to ``value``:
+    9 is the array flags' second byte (complex 0x08, global 0x04, logical 0x02), 24 the low
+    byte of its first dimension."""
+    data = bytearray(path.read_bytes())
+    data[136 + offset] = value
+    path.write_bytes(bytes(data))
+
+
 def _mat_edit(**changes: object) -> Callable[[Path], None]:
     def edit(path: Path) -> None:
         m = _mat_vars(path)
@@ -339,7 +348,12 @@ MAT_CASES = {
     "a struct": (_mat_edit(provenance={"method": "iem"}), "MAT array of class 2"),
     "HDF5 (MATLAB 7.3)": (lambda p: p.write_bytes((p.parent / "m.h5").read_bytes()),
                           "not a MATLAB 5 .mat file"),
-    "complex": (_mat_edit(A=np.eye(2) * 1j), "'A' is complex"),
+    "complex": (_mat_edit(A=np.eye(2) * 1j), r"MAT array at byte \d+ is complex"),
+    # the complex bit set on a real array (no imaginary part): scipy's reader segfaulted
+    "complex flag, no imaginary part": (lambda p: _mat_flip(p, offset=9, value=0x08),
+                                        r"MAT array at byte 136 is complex"),
+    "fewer numbers than its dimensions": (lambda p: _mat_flip(p, offset=24, value=9),
+                                          r"MAT array at byte 128: \d+ bytes of type \d+ for"),
     "text A": (_mat_edit(A="abcd"), "'A' holds text"),
     "no version": (_mat_edit(version=None), "no format version"),
     "version 2": (_mat_edit(version=2), "version 2 is newer than 1"),
