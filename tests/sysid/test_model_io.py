@@ -144,6 +144,15 @@ def _attr(name: str, value: object) -> Callable[[h5py.File, Path], None]:
     return edit
 
 
+def _vlen_attr(name: str) -> Callable[[h5py.File, Path], None]:
+    def edit(f: h5py.File, tmp: Path) -> None:
+        del f.attrs[name]
+        value = np.empty(1, dtype=object)
+        value[0] = np.array([115], dtype=np.uint8)  # "s", as a sequence of bytes
+        f.attrs.create(name, data=value, dtype=h5py.vlen_dtype(np.uint8))
+    return edit
+
+
 def _group_a(f: h5py.File, tmp: Path) -> None:
     del f["A"]
     f.create_group("A")
@@ -209,7 +218,28 @@ HDF5_CASES = {
     "provenance not an object": (_attr("provenance", "[1]"), "provenance is"),
     "deep provenance": (_attr("provenance", "[" * 100_000 + "]" * 100_000),
                         "not a readable sysid model"),
+    "dt_unit a sequence": (_vlen_attr("dt_unit"),
+                           r"'dt_unit' skipped \(HDF5 type class variable-length sequence"),
 }
+
+
+def test_a_damaged_string_type_is_one_line_not_a_crash(tmp_path):
+    """One flipped byte (fuzzing found it) turns the variable-length string type of
+    ``dt_unit`` into a variable-length sequence, which HDF5 read into a segfault: attributes
+    that are not numbers or text are skipped unread. Run in a child: a crash fails the test
+    instead of ending the run."""
+    path = save(_model(), tmp_path / "m.h5")
+    data = bytearray(path.read_bytes())
+    at = data.index(b"dt_unit\x00\x19") + 9  # the datatype message: version 1, class 9 ...
+    assert data[at] == 1                      # ... string bit set
+    data[at] = 199
+    path.write_bytes(bytes(data))
+    code = (f"import sysid\ntry:\n    sysid.load_model({str(path)!r})\n"
+            "except sysid.SysIdError as e:\n    print(e)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, (done.returncode, done.stderr[-500:])
+    assert "'dt_unit' skipped" in done.stdout and "\n" not in done.stdout.strip()
 
 
 @pytest.mark.timeout(60)
