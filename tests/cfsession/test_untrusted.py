@@ -154,6 +154,26 @@ def test_deep_json_and_wrongly_typed_attributes_are_ignored(session):
     assert result.exit_code == 0, result.output
 
 
+def test_attributes_that_are_not_numbers_or_text_are_skipped_unread(session):
+    """A sequence, a compound and an enum where the schema has numbers or text: skipped and
+    listed as problems (a damaged string type read as a sequence crashed HDF5); the rest of
+    the session reads as usual."""
+    with h5py.File(session, "a") as f:
+        seq = np.empty(1, dtype=object)
+        seq[0] = np.arange(3, dtype=np.int32)
+        f["gyro"].attrs.create("description", data=seq, dtype=h5py.vlen_dtype(np.int32))
+        f["gyro"].attrs["period_s"] = np.zeros(1, dtype=[("a", "f8"), ("b", "i4")])
+        f["gyro/data"].attrs["units"] = np.array([True])  # h5py stores bool as an enum
+    s = open_session(session)
+    skipped = [p for p in s.problems if "skipped (HDF5 type class" in p]
+    assert len(skipped) == 3, s.problems
+    for kind in ("variable-length sequence", "compound", "enum"):
+        assert any(kind in p for p in skipped), (kind, skipped)
+    assert s["gyro"].period_s is None and len(s["gyro"]) == 100
+    result = CliRunner().invoke(main, ["info", str(session)])
+    assert result.exit_code == 0, result.output
+
+
 def test_killed_writer_file_is_read_without_changing_it(tmp_path):
     path = tmp_path / "killed.h5"
     w = _write(path, close=False)
