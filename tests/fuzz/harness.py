@@ -13,7 +13,7 @@ holds a global lock, so a hang cannot be timed out inside one process.
 Add a target: write ``def my_target(rng, work) -> str`` and add it to :data:`TARGETS`.
 
     python -m tests.fuzz.harness --target session --cases 2000 --seed 7
-    make fuzz          # every target (session, udp, importers), FUZZ_CASES each, seed from the date
+    make fuzz          # every target (session, udp, importers, model), FUZZ_CASES each
 """
 
 from __future__ import annotations
