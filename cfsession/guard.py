@@ -54,8 +54,9 @@ MAX_OBJECTS = 1024
 """Most streams in a file, and most attributes on one object."""
 MAX_ATTR_BYTES = 1 << 20
 _ATTR_CLASSES = (h5py.h5t.INTEGER, h5py.h5t.FLOAT, h5py.h5t.STRING)
-"""Attribute types read: numbers and text. Others are skipped unread: a damaged string type
-that reads as a variable-length sequence crashed the interpreter inside HDF5."""
+"""Attribute types read: numbers and text (and h5py's two-member boolean enum). Others are
+skipped unread: a damaged string type that reads as a variable-length sequence crashed the
+interpreter inside HDF5."""
 _CLASS_NAMES = {h5py.h5t.TIME: "time", h5py.h5t.BITFIELD: "bitfield",
                 h5py.h5t.OPAQUE: "opaque", h5py.h5t.COMPOUND: "compound",
                 h5py.h5t.REFERENCE: "reference", h5py.h5t.ENUM: "enum",
@@ -235,10 +236,12 @@ def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],
             if size > MAX_ATTR_BYTES:
                 problems.append(f"{where}: attribute {name!r} skipped ({size} bytes)")
                 continue
-            kind = aid.get_type().get_class()
-            if kind not in _ATTR_CLASSES:
+            type_class = aid.get_type().get_class()
+            boolean = type_class == h5py.h5t.ENUM and aid.dtype == np.bool_  # h5py's bool
+            if type_class not in _ATTR_CLASSES and not boolean:
                 problems.append(f"{where}: attribute {name!r} skipped (HDF5 type class "
-                                f"{_CLASS_NAMES.get(kind, kind)}, not a number or text)")
+                                f"{_CLASS_NAMES.get(type_class, type_class)}, not a number "
+                                "or text)")
                 continue
             out[name] = attrs[name]
         except Exception as exc:

@@ -222,14 +222,19 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
                                 options=options)
     except DataError:  # the full data cannot hold what the grid's common columns could
         model = None
-    if model is None or (best.stable and not model.is_stable):
+    if model is None:
+        model = _scored_model(p, best, method=method, options=options)
+    elif best.stable and not model.is_stable:
         scored = _scored_model(p, best, method=method, options=options)
-        if model is not None:
-            warnings.append(
-                f"identified again on all the data the model had a pole at |z| = "
-                f"{np.abs(model.poles()).max():.3f}: kept the stable model the sweep scored on "
-                f"the held-out data ({_share(p)})")
-        model = scored
+        pole = f"{np.abs(model.poles()).max():.3f}"
+        if scored.is_stable:
+            warnings.append(f"identified again on all the data the model had a pole at |z| = "
+                            f"{pole}: kept the stable model the sweep scored on the held-out "
+                            f"data ({_share(p)})")
+            model = scored
+        else:  # rounding moved a pole of the scored model across: nothing better to offer
+            warnings.append(f"identified again on all the data the model has a pole at "
+                            f"|z| = {pole}")
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
@@ -238,8 +243,11 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
 
 def _scored_model(p: Plan, best: SweepRow, *, method: Method, options: Options
                   ) -> StateSpaceModel:
-    """The model the sweep scored for ``best``: its horizons on the identification data as
-    the grid's common Hankel columns see them (:func:`sysid.grid.pair_flights`)."""
+    """The model the sweep scored for ``best`` (kept with ``keep_models``, else identified
+    again): its horizons on the identification data as the grid's common Hankel columns see
+    them (:func:`sysid.grid.pair_flights`)."""
+    if best.model is not None:
+        return best.model
     trimmed = pair_flights(p.ident, past=best.past, future=best.future,
                            past_max=p.grid["pasts"][-1], future_max=p.grid["futures"][-1])
     return method.identify(list(trimmed), order=best.order, past=best.past,
@@ -248,6 +256,8 @@ def _scored_model(p: Plan, best: SweepRow, *, method: Method, options: Options
 
 def _share(p: Plan) -> str:
     """How much data the scored model was identified on, for a message."""
+    if p.given_validation:
+        return "identified on the identification sessions, as the grid's common columns see them"
     n_ident = sum(d.n_samples for d in p.ident)
     n_all = sum(d.n_samples for d in p.everything)
     return f"identified on {n_ident} of the {n_all} samples"

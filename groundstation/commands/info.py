@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -69,9 +70,18 @@ def flown_parameters(session: Session) -> dict[str, Any]:
     if not isinstance(raw, dict):
         return {}
     return {str(k): v for k, v in raw.items()
-            if isinstance(v, dict) and all(isinstance(v.get(x), int | float)
-                                           and not isinstance(v.get(x), bool)
-                                           for x in ("value", "was"))}
+            if isinstance(v, dict) and all(finite_number(v.get(x)) for x in ("value", "was"))}
+
+
+def finite_number(value: object) -> bool:
+    """Whether a value read from a file is a number a float holds (not a bool, not NaN or
+    infinite, not an integer of 400 digits: ``float()`` of that raises ``OverflowError``)."""
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def live_id(session: Session) -> dict[str, Any]:

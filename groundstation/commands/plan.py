@@ -365,7 +365,7 @@ def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
     recorded at connect, with the plan's ``[parameters]`` set for the flight over them; the
     last session's value where they differ."""
     from cfsession import open_session
-    from groundstation.commands.info import flown_parameters
+    from groundstation.commands.info import finite_number, flown_parameters
 
     out: dict[str, float] = {}
     for path in sessions:
@@ -373,7 +373,7 @@ def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
         params = session.json_meta("params")
         for group, values in (params.items() if isinstance(params, dict) else ()):
             for name, value in (values.items() if isinstance(values, dict) else ()):
-                if isinstance(value, int | float) and not isinstance(value, bool):
+                if finite_number(value):
                     out[f"{group}.{name}"] = float(value)
         out |= {name: float(v["value"]) for name, v in flown_parameters(session).items()}
     return out

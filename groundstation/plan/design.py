@@ -308,10 +308,10 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
         doubt, flown_clock = _doubt(axes, sv_weak=w_sv), min(e.clock_period for e in chains)
         rule = {"poles": facts.poles, "dt": facts.dt, "rate_hz": rate, "n_ticks": phase.n_ticks,
                 "horizon_ticks": facts.horizon_samples * facts.dt * rate}
-        timing = prbs_timing(**rule)
-        if doubt and timing and timing[0] > flown_clock:
-            timing = prbs_timing(**rule, max_clock=flown_clock, untrusted=doubt)
-            chip_notes.append(f"phase[{i}] PRBS {timing[2]}")
+        timing = prbs_timing(**rule, max_clock=flown_clock if doubt else None,
+                             untrusted=doubt)
+        if timing and timing.capped:
+            chip_notes.append(f"phase[{i}] PRBS {timing.why_clock}")
         worst = max(weak, key=weak.__getitem__) if weak else None
         for e in chains:
             if e.axis not in _LIMIT:
@@ -338,7 +338,7 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                     f"{fit_text}, weakness {w:.2f}: x{1 + w:.2f}, at most "
                     f"{LIMIT_SHARE:g} x vehicle.{_LIMIT[e.axis]} = {LIMIT_SHARE * limit:g}"))
         clock, n = timing[:2] if timing else (chains[0].clock_period, chains[0].register_length)
-        why_clock, why_reg = timing[2:] if timing else (
+        why_clock, why_reg = timing[2:4] if timing else (
             "no mode below the setpoint Nyquist settles within the phase: as before",) * 2
         seeds, apart = choose_seeds(register_length=n, n_axes=len(chains), flown=flown)
         flown |= {(n, s) for s in seeds}

@@ -16,26 +16,39 @@ slowest); then
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from groundstation.errors import PlanError
 from groundstation.plan.excitation import LFSR_TAPS
 
-__all__ = ["ALPHA_S", "BETA_S", "SWITCH", "prbs_timing"]
+__all__ = ["ALPHA_S", "BETA_S", "SWITCH", "Timing", "prbs_timing"]
 
 SWITCH, ALPHA_S, BETA_S = 2.78, 2.0, 3.0
 """PRBS power is down by half at 2.78 / T_sw rad/s; closed loop alpha_s times faster than the
 open loop; beta_s time constants to settle (Rivera and Jun 2000)."""
 
 
+class Timing(NamedTuple):
+    """A PRBS's chip (setpoint ticks) and register length, why each, and whether the chip was
+    capped below what the model's modes allow."""
+
+    clock: int
+    register_length: int
+    why_clock: str
+    why_register: str
+    capped: bool = False
+
+
 def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
                 horizon_ticks: float = 0.0, max_clock: int | None = None,
-                untrusted: str = "") -> tuple[int, int, str, str] | None:
-    """``(clock ticks, register length, why clock, why register)`` from the model's modes
-    (module docstring); None when no mode below the setpoints' Nyquist frequency settles
-    within the phase. ``max_clock`` (ticks) caps the chip, with ``untrusted`` saying why: the
-    flown chip, when the model is not trusted to lengthen it (:func:`design_plan`)."""
+                untrusted: str = "") -> Timing | None:
+    """The chip and register from the model's modes (module docstring); None when no mode
+    below the setpoints' Nyquist frequency settles within the phase. ``max_clock`` (ticks)
+    caps the chip, with ``untrusted`` saying why: the flown chip, when the model is not
+    trusted to lengthen it (:func:`groundstation.plan.design.design_plan`); the period is then
+    chosen for the capped chip."""
     z = np.asarray(poles, dtype=complex)
     z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
     s = np.log(z) / dt  # continuous-time equivalents, rad/s
@@ -50,11 +63,12 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
     why_clock = (f"chip {clock * tick:g} s <= 2.78 tau_L / alpha_s = 2.78 x {tau_l:.3g} s / "
                  f"{ALPHA_S:g} = {SWITCH * tau_l / ALPHA_S:.3g} s (fastest mode below the "
                  f"setpoint Nyquist)" + (", at least one tick" if clock == 1 else ""))
-    if max_clock is not None and clock > max_clock:
+    capped = max_clock is not None and clock > max_clock
+    if capped:
         why_clock = (f"chip {max_clock * tick:g} s as flown: the model's fastest mode below the "
                      f"setpoint Nyquist (tau_L = {tau_l:.3g} s) would allow "
                      f"{clock * tick:g} s, but {untrusted}")
-        clock = max_clock
+        clock = int(max_clock)
     want = 2 * math.pi * BETA_S * tau_h
     need = max(want, horizon_ticks * tick) / (clock * tick)
     fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
@@ -68,4 +82,4 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
                f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
     if (1 << n) - 1 < need:
         why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
-    return clock, n, why_clock, why_reg
+    return Timing(clock, n, why_clock, why_reg, capped)

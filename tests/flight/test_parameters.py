@@ -120,13 +120,21 @@ def test_a_parameter_the_firmware_cannot_take_is_one_line_and_nothing_flown(
     assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
 
 
+HUGE = "1" + "0" * 400  # a JSON integer float() cannot hold (OverflowError)
+
+
 @pytest.mark.parametrize("meta", ["{not json", '["a"]', {"a.b": {"value": "x", "was": 1}},
-                                  {"a.b": {"value": True, "was": 1.0}}, {"a.b": 3}])
+                                  {"a.b": {"value": True, "was": 1.0}}, {"a.b": 3},
+                                  '{"a.b": {"value": ' + HUGE + ', "was": 1.0}}',
+                                  '{"a.b": {"value": Infinity, "was": 1.0}}'])
 def test_info_reads_a_hostile_parameters_attribute_without_failing(tmp_path, meta):
+    from groundstation.commands.plan import _flown_firmware
     from tests.sysid.flights import known_system, write_flight
 
     flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=0, n=600,
-                          metadata={"plan_parameters": meta})
+                          metadata={"plan_parameters": meta,
+                                    "params": '{"pid": {"kd": ' + HUGE + ', "kp": 2.5}}'})
+    assert _flown_firmware((flight.path,)) == {"pid.kp": 2.5}  # what plan design sees
     res = CliRunner().invoke(main, ["info", str(flight.path), "--json"])
     assert res.exit_code == 0, res.output
     assert "parameters" not in json.loads(res.stdout)

@@ -384,43 +384,53 @@ def supervise(*, target: str, seed: int, cases: int, timeout_s: float = 10.0) ->
            "--seed", str(seed), "--cases", str(cases)]
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root)}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, cwd=root,
-                            env=env, text=True, bufsize=1)
-    report: dict = {"target": target, "seed": seed, "cases": 0, "outcomes": {},
-                    "failures": [], "hangs": [], "slowest_s": 0.0}
-    current, deadline = None, time.monotonic() + 120.0  # the first case builds the inputs
-    try:
-        while True:
-            wait = max(0.0, deadline - time.monotonic())
-            ready, _, _ = select.select([proc.stdout], [], [], wait)
-            if not ready:
-                report["hangs"].append(current)
-                break
-            line = proc.stdout.readline()
-            if not line:  # the child is gone: done, or killed by what the case did
-                code = proc.wait()
-                if report["cases"] < cases:
-                    why = (f"signal {signal.Signals(-code).name}" if code < 0 else
-                           f"exit code {code}")
-                    report["failures"].append((current, f"the process died ({why}): a "
-                                                        "crash in native code"))
-                break
-            msg = json.loads(line)
-            if msg.get("start"):
-                current = msg["case"]
-                if current > 0:
-                    deadline = time.monotonic() + timeout_s
-                continue
-            report["cases"] += 1
-            report["outcomes"][msg["outcome"]] = report["outcomes"].get(msg["outcome"], 0) + 1
-            report["slowest_s"] = max(report["slowest_s"], msg["seconds"])
-            if msg["outcome"] == "failure":
-                report["failures"].append((msg["case"], msg["detail"]))
-            deadline = time.monotonic() + timeout_s
-    finally:
-        proc.kill()
-        proc.wait()
+    with tempfile.TemporaryFile(mode="w+") as errors:  # a crash's last words
+        proc = subprocess.Popen([cmd[0], "-X", "faulthandler", *cmd[1:]], stdout=subprocess.PIPE,
+                                stderr=errors, cwd=root, env=env, text=True, bufsize=1)
+        report: dict = {"target": target, "seed": seed, "cases": 0, "outcomes": {},
+                        "failures": [], "hangs": [], "slowest_s": 0.0}
+        current, deadline = None, time.monotonic() + 120.0  # the first case builds the inputs
+        try:
+            while True:
+                wait = max(0.0, deadline - time.monotonic())
+                ready, _, _ = select.select([proc.stdout], [], [], wait)
+                if not ready:
+                    report["hangs"].append(current)
+                    break
+                line = proc.stdout.readline()
+                if not line:  # the child is gone: done, or killed by what a case did
+                    code = proc.wait()
+                    if code or report["cases"] < cases:
+                        report["failures"].append((current, _death(code, errors)))
+                    break
+                msg = json.loads(line)
+                if msg.get("start"):
+                    current = msg["case"]
+                    if current > 0:
+                        deadline = time.monotonic() + timeout_s
+                    continue
+                report["cases"] += 1
+                report["outcomes"][msg["outcome"]] = report["outcomes"].get(msg["outcome"], 0) + 1
+                report["slowest_s"] = max(report["slowest_s"], msg["seconds"])
+                if msg["outcome"] == "failure":
+                    report["failures"].append((msg["case"], msg["detail"]))
+                deadline = time.monotonic() + timeout_s
+        finally:
+            proc.kill()
+            proc.wait()
     return report
+
+
+def _death(code: int, errors: object) -> str:
+    """Why the child ended early or badly: its signal or exit code and the end of its
+    stderr (faulthandler's stack of the crash)."""
+    try:
+        why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+    except ValueError:
+        why = f"signal {-code}"
+    errors.seek(0)
+    stack = errors.read().split("\nExtension modules:")[0]  # faulthandler's, without the list
+    return f"the process died ({why}): a crash in native code\n{stack[-2000:]}"
 
 
 def main(argv: list[str] | None = None) -> int:

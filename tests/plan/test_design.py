@@ -64,12 +64,13 @@ def _amplitudes(plan) -> dict[str, float]:
 def test_prbs_timing_follows_the_rule():
     # tau_L = 0.2 s: chip <= 2.78 x 0.2 / 2 = 0.278 s -> 2 ticks at 10 Hz; tau_H = 2 s: period
     # >= 2 pi x 3 x 2 = 37.7 s = 189 chips of 0.2 s -> 8 bits (255 chips = 51 s, fits 102.3 s)
-    clock, n, why_clock, why_reg = prbs_timing(poles=_poles(0.2, 2.0), dt=DT, rate_hz=10,
-                                               n_ticks=1023)
-    assert (clock, n) == (2, 8)
+    clock, n, why_clock, why_reg, capped = prbs_timing(poles=_poles(0.2, 2.0), dt=DT,
+                                                       rate_hz=10, n_ticks=1023)
+    assert (clock, n, capped) == (2, 8, False)
     assert "0.278 s" in why_clock and "37.7 s" in why_reg and "capped" not in why_reg
     # a slowest mode of 20 s asks for 377 s: capped at the longest period the phase holds
-    clock, n, _, why_reg = prbs_timing(poles=_poles(0.2, 20.0), dt=DT, rate_hz=10, n_ticks=1023)
+    clock, n, _, why_reg, _ = prbs_timing(poles=_poles(0.2, 20.0), dt=DT, rate_hz=10,
+                                          n_ticks=1023)
     assert (clock, n) == (2, 9) and "capped" in why_reg and 511 * 2 <= 1023
     # oscillatory modes count by natural frequency: 20 rad/s -> tau_L = 0.05 s -> one tick
     s = complex(-20.0, 0.0) * np.exp(1j * 1.2)
@@ -96,7 +97,8 @@ def test_only_a_model_that_explains_every_axis_lengthens_the_chip(fits, sv, cloc
                       name="next", flown=set()).plan
     assert {e.clock_period for e in new.phases[2].excitation} == {clock}
     assert why in new.text
-    assert "2.78 x 2 s / 2" in new.text or "would allow 2.7 s" in new.text
+    # the rule's own chip, as taken or as what the model would have allowed
+    assert ("2.78 x 2 s / 2" if clock == 27 else "would allow 2.7 s") in new.text
 
 
 def test_an_untrusted_model_still_shortens_the_chip():
@@ -303,8 +305,13 @@ def test_bad_input_is_one_line_exit_2(tmp_path, case, needle):
 
 def test_a_phase_too_short_for_one_period_is_refused():
     plan = parse_plan(text=BASE.replace("duration = 3.1", "duration = 1.2"), name="short")
+    trusted = {g: 95.0 for g in GYROS}  # so its 1.3 s chip is taken: 7 chips do not fit
     with pytest.raises(PlanError, match="lengthen it"):
-        design_plan(plan, _facts(taus=(1.0, 2.0)), name="short", flown=set())
+        design_plan(plan, _facts(taus=(1.0, 2.0), fits=trusted), name="short", flown=set())
+    # a model not trusted to lengthen the chip keeps the flown one, which fits
+    kept = design_plan(plan, _facts(taus=(1.0, 2.0)), name="short", flown=set())
+    assert {e.clock_period for p in kept.plan.phases for e in p.excitation} == {1}
+    assert any("as flown" in n for n in kept.notes)
 
 
 def test_only_the_changed_values_differ_from_the_from_plan():
