@@ -397,7 +397,8 @@ def _flown_firmware(sessions: tuple[Path, ...]) -> dict[str, float]:
 @click.option("--force", is_flag=True, help="Replace --out if it exists.")
 def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
            max_saturation: float, force: bool) -> None:
-    """Write the next flight's plan: PRBS clock and register from the model's modes,
+    """Write the next flight's plan: PRBS clock and register from the model's modes (the
+    chip made longer than flown only by a model that explains every axis to 90 %),
     amplitudes raised on the axes the model explains poorly (within the plan's limits, and
     only while the flown motors kept clear of their limits), seeds unlike those flown. Each
     changed value carries a '# design:' comment saying why, and
