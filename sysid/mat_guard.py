@@ -5,16 +5,19 @@ through nested cells (9 MB of them crashed the interpreter). :func:`check_mat` w
 tags in Python first and lets through only what :func:`sysid.model_io.save` writes: MATLAB 5,
 uncompressed real arrays of numbers or text, and at top level cells of those. Every element must
 fit inside its parent, and every array hold the subelements of its class at the sizes its
-dimensions say (a complex flag with no imaginary part crashed scipy's reader); anything else is
-a ``ValueError`` naming the byte where it is.
+dimensions say (a complex flag with no imaginary part crashed scipy's reader), and no part may
+be larger than a model's (:class:`Limits`: crafted dimensions, cells and texts cost seconds and
+gigabytes). The header must be MATLAB 5's (scipy reads a file with a zero in its first four bytes
+as MATLAB 4, past this walk). Anything else is a ``ValueError`` naming the byte where it is.
 """
 
 from __future__ import annotations
 
 import math
 import struct
+from dataclasses import dataclass
 
-__all__ = ["check_mat"]
+__all__ = ["Limits", "check_mat"]
 
 # MAT-file element types and array classes (MATLAB 5 format): what check_mat lets through
 _MI_INT8, _MI_INT32, _MI_UINT32, _MI_MATRIX = 1, 5, 6, 14
@@ -25,6 +28,19 @@ _NUMBER_BYTES = {1: 1, 2: 1, 3: 2, 4: 2, 5: 4, 6: 4, 7: 4, 9: 8, 12: 8, 13: 8}
 #: Bytes per character of the element types a char array's data may be stored in (UTF-8: 1-4).
 _CHAR_BYTES = {1: (1, 1), 2: (1, 1), 4: (2, 2), 16: (1, 4), 17: (2, 2), 18: (4, 4)}
 _FLAG_BITS = 0x0E  # complex, global, logical: sysid writes none of them
+_MAX_NDIMS = 4  # sysid writes 2; more would only make the product of the dimensions costly
+
+
+@dataclass(frozen=True)
+class Limits:
+    """How large a sysid model's MAT file may be in its parts: values in one numeric array (a
+    2000 x 2000 matrix), texts in one cell (names of 2000 channels), bytes of one text (the
+    provenance), top-level variables."""
+
+    values: int = 2000 * 2000
+    cells: int = 2000
+    text_bytes: int = 1 << 20
+    variables: int = 64
 
 
 def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int, int]:
@@ -55,6 +71,8 @@ def _header(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int]
     kind, dims, size, p = _mat_tag(data, p, order, end)
     if kind != _MI_INT32 or size < 8 or size % 4:
         raise ValueError(f"MAT array at byte {pos} has no dimensions")
+    if size // 4 > _MAX_NDIMS:
+        raise ValueError(f"MAT array at byte {pos} has {size // 4} dimensions; sysid writes 2")
     shape = struct.unpack_from(f"{order}{size // 4}i", data, dims)
     if min(shape) < 0:
         raise ValueError(f"MAT array at byte {pos} has a negative dimension")
@@ -64,26 +82,36 @@ def _header(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int]
     return word & 0xFF, math.prod(shape), p
 
 
-def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool) -> int:
+def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool,
+               limits: Limits) -> int:
     """Check the array element at ``pos`` (numbers, text, or at top level a cell of those):
     every subelement present, of its type and of the size its dimensions say, nothing after
-    them; the position after the array."""
+    them, within ``limits``; the position after the array."""
     kind, start, nbytes, after = _mat_tag(data, pos, order, end)
     if kind != _MI_MATRIX:  # 15 (compressed) included
         raise ValueError(f"MAT element of type {kind} at byte {pos}; sysid writes uncompressed "
                          "arrays only")
+    if nbytes % 8:  # the subelements are padded to 8 bytes: scipy and this walk agree
+        raise ValueError(f"MAT array at byte {pos} declares {nbytes} bytes, not whole words")
     if nbytes == 0:
         return after
     stop = start + nbytes
     cls, count, p = _header(data, start, order, stop)
+    most = limits.cells if cls == _MX_CELL else limits.values
+    if cls != _MX_CHAR and count > most:
+        raise ValueError(f"MAT array at byte {pos} holds {count} values; a sysid model has at "
+                         f"most {most}")
     if cls == _MX_CELL and not in_cell:
         for _ in range(count):
-            p = _mat_array(data, p, order, end=stop, in_cell=True)
+            p = _mat_array(data, p, order, end=stop, in_cell=True, limits=limits)
     elif cls == _MX_CHAR or cls in _MX_NUMBERS:
         kind, _, size, p = _mat_tag(data, p, order, stop)
         if cls == _MX_CHAR:
             low, high = _CHAR_BYTES.get(kind, (0, -1))
             fits = low * count <= size <= high * count
+            if size > limits.text_bytes:
+                raise ValueError(f"MAT text at byte {pos} has {size} bytes; a sysid model's "
+                                 f"texts have at most {limits.text_bytes}")
         else:
             fits = kind in _NUMBER_BYTES and size == _NUMBER_BYTES[kind] * count
         if not fits:
@@ -97,12 +125,21 @@ def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool) ->
     return after
 
 
-def check_mat(data: bytes) -> None:
-    """Refuse (``ValueError``) a MAT file that scipy would inflate or recurse through (module
-    docstring). Nesting is at most one cell deep, so this recursion is bounded too."""
+def check_mat(data: bytes, *, limits: Limits | None = None) -> None:
+    """Refuse (``ValueError``) a MAT file that scipy would inflate or recurse through, or
+    that is larger in any part than a sysid model (module docstring). Nesting is at most one
+    cell deep, so this recursion is bounded too."""
+    limits = limits or Limits()
     order = {b"IM": "<", b"MI": ">"}.get(data[126:128])
     if len(data) < 128 or order is None:
         raise ValueError("not a MATLAB 5 .mat file")
-    pos = 128
+    # scipy takes a file with a zero in its first four bytes for MATLAB 4, whatever follows
+    if 0 in data[:4] or struct.unpack_from(order + "H", data, 124)[0] != 0x0100:
+        raise ValueError("not a MATLAB 5 .mat file (header)")
+    pos, count = 128, 0
     while pos < len(data):
-        pos = _mat_array(data, pos, order, end=len(data), in_cell=False)
+        count += 1
+        if count > limits.variables:
+            raise ValueError(f"MAT file with more than {limits.variables} variables; a sysid "
+                             "model has about 15")
+        pos = _mat_array(data, pos, order, end=len(data), in_cell=False, limits=limits)

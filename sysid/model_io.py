@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sysid.errors import ModelFileError
-from sysid.mat_guard import check_mat
+from sysid.mat_guard import Limits, check_mat
 
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
@@ -50,6 +50,10 @@ MAX_DIMENSION = 2000
 """Most states, inputs or outputs a model file may have (a 2000 x 2000 matrix is 32 MB)."""
 MAX_FILE_BYTES = 128 << 20
 """Largest JSON or MAT model file read (a 2000-state JSON model is about 90 MB)."""
+MAX_TEXT_BYTES = 1 << 20
+"""Largest text of a MAT model (its provenance JSON), as an HDF5 model's attributes."""
+MAX_JSON_CONTAINERS = 1_000_000
+"""Most JSON arrays and objects in a JSON model file (a 2000-state model has about 12 000)."""
 _SHAPES = {"A": "nn", "B": "nm", "C": "ln", "D": "lm", "K": "nl", "noise_cov": "ll"}
 _LABELS = {"input_names": "m", "output_names": "l", "input_units": "m", "output_units": "l"}
 _COUNTS = {"n": "states", "m": "inputs", "l": "outputs"}
@@ -255,7 +259,14 @@ def _read_bounded(path: Path) -> bytes:
 
 
 def _load_json(path: Path) -> object:
-    return json.loads(_read_bounded(path))
+    data = _read_bounded(path)
+    # Python builds an object of about 60 bytes for each "[]": a file of them would take 20
+    # times its size in memory. A 2000-state model has about 12 000 arrays.
+    containers = data.count(b"[") + data.count(b"{")
+    if containers > MAX_JSON_CONTAINERS:
+        raise _unreadable(path, f"{containers} JSON arrays and objects, more than a model has "
+                                f"({MAX_JSON_CONTAINERS})")
+    return json.loads(data)
 
 
 def _load_h5(path: Path) -> dict[str, Any]:
@@ -339,7 +350,8 @@ def _load_mat(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
 
     data = _read_bounded(path)
-    check_mat(data)
+    check_mat(data, limits=Limits(values=MAX_DIMENSION ** 2, cells=MAX_DIMENSION,
+                                  text_bytes=MAX_TEXT_BYTES))
     m = loadmat(io.BytesIO(data), squeeze_me=False)
     if "format" not in m:
         return {}

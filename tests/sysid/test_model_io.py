@@ -299,6 +299,9 @@ JSON_CASES = {
     "deep A": (_json_edit(A=json.loads("[" * 100 + "1" + "]" * 100)), "'A' is not a table"),
     "huge integer": (_json_edit(D=[[10**30]]), "'D' holds objects"),
     "booleans": (_json_edit(D=[[True]]), "'D' holds true/false"),
+    # 3 MB of "[]," would take about 60 MB as Python objects (120 MB: 2.5 GB)
+    "a million empty lists": (_json_edit(provenance={"x": [[]] * 1_000_001}),
+                              r"\d{7} JSON arrays and objects, more than a model has \(1000000\)"),
     "NaN": (_json_edit(K=[[float("nan")], [0.0]]), "'K' contains NaN or inf"),
     "C of the wrong shape": (_json_edit(C=[[1.0, 0.0, 0.0]]),
                              r"matrix 'C' has shape \(1, 3\); it must be \(l, n\) = \(1, 2\)"),
@@ -329,12 +332,20 @@ def test_json_deeper_than_python_parses_or_larger_than_the_cap(tmp_path, monkeyp
 
 
 # ------------------------------------------------------------------------- crafted MAT files
-def _mat_element(cls: int, name: str, body: bytes) -> bytes:
-    """One uncompressed MATLAB 5 array element of class ``cls`` (1 x 1) holding ``body``."""
+def _mat_element(cls: int, name: str, body: bytes, dims: tuple[int, ...] = (1, 1)) -> bytes:
+    """One uncompressed MATLAB 5 array element of class ``cls`` (``dims``) holding ``body``."""
     text = name.encode()
-    parts = (struct.pack("<IIII", 6, 8, cls, 0) + struct.pack("<IIii", 5, 8, 1, 1) +
+    shape = struct.pack(f"<{len(dims)}i", *dims).ljust(-(-4 * len(dims) // 8) * 8, b"\0")
+    parts = (struct.pack("<IIII", 6, 8, cls, 0) + struct.pack("<II", 5, 4 * len(dims)) + shape +
              struct.pack("<II", 1, len(text)) + text.ljust(-(-len(text) // 8) * 8, b"\0") + body)
     return struct.pack("<II", 14, len(parts)) + parts
+
+
+def _mat_file(*elements: bytes, first: bytes = b"MATLAB 5.0 MAT-file") -> bytes:
+    return first.ljust(116) + bytes(8) + struct.pack("<H", 0x0100) + b"IM" + b"".join(elements)
+
+
+_DOUBLE_1 = struct.pack("<II", 9, 8) + struct.pack("<d", 1.0)
 
 
 def _nested_cells(depth: int) -> bytes:
@@ -343,7 +354,7 @@ def _nested_cells(depth: int) -> bytes:
     inner = _mat_element(6, "", struct.pack("<II", 9, 8) + struct.pack("<d", 1.0))
     for level in range(depth):
         inner = _mat_element(1, "A" if level == depth - 1 else "", inner)
-    return b"MATLAB 5.0 MAT-file".ljust(116) + bytes(8) + struct.pack("<H", 0x0100) + b"IM" + inner
+    return _mat_file(inner)
 
 
 def _mat_vars(path: Path) -> dict[str, object]:
@@ -379,6 +390,21 @@ MAT_CASES = {
     "HDF5 (MATLAB 7.3)": (lambda p: p.write_bytes((p.parent / "m.h5").read_bytes()),
                           "not a MATLAB 5 .mat file"),
     "complex": (_mat_edit(A=np.eye(2) * 1j), r"MAT array at byte \d+ is complex"),
+    # crafted to cost time or memory (a helper's structural fuzzing): each was seconds and GB
+    "150 001 dimensions": (lambda p: p.write_bytes(_mat_file(_mat_element(
+        6, "A", _DOUBLE_1, dims=(2**31 - 1,) * 150_000 + (0,)))), "has 150001 dimensions"),
+    "a cell of 5 million": (lambda p: p.write_bytes(_mat_file(_mat_element(
+        1, "InputName", b"", dims=(1, 5_000_000)))), "holds 5000000 values; .* at most 2000"),
+    "a 2 MB text": (lambda p: p.write_bytes(_mat_file(_mat_element(
+        4, "provenance", struct.pack("<II", 16, 2 << 20) + b"[" * (2 << 20),
+        dims=(1, 2 << 20)))), r"MAT text at byte 128 has 2097152 bytes"),
+    "MATLAB 4 behind a 5 header": (lambda p: p.write_bytes(_mat_file(
+        _mat_element(6, "A", _DOUBLE_1), first=b"\0ATLAB 5.0")), r"not a MATLAB 5 \.mat file"),
+    "65 variables": (lambda p: p.write_bytes(_mat_file(*(
+        _mat_element(6, f"v{i}", _DOUBLE_1) for i in range(65)))), "more than 64 variables"),
+    "an odd size": (lambda p: p.write_bytes(_mat_file(
+        _mat_element(6, "A", _DOUBLE_1)[:4] + struct.pack("<I", 49) +
+        _mat_element(6, "A", _DOUBLE_1)[8:] + bytes(8))), "declares 49 bytes, not whole words"),
     # the complex bit set on a real array (no imaginary part): scipy's reader segfaulted
     "complex flag, no imaginary part": (lambda p: _mat_flip(p, offset=9, value=0x08),
                                         r"MAT array at byte 136 is complex"),
