@@ -7,10 +7,13 @@ Faithful to the conventions of crazyflie-firmware (``pid.c``, ``attitude_pid_con
 * The estimator's pitch is the *legacy* pitch ``theta_legacy = -theta`` (positive nose up), and the
   rate loop is fed ``(gyro.x, -gyro.y, gyro.z)``; the yaw output is negated before mixing.
 * PID (``pid.c``): ``e = desired - measured``, ``u = kp e + ki sat(int e dt, i_limit)
-  + kd lpf(de/dt)``, the rate loop's derivative passed through a 2nd-order Butterworth low-pass
-  at 20 Hz, the attitude loop's unfiltered (``ATTITUDE_LPF_ENABLE`` is false in the firmware:
-  with the Kalman estimator's 100 Hz attitude steps the yaw D term gives one-tick pulses, see
-  ``SimVehicle``); rate outputs saturate to ``+-32767``.
+  + kd lpf(de/dt)``, the attitude loop's derivative unfiltered (``ATTITUDE_LPF_ENABLE`` is false
+  in the firmware: with the Kalman estimator's 100 Hz attitude steps the yaw D term gives
+  one-tick pulses, see ``SimVehicle``); rate outputs saturate to ``+-32767``. **Not as the
+  firmware:** the rate loop's derivative passes a 2nd-order Butterworth low-pass at 20 Hz, where
+  the firmware's default (``ATTITUDE_RATE_LPF_ENABLE`` false in ``platform_defaults.h``) leaves
+  it unfiltered too; taking the filter out changes every ``sim://`` figure and wants the motor
+  noise calibrated again against the CrazyPAD logs.
 * Mixer: ``r = roll/2``, ``p = pitch/2``; ``m1 = T - r + p + y``, ``m2 = T - r - p - y``,
   ``m3 = T + r - p + y``, ``m4 = T + r + p - y``; if one exceeds 65535 all four are reduced by the
   excess, then each is clipped at 0.
