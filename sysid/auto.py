@@ -221,10 +221,21 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
         model = method.identify(final, order=best.order, past=best.past, future=best.future,
                                 options=options)
     except DataError:  # the full data cannot hold what the grid's common columns could
-        model = None
-    if model is None:
         model = _scored_model(p, best, method=method, options=options)
-    elif best.stable and not model.is_stable:
+    else:
+        model = _stable_choice(p, best, model, warnings, method=method, options=options)
+    for w in warnings:
+        log.info("selection: %s", w)
+    return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
+                     warnings=tuple(warnings), grid=p.grid)
+
+
+def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,
+                   method: Method, options: Options) -> StateSpaceModel:
+    """``model`` (identified on all the data), or the scored model when ``model`` has a pole
+    outside the unit circle where the scored one had none; a warning in ``warnings`` says
+    which."""
+    if best.stable and not model.is_stable:
         scored = _scored_model(p, best, method=method, options=options)
         pole = f"{np.abs(model.poles()).max():.3f}"
         if scored.is_stable:
@@ -235,10 +246,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
         else:  # rounding moved a pole of the scored model across: nothing better to offer
             warnings.append(f"identified again on all the data the model has a pole at "
                             f"|z| = {pole}")
-    for w in warnings:
-        log.info("selection: %s", w)
-    return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
-                     warnings=tuple(warnings), grid=p.grid)
+    return model
 
 
 def _scored_model(p: Plan, best: SweepRow, *, method: Method, options: Options

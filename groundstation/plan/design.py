@@ -337,9 +337,13 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                     ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
                     f"{fit_text}, weakness {w:.2f}: x{1 + w:.2f}, at most "
                     f"{LIMIT_SHARE:g} x vehicle.{_LIMIT[e.axis]} = {LIMIT_SHARE * limit:g}"))
-        clock, n = timing[:2] if timing else (chains[0].clock_period, chains[0].register_length)
-        why_clock, why_reg = timing[2:4] if timing else (
-            "no mode below the setpoint Nyquist settles within the phase: as before",) * 2
+        if timing:
+            clock, n, why_clock, why_reg = (timing.clock, timing.register_length,
+                                            timing.why_clock, timing.why_register)
+        else:
+            clock, n = chains[0].clock_period, chains[0].register_length
+            why_clock = why_reg = ("no mode below the setpoint Nyquist settles within the "
+                                   "phase: as before")
         seeds, apart = choose_seeds(register_length=n, n_axes=len(chains), flown=flown)
         flown |= {(n, s) for s in seeds}
         for e, seed in zip(chains, seeds, strict=True):
