@@ -4,11 +4,14 @@
 of the *last* session validate and those of the others identify. With one session, the first
 70 % of each of its experiments identifies and the last 30 % validates.
 
-**Default grid** (:func:`default_grid`), scaled to the sample rate and the record length:
-pasts from 0.1 s to 1.2 s and futures from 0.06 s to 0.4 s (the thesis used 1.2 s and 0.34 s
-at 50 Hz), about evenly spaced on a log scale, in samples of ``dt``; both capped so that the
-identification data have at least three Hankel columns per row of the largest pair (a 6.5 s
-hover at 100 Hz gets pasts up to about 0.15 s). Orders 2 to 12, capped by the rank the
+**Default grid** (:func:`default_grid`), scaled to the data's memory in samples, not to the
+sample time: the lag of the best VARX model by AICc (:func:`sysid.memory.predictor_memory`,
+as MATLAB's ``n4sid`` chooses its horizons) is how many past samples the one-step predictor
+needs. Pasts from a third of it to three times it, futures from a sixth of it to one and a
+half times it, about evenly spaced on a log scale (the quadrotor flights of ``groundstation
+demo`` have a memory of 13-18 samples at 50 Hz: pasts 4-6 to 39-51, futures 2-3 to 20-26,
+where the thesis used 60 and 17); both capped so that the identification data have at least
+three Hankel columns per row of the largest pair. Orders 2 to 12, capped by the rank the
 horizons allow.
 
 **Focus** (:func:`pick_focus`): when the caller does not fix it, the grid runs with both
@@ -16,9 +19,10 @@ focus choices and the one whose chosen model scores best on the held-out data wi
 method's default (IEM: prediction) unless the other is better by more than 0.5 points.
 
 **Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
-scored by simulation over windows of ``min(2 s, shortest validation record)`` on the held-out
-data, ranked by the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious
-best stable model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
+scored by simulation over windows of ``min(2 s, shortest validation record)`` (at least 10
+output values per state of the initial state fitted on each) on the held-out data, ranked by
+the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious best stable
+model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
 grid (largest or smallest past, future or order tried, when more than one was) is flagged.
 The chosen horizons and order are then identified again on all the data. ``sysid identify``
 (without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
@@ -38,6 +42,7 @@ import numpy as np
 from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.grid import pair_flights
+from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult, SweepRow, sweep
@@ -53,8 +58,9 @@ log = logging.getLogger(__name__)
 HOLDOUT_FRACTION = 0.3
 #: Hankel columns per row of the largest pair the default grid leaves at least.
 COLUMNS_PER_ROW = 3.0
-PAST_S = (0.1, 1.2)
-FUTURE_S = (0.06, 0.4)
+#: Pasts and futures of the default grid, as multiples of the predictor's memory (samples).
+PAST_X = (1 / 3, 3.0)
+FUTURE_X = (1 / 6, 1.5)
 ORDERS = (2, 12)
 #: Simulation window of the score, seconds (at least 20 samples, at most the shortest
 #: validation record: :func:`sysid.validate.simulation_window`).
@@ -131,22 +137,28 @@ def max_blocks(flights: Sequence[IOData], *, columns_per_row: float = COLUMNS_PE
 
 def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
     """Pasts, futures and orders for ``flights`` (module docstring), in samples."""
-    dt = flights[0].dt
+    return _grid(flights)[0]
+
+
+def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool]:
+    """The default grid and whether the data cut it short of the memory's range."""
     room = max_blocks(flights)
     ell = flights[0].n_outputs
     if room < 4:
         need = 4 * (flights[0].n_inputs + ell) * COLUMNS_PER_ROW
         raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
                         f"(need about {need:.0f}); give longer records or fewer channels")
-    f_hi = max(2, min(round(FUTURE_S[1] / dt), room // 3))
-    f_lo = max(2, min(round(FUTURE_S[0] / dt), f_hi))
+    lag = max(predictor_memory(flights).lag, 1)
+    f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
+    f_lo = max(2, min(round(FUTURE_X[0] * lag), f_hi))
     futures = _spread(f_lo, f_hi, 4)
-    p_hi = max(1, min(round(PAST_S[1] / dt), room - futures[-1]))
-    p_lo = max(1, min(round(PAST_S[0] / dt), p_hi))
+    p_hi = max(1, min(round(PAST_X[1] * lag), room - futures[-1]))
+    p_lo = max(1, min(round(PAST_X[0] * lag), p_hi))
     pasts = _spread(p_lo, p_hi, 6)
     top = min((futures[-1] - 1) * ell, ORDERS[1])
     orders = list(range(min(ORDERS[0], top), top + 1))
-    return {"pasts": pasts, "futures": futures, "orders": orders}
+    capped = p_hi < round(PAST_X[1] * lag)
+    return {"pasts": pasts, "futures": futures, "orders": orders}, capped
 
 
 def _edges(best: SweepRow, grid: dict[str, list[int]], *, capped: bool) -> list[str]:
@@ -194,14 +206,16 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
-    auto = default_grid(ident)
+    auto, capped = _grid(ident)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"],
             "orders": sorted(orders) if orders else auto["orders"]}
     shortest = min(d.n_samples for d in val)
-    capped = not pasts and grid["pasts"][-1] < round(PAST_S[1] / ident[0].dt)
+    capped = capped and not pasts
     return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
-                window_s=simulation_window(dt=ident[0].dt, n_samples=shortest), capped=capped,
+                window_s=simulation_window(dt=ident[0].dt, n_samples=shortest,
+                                          n_states=grid["orders"][-1],
+                                          n_outputs=ident[0].n_outputs), capped=capped,
                 given_validation=bool(validation))
 
 

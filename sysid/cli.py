@@ -191,14 +191,16 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
     # model, so the fit is over short windows (initial state estimated per window).
-    window_s = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights))
+    window_s = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights),
+                                 n_states=model.n_states, n_outputs=model.n_outputs)
     sim = compare(model, flights, window=window_s, warn=False)
     pred = compare(model, flights, horizon=1, warn=False)
     checks = []
     if validate:
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
                            inputs=model.input_names, outputs=model.output_names)
-        v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val))
+        v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
+                                  n_states=model.n_states, n_outputs=model.n_outputs)
         checks = [(f"validation: simulation, {v_win:g} s windows",
                    compare(model, val, window=v_win, warn=False)),
                   ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]

@@ -292,6 +292,7 @@ def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
     only its drift)."""
     radius = float(np.max(np.abs(model.poles()), initial=0.0))
     if radius >= INTEGRATING_RADIUS:
-        window = simulation_window(dt=model.dt)
+        window = simulation_window(dt=model.dt, n_states=model.n_states,
+                                   n_outputs=model.n_outputs)
         return (f"simulation, {window:g} s windows", {"window": window})
     return ("simulation", {})

@@ -140,7 +140,8 @@ def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,
     flights = list(products.flights)
     window = None
     if horizon is None:
-        window = simulation_window(dt=model.dt, n_samples=min(fl.n_samples for fl in flights))
+        window = simulation_window(dt=model.dt, n_samples=min(fl.n_samples for fl in flights),
+                                   n_states=model.n_states, n_outputs=model.n_outputs)
     with np.errstate(all="ignore"):
         fit = np.asarray(compare(model, flights, horizon=horizon, window=window, warn=False))
         fit_free = np.asarray(compare(free_model, flights, horizon=horizon, window=window,

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -63,12 +64,19 @@ __all__ = [
 SIMULATION_WINDOW_S = 2.0
 #: ... but never fewer samples than this (slowly sampled data: dt = 1 s makes 2 s two samples).
 MIN_WINDOW_SAMPLES = 20
+#: ... and at least this many output values per state of the initial state fitted on each
+#: window (12 states on 20 samples of one output fit any window: every score near 100 %).
+SAMPLES_PER_STATE = 10
 
 
-def simulation_window(*, dt: float, n_samples: int | None = None) -> float:
+def simulation_window(*, dt: float, n_samples: int | None = None, n_states: int = 0,
+                      n_outputs: int = 1) -> float:
     """Seconds of the default simulation window: :data:`SIMULATION_WINDOW_S`, at least
-    :data:`MIN_WINDOW_SAMPLES` samples of ``dt``, at most the record (``n_samples``, if known)."""
-    samples = max(round(SIMULATION_WINDOW_S / dt), MIN_WINDOW_SAMPLES)
+    :data:`MIN_WINDOW_SAMPLES` samples of ``dt`` and :data:`SAMPLES_PER_STATE` output values
+    per initial-state parameter (``n_states`` fitted on ``n_outputs`` channels each window),
+    at most the record (``n_samples``, if known)."""
+    samples = max(round(SIMULATION_WINDOW_S / dt), MIN_WINDOW_SAMPLES,
+                  math.ceil(SAMPLES_PER_STATE * n_states / max(n_outputs, 1)))
     return (samples if n_samples is None else min(samples, n_samples)) * dt
 
 log = logging.getLogger(__name__)

@@ -344,7 +344,8 @@ def _measured(model: Any, sessions: tuple[Path, ...]
             at += [saturated(d.u) for d in raw]
             inputs += [d.u for d in raw]
             data = [detrend_data(d)[0] for d in raw]
-            win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in data))
+            win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in data),
+                                    n_states=model.n_states, n_outputs=model.n_outputs)
             window.append(np.ravel(compare(model, data, window=win, warn=False).fit))
             one.append(np.ravel(compare(model, data, horizon=1, warn=False).fit))
         except SysIdError as exc:

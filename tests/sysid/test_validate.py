@@ -215,3 +215,7 @@ def test_default_simulation_window_is_2_s_with_a_floor_in_samples():
     assert simulation_window(dt=0.01, n_samples=150) == pytest.approx(1.5)
     assert simulation_window(dt=1.0) == MIN_WINDOW_SAMPLES == 20
     assert simulation_window(dt=1.0, n_samples=12) == 12
+    # an initial state fitted per window needs data: 10 output values per state
+    assert simulation_window(dt=1.0, n_states=12, n_outputs=1) == 120
+    assert simulation_window(dt=1.0, n_states=12, n_outputs=6) == 20
+    assert simulation_window(dt=0.02, n_states=12, n_outputs=1) == pytest.approx(2.4)

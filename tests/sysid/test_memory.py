@@ -1,0 +1,63 @@
+"""The predictor's memory (VARX lag by AICc) that scales the default horizons."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.signal
+
+import sysid
+from sysid.memory import MAX_LAG, predictor_memory
+
+
+def _arx(*, a: list[float], b: list[float], n: int, seed: int, dt: float = 1.0,
+         noise_std: float = 0.1) -> sysid.IOData:
+    """``y(k) = -a1 y(k-1) - ... + b1 u(k-1) + ... + e(k)``, white u and e: an ARX model whose
+    one-step predictor needs exactly ``max(len(a), len(b))`` past samples."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    e = noise_std * rng.standard_normal(n)
+    y = scipy.signal.lfilter([0.0, *b], [1.0, *a], u) + scipy.signal.lfilter([1.0], [1.0, *a], e)
+    return sysid.IOData(u=u[:, None], y=y[:, None], dt=dt)
+
+
+def test_a_known_arx_process_has_its_own_lag_at_any_sample_time() -> None:
+    a = [-1.5, 0.7, -0.1]  # poles 0.28, 0.5, 0.72
+    b = [1.0, 0.5, 0.25]
+    lags = [predictor_memory([_arx(a=a, b=b, n=4000, seed=s)]).lag for s in range(5)]
+    assert all(3 <= lag <= 5 for lag in lags), lags  # never short of the true lag of 3
+    assert sum(lag == 3 for lag in lags) >= 3, lags
+    slow = _arx(a=a, b=b, n=4000, seed=0, dt=0.001)
+    assert predictor_memory([slow]).lag == lags[0]  # samples, not seconds
+
+
+def test_a_moving_average_noise_needs_more_memory_than_white_noise() -> None:
+    """An ARMAX process has an infinitely long predictor, and the lag grows with what the
+    data support: a noise zero at -0.9 needs far more past than the same plant as ARX."""
+    rng = np.random.default_rng(3)
+    n = 5000
+    u = rng.standard_normal(n)
+    e = 0.5 * rng.standard_normal(n)
+    plant = scipy.signal.lfilter([0.0, 1.0], [1.0, -0.8], u)
+    arx = scipy.signal.lfilter([1.0], [1.0, -0.8], e)  # A y = B u + e: one lag
+    white = predictor_memory([sysid.IOData(u=u[:, None], y=(plant + arx)[:, None],
+                                           dt=1.0)]).lag
+    ma = scipy.signal.lfilter([1.0, 0.9], [1.0, -0.8], e)  # (1 + 0.9 q^-1) / (1 - 0.8 q^-1)
+    colored = predictor_memory([sysid.IOData(u=u[:, None], y=(plant + ma)[:, None],
+                                             dt=1.0)]).lag
+    assert white <= 2 and colored >= 3 * white + 3, (white, colored)
+
+
+def test_short_records_and_dead_channels_bound_the_search() -> None:
+    short = _arx(a=[-0.5], b=[1.0], n=60, seed=1)
+    mem = predictor_memory([short])
+    assert mem.max_lag < 12 and mem.aicc.shape == (mem.max_lag + 1,)  # 5 rows a regressor
+    assert 1 <= mem.lag <= mem.max_lag
+    long = _arx(a=[-0.5], b=[1.0], n=20_000, seed=1)
+    assert predictor_memory([long]).max_lag == MAX_LAG
+    # a constant output (a sensor that did not move) is left out, not a zero determinant
+    d = _arx(a=[-1.2, 0.35], b=[1.0], n=3000, seed=2)
+    dead = sysid.IOData(u=d.u, y=np.hstack([d.y, np.zeros_like(d.y)]), dt=1.0)
+    assert predictor_memory([dead]).lag == predictor_memory([d]).lag
+    # several flights: the regression stacks them, each from its own start
+    parts = [sysid.IOData(u=d.u[i:i + 1000], y=d.y[i:i + 1000], dt=1.0) for i in (0, 1000, 2000)]
+    assert abs(predictor_memory(parts).lag - predictor_memory([d]).lag) <= 1
