@@ -79,6 +79,7 @@ class Selection:
     warnings: tuple[str, ...]
     grid: dict[str, list[int]]
     focus_note: str = ""
+    memory: int | None = None
     focus_scores: dict[str, float] | None = None
 
     def top(self, count: int = 8) -> list[SweepRow]:
@@ -140,8 +141,8 @@ def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
     return _grid(flights)[0]
 
 
-def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool]:
-    """The default grid and whether the data cut it short of the memory's range."""
+def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
+    """The default grid, whether the data cut it short of the memory's range, the memory."""
     room = max_blocks(flights)
     ell = flights[0].n_outputs
     if room < 4:
@@ -158,7 +159,7 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool]:
     top = min((futures[-1] - 1) * ell, ORDERS[1])
     orders = list(range(min(ORDERS[0], top), top + 1))
     capped = p_hi < round(PAST_X[1] * lag)
-    return {"pasts": pasts, "futures": futures, "orders": orders}, capped
+    return {"pasts": pasts, "futures": futures, "orders": orders}, capped, lag
 
 
 def _edges(best: SweepRow, grid: dict[str, list[int]], *, capped: bool) -> list[str]:
@@ -178,7 +179,8 @@ def _edges(best: SweepRow, grid: dict[str, list[int]], *, capped: bool) -> list[
 @dataclass(frozen=True, eq=False)
 class Plan:
     """The data and grid of a selection: identification and validation experiments, the
-    rule that split them, the grid (samples) and the score's simulation window (s)."""
+    rule that split them, the grid (samples), the score's simulation window (s) and the
+    data's memory (samples, :mod:`sysid.memory`) when it set the horizons."""
 
     everything: list[IOData]
     ident: list[IOData]
@@ -188,6 +190,7 @@ class Plan:
     window_s: float
     capped: bool
     given_validation: bool
+    memory: int | None = None
 
     @property
     def n_models(self) -> int:
@@ -206,7 +209,7 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
-    auto, capped = _grid(ident)
+    auto, capped, memory = _grid(ident)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"],
             "orders": sorted(orders) if orders else auto["orders"]}
@@ -216,7 +219,8 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
                 window_s=simulation_window(dt=ident[0].dt, n_samples=shortest,
                                           n_states=grid["orders"][-1],
                                           n_outputs=ident[0].n_outputs), capped=capped,
-                given_validation=bool(validation))
+                given_validation=bool(validation),
+                memory=None if pasts and futures else memory)
 
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
@@ -241,7 +245,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
-                     warnings=tuple(warnings), grid=p.grid)
+                     warnings=tuple(warnings), grid=p.grid, memory=p.memory)
 
 
 def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,

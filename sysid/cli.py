@@ -303,7 +303,8 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     largest gap right after s_1 is degenerate (one dominant direction), a smaller one no cut:
     BIC's order is suggested then. Validation on held-out data (sysid identify without
     --order) judges better than either. Without --past/--future the horizons are the largest
-    of the default grid (1.2 s and 0.4 s, or what the data allow).
+    of the default grid (three and one and a half times the data's memory, the lag of the
+    best ARX model by AICc, or what the data allow).
 
     \b
     Example:

@@ -106,7 +106,10 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
                       + f" (fit [%], {sel.scoring} of held-out data)")
     dt = sel.model.dt
     con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
-              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}")
+              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}"
+              + ("" if sel.memory is None else
+                 f" (horizons from the data's memory of {sel.memory} samples, the lag of the "
+                 "best ARX model by AICc)"))
     con.print(f"chosen: past {sel.best.past} ({sel.best.past * dt:.2f} s), future "
               f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}, "
               f"focus {sel.model.provenance.get('focus')}: the smallest order within 0.5 "
@@ -126,7 +129,8 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
     """What was chosen and why, JSON-able (``candidates``: the best ``top``)."""
     return {"rule": sel.rule, "score": "mean of per-channel fits floored at 0 %, "
             f"{sel.scoring} of the validation data",
-            "grid": sel.grid, "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
+            "grid": sel.grid, "memory_samples": sel.memory,
+            "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
             "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
             "focus_scores": sel.focus_scores,
             "candidates": [r.to_record() for r in sel.top(top)]}

@@ -144,6 +144,10 @@ def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> Non
                 sel["focus"])
 
     assert key(report) == key(chose) and report["grid"] == chose["grid"]
+    # the grid is set by the data's memory (samples), and the report says it
+    memory = chose["memory_samples"]
+    assert isinstance(memory, int) and memory >= 1 and report["memory_samples"] == memory
+    assert chose["grid"]["pasts"][0] <= memory <= chose["grid"]["pasts"][-1]
     assert set(report["focus_scores"]) == {"prediction", "simulation"}
     assert report["focus_scores"] == pytest.approx(chose["focus_scores"])
     assert report["best"] == report["chosen"] and report["rule"] == chose["rule"]
