@@ -88,8 +88,9 @@ FOCUS_OPTION = click.option(
          "simulation: B, D, x0 by output error (default for po-moesp; biased in closed loop).")
 STABILITY_OPTION = click.option(
     "--stability", type=click.Choice(list(STABILITY_MODES)), default="auto", show_default=True,
-    help="auto: poles just outside the unit circle (|z| <= 1.1) moved to 0.999; enforce: all "
-         "strictly inside; free: as estimated.")
+    help="auto: poles just outside the unit circle (|z| <= 1.1) moved inside: to 0.999 near "
+         "z = 1 (integrators), reflected elsewhere (oscillations); enforce: all strictly "
+         "inside; free: as estimated.")
 FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
 

@@ -222,8 +222,9 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
             subspace step; for open-loop data with colored inputs; biased under feedback
             (:mod:`sysid.finish`, ``docs/sysid.md``).
         stability: "auto" (default), "enforce" or "free" (:mod:`sysid.stability`): "auto"
-            moves poles just outside the unit circle (|z| <= 1.1, noise around an integrator)
-            to 0.999; "enforce" puts every pole strictly inside (MATLAB's EnforceStability);
+            moves poles just outside the unit circle (|z| <= 1.1) inside: to 0.999 near z = 1
+            (an integrator's estimate), reflected elsewhere; "enforce" puts every pole
+            strictly inside (MATLAB's EnforceStability);
             B, D, K are estimated for the final A and the fit it cost is in
             ``provenance["stability"]``.
         bk_method: "state" (closed-loop consistent) or "thesis" (eq. 3.15).

@@ -5,10 +5,13 @@ poles sit on the unit circle, so a finite-sample estimate puts them just inside 
 A pole at ``|z| = 1.008`` is physics plus variance; a model that *simulates* with it drifts off.
 The modes (``stability=``):
 
-* ``"auto"`` (default): poles with ``1 < |z| <= 1 + NEAR_BAND`` are estimation noise around an
-  integrator; they are moved radially onto ``|z| = MARGINAL_RADIUS`` (a time constant of 1000
-  samples: an integrator over any validation window). Poles further out are a genuinely
-  unstable plant (closed-loop identification exists for those) and are kept, with a warning.
+* ``"auto"`` (default): poles with ``1 < |z| <= 1 + NEAR_BAND`` are estimation noise. Within
+  ``NEAR_BAND`` of ``z = 1`` they are an integrator's estimate and are moved radially onto
+  ``|z| = MARGINAL_RADIUS`` (a time constant of 1000 samples: an integrator over any
+  validation window). Elsewhere (an oscillation, or near ``z = -1``) they are a lightly damped
+  mode estimated just outside and are reflected as ``"enforce"`` does: at ``MARGINAL_RADIUS``
+  they would ring undamped through any simulation. Poles further out are a genuinely unstable
+  plant (closed-loop identification exists for those) and are kept, with a warning.
 * ``"enforce"``: every pole strictly inside, as MATLAB's ``EnforceStability``: a pole outside
   is reflected, :math:`z \\to 1/\\bar z`, and capped at ``MARGINAL_RADIUS``.
 * ``"free"``: A as the subspace step estimated it.
@@ -37,7 +40,8 @@ STABILITY_MODES: tuple[str, ...] = ("auto", "enforce", "free")
 
 #: Radius a near-integrating or reflected pole is put at.
 MARGINAL_RADIUS = 0.999
-#: ``"auto"`` treats poles with ``1 < |z| <= 1 + NEAR_BAND`` as integrators plus noise.
+#: ``"auto"`` treats poles with ``1 < |z| <= 1 + NEAR_BAND`` as noise, and those of them within
+#: ``NEAR_BAND`` of ``z = 1`` as integrators.
 NEAR_BAND = 0.1
 
 
@@ -47,12 +51,16 @@ def check_stability(stability: object) -> None:
         raise ParameterError(f"stability={stability!r}; use one of {STABILITY_MODES}")
 
 
-def _target_radius(radius: float, mode: str) -> float | None:
-    """New radius for a pole of ``radius``, or None to keep it."""
+def _target_radius(pole: complex, mode: str) -> float | None:
+    """New radius for ``pole``, or None to keep it."""
+    radius = abs(pole)
     if mode == "free" or radius <= 1.0:
         return None
     if mode == "auto":
-        return MARGINAL_RADIUS if radius <= 1.0 + NEAR_BAND else None
+        if radius > 1.0 + NEAR_BAND:
+            return None
+        if abs(pole - 1.0) <= NEAR_BAND * (1.0 + 1e-9):  # the band edge, to rounding
+            return MARGINAL_RADIUS
     return min(1.0 / radius, MARGINAL_RADIUS)
 
 
@@ -80,7 +88,7 @@ def stabilize(a: np.ndarray, *, mode: Stability
         blk = t[i:i + size, i:i + size]
         pole = complex(np.linalg.eigvals(blk)[0])
         radius = abs(pole)
-        new = _target_radius(radius, mode)
+        new = _target_radius(pole, mode)
         if mode == "enforce" and new is None and radius > MARGINAL_RADIUS:
             new = MARGINAL_RADIUS
         if new is not None:
