@@ -501,7 +501,7 @@ class _Runner:
             "file": str(self.recorder.path),
             "plan": self.plan.name,
             "uri": self.uri,
-            "duration_s": round(self.now(), 3),
+            "duration_s": round(end, 3),
             "aborted": bool(self.causes),
             "cause": self.causes[0] if self.causes else "",
             **({"excitation_cut": self.cut} if self.cut else {}),

@@ -75,8 +75,9 @@ class SimClock:
         pace = getattr(src, "pace", None)
         if pace is not None:
             pace(until_s=t)
-        with src.cond:
-            while src.running and src.published_s < t:
+        with src.cond:  # flat out also until the simulation holds for this sleep and the link
+            # has delivered what it released by then (Simulator.quiescent: lock-step)
+            while src.running and (src.published_s < t or not getattr(src, "quiescent", True)):
                 src.cond.wait(0.05)
         remaining = t - self.now()
         if remaining > 0:

@@ -14,7 +14,9 @@ URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every opti
 
 A :class:`Simulator` steps the vehicle from one thread at ``speed`` x real time, splitting its steps
 at the firmware ms where log packets are due, so every log packet carries the exact firmware time;
-a scheduler sleeping on its clock paces it (:meth:`Simulator.pace`). Faults act on what the link
+a scheduler sleeping on its clock paces it (:meth:`Simulator.pace`); flat out (``speed=inf``) it
+also runs in lock-step with its link (:attr:`Simulator.quiescent`), so same-seed flights are
+identical. Faults act on what the link
 returns (log packets dropped, everything delayed); a cut link stops both directions and fires the
 link's error callback, the vehicle left to its supervisor watchdog. A lost link (``cut_at``)
 leaves the simulation running until the vehicle has been at rest for a second, as a real one
@@ -152,6 +154,13 @@ class Simulator:
         self._on_lost: Callable[[str], None] | None = None
         self._pace_ms: int | None = None  # paced: run no further than this (see pace())
         self._pace_wall = 0.0
+        # Flat out: lock-step with the link (see quiescent). Time starts held for the scheduler,
+        # so connecting costs no simulated time however long it takes on the host.
+        self._lockstep = math.isinf(speed) and sink is None
+        if self._lockstep:
+            self._pace_ms, self._pace_wall = vehicle.firmware_ms, time.monotonic()
+        self._handed = False  # a packet is in the link's hands (it has not asked for more since)
+        self._link_wall = time.monotonic()  # when the link last took or asked for a packet
         # A link that fetches packets one by one (the emulated radio's acks) holds simulation
         # time while this many wait for it, as a link faster than the host would never fall
         # behind (the hold lapses like the pacing hold when nothing is fetched for 3 s).
@@ -169,6 +178,28 @@ class Simulator:
     @property
     def running(self) -> bool:
         return not self._stop.is_set()
+
+    @property
+    def quiescent(self) -> bool:
+        """Lock-step, flat out: the simulation holds where the scheduler's sleep lets it, has
+        handled every packet sent to it, and the link has taken every released packet and come
+        back for more (cflib's thread has run their callbacks). Time starts held (connecting
+        costs no simulated time) and moves only while the link is idle, so what the scheduler
+        and the link read never depends on thread timing. Always true at a finite speed; true
+        once a hold lapses (``_PACE_HOLD_S``), so nothing ever hangs on it."""
+        with self.cond:
+            if not self._lockstep:
+                return True
+            lapsed = time.monotonic() - self._pace_wall > _PACE_HOLD_S
+            held = self._pace_ms is None or lapsed or self._published_ms >= self._pace_ms
+            return held and not self._rx and self._link_idle()
+
+    def _link_idle(self) -> bool:
+        """(under ``cond``) Lock-step: nothing released waits for the link or is in its hands
+        (a link silent for ``_PACE_HOLD_S`` counts as idle: time never waits on a stuck one)."""
+        if not self._token or time.monotonic() - self._link_wall > _PACE_HOLD_S:
+            return True
+        return not self._handed and not (self._out and self._out[0][0] <= self._published_ms)
 
     def pace(self, *, until_s: float) -> None:
         """A scheduler sleeps until ``until_s``: let the simulation run to it and then hold,
@@ -192,6 +223,7 @@ class Simulator:
             behind = (self._max_backlog is not None and self._token != 0
                       and len(self._out) >= self._max_backlog
                       and time.monotonic() - self._taken_wall < _PACE_HOLD_S)
+            behind = behind or (self._lockstep and not self._link_idle())
         if behind:
             return min(target, self.vehicle.firmware_ms)
         if limit is None or time.monotonic() - since > _PACE_HOLD_S:
@@ -244,16 +276,26 @@ class Simulator:
         """The next released outgoing packet for link ``token`` (``wait`` as cflib's driver)."""
         deadline = None if wait < 0 else time.monotonic() + wait
         with self.cond:
+            if token == self._token:
+                back, self._handed = self._handed, False  # its last packet's callbacks ran
+                self._link_wall = time.monotonic()
+            else:
+                back = False
             while True:
                 if token != self._token or not self.running:
                     return None
                 if self._out and self._out[0][0] <= self._published_ms:
                     _, header, data = self._out.popleft()
+                    self._handed = True
                     if self._max_backlog is not None:
                         self._taken_wall = time.monotonic()
                         if len(self._out) < self._max_backlog:
                             self._wake.set()
                     return header, data
+                if back and self._lockstep:  # drained: time may move on (lock-step)
+                    back = False
+                    self._wake.set()
+                    self.cond.notify_all()
                 remaining = 0.1 if deadline is None else deadline - time.monotonic()
                 if remaining <= 0:
                     return None
@@ -349,11 +391,18 @@ class Simulator:
         rest_since: float | None = time.monotonic()
         failed = False
         while not self._stop.is_set():
-            self._process_rx()
             if math.isinf(self.speed):  # flat out, but held for a scheduler like any speed
+                # The hold is read first: what the scheduler sent before it released the hold is
+                # applied at the held time, never one step later; in lock-step the replies go
+                # out (and come back through the link) before time moves on.
                 target = self._paced_target(v.firmware_ms + _CHUNK_MS)
+                had_rx = bool(self._rx)
+                self._process_rx()
+                if had_rx and self._lockstep:
+                    target = self._paced_target(v.firmware_ms + _CHUNK_MS)
                 held = target <= v.firmware_ms
             else:
+                self._process_rx()
                 target = base_ms + int((time.perf_counter() - base_wall) * self.speed * 1000.0)
                 if target - v.firmware_ms > _MAX_LAG_MS:  # host too slow: let time slip
                     base_ms -= target - v.firmware_ms - _MAX_LAG_MS
