@@ -149,7 +149,8 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
         need = 4 * (flights[0].n_inputs + ell) * COLUMNS_PER_ROW
         raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
                         f"(need about {need:.0f}); give longer records or fewer channels")
-    lag = max(predictor_memory(flights).lag, 1)
+    memory = predictor_memory(flights)
+    lag = max(memory.lag, 1)
     f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
     f_lo = max(2, min(round(FUTURE_X[0] * lag), f_hi))
     futures = _spread(f_lo, f_hi, 4)
@@ -158,7 +159,7 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
     pasts = _spread(p_lo, p_hi, 6)
     top = min((futures[-1] - 1) * ell, ORDERS[1])
     orders = list(range(min(ORDERS[0], top), top + 1))
-    capped = p_hi < round(PAST_X[1] * lag)
+    capped = p_hi < round(PAST_X[1] * lag) or memory.capped  # short data, or the longest lag
     return {"pasts": pasts, "futures": futures, "orders": orders}, capped, lag
 
 

@@ -192,8 +192,10 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
     # model, so the fit is over short windows (initial state estimated per window).
-    window_s = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights),
-                                 n_states=model.n_states, n_outputs=model.n_outputs)
+    # The selection's own window when it chose the model (sized for the grid's largest order).
+    window_s = (selection.window_s if selection is not None and selection.window_s else
+                simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights),
+                                  n_states=model.n_states, n_outputs=model.n_outputs))
     sim = compare(model, flights, window=window_s, warn=False)
     pred = compare(model, flights, horizon=1, warn=False)
     checks = []

@@ -59,7 +59,8 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     The model's channel names select the session channels and its dt sets the grid. Without
     --horizon/--window-s the whole window is simulated from a least-squares initial state,
     unless the model integrates (a pole at |z| >= 0.995): whole-flight simulation of an
-    integrator only measures its drift, so it is then simulated over 2 s windows. A fit that
+    integrator only measures its drift, so it is then simulated over 2 s windows (at least 10
+    output values per state of the initial state fitted on each). A fit that
     diverged is "diverged" in tables and null in --json.
     Each experiment of a session (e.g. its airborne-N phases) is its own row.
 

@@ -24,7 +24,8 @@ Tsai, 1993):
 with :math:`N` rows, :math:`\hat\Sigma_L = E^T E / N` ``(l, l)`` the residual covariance.
 One QR factor of ``[regressors | outputs]`` ordered by lag gives every :math:`\hat\Sigma_L`
 (the rows below column ``q`` of the outputs' block). Channels are scaled to unit variance
-first (the criterion does not change; the factor is better conditioned).
+first (the criterion does not change; the factor is better conditioned), one scale for all
+flights; each flight's mean is removed (an offset would otherwise be explained by long lags).
 """
 
 from __future__ import annotations
@@ -74,27 +75,39 @@ def _longest_lag(flights: Sequence[IOData], *, limit: int) -> int:
     return best
 
 
-def _unit(x: np.ndarray) -> np.ndarray:
-    s = x.std(axis=0)
-    return x / np.where(s > 0, s, 1.0)
+def _pooled(flights: Sequence[IOData]) -> tuple[list[np.ndarray], list[np.ndarray],
+                                                np.ndarray, np.ndarray]:
+    """Each flight's inputs and outputs less their own means (one intercept a flight), and
+    which input and output channels move at all (pooled standard deviation > 0)."""
+    us = [d.u - d.u.mean(axis=0) for d in flights]
+    ys = [d.y - d.y.mean(axis=0) for d in flights]
+    su = np.sqrt(sum((u ** 2).sum(axis=0) for u in us) / sum(len(u) for u in us))
+    sy = np.sqrt(sum((y ** 2).sum(axis=0) for y in ys) / sum(len(y) for y in ys))
+    # one scale for every flight (the pooled model's coefficients must hold in all of them);
+    # a constant channel is left out (a dead output makes every determinant zero)
+    us = [u[:, su > 0] / su[su > 0] for u in us]
+    ys = [y[:, sy > 0] / sy[sy > 0] for y in ys]
+    return us, ys, su > 0, sy > 0
 
 
 def predictor_memory(flights: Sequence[IOData], *, max_lag: int = MAX_LAG) -> Memory:
     """The VARX lag with the smallest AICc (module docstring) over ``0..max_lag``, fewer when
-    the records are short (at least :data:`ROWS_PER_REGRESSOR` rows a regressor)."""
+    the records are short (at least :data:`ROWS_PER_REGRESSOR` rows a regressor). Each
+    flight's mean is removed (an intercept a flight); channels are scaled by one pooled
+    standard deviation; constant channels are left out."""
     top = _longest_lag(flights, limit=max_lag)
-    # outputs that move in every flight (a constant one would make every det zero)
-    live = np.all([d.y.std(axis=0) > 0 for d in flights], axis=0)
-    m, ell = flights[0].n_inputs, int(live.sum())
+    used = [d for d in flights if d.n_samples > top]
+    empty = Memory(lag=0, aicc=np.full(top + 1, np.inf), max_lag=top, n_rows=0)
+    if not used:
+        return empty
+    us, ys, live_u, live_y = _pooled(used)
+    m, ell = int(live_u.sum()), int(live_y.sum())
     if ell == 0:
-        return Memory(lag=0, aicc=np.full(top + 1, np.inf), max_lag=top, n_rows=0)
+        return empty
     r: np.ndarray | None = None
     n_rows = 0
-    for d in flights:
-        n = d.n_samples
-        if n <= top:
-            continue
-        u, y = _unit(d.u), _unit(d.y[:, live])
+    for u, y in zip(us, ys, strict=True):
+        n = len(y)
         z = np.hstack([y, u])
         for start in range(top, n, _CHUNK):
             stop = min(start + _CHUNK, n)

@@ -327,16 +327,17 @@ def _session_plan(path: Path) -> Plan:
 def _measured(model: Any, sessions: tuple[Path, ...]
               ) -> tuple[dict[str, float], str, float, dict[str, float]]:
     """On ``sessions``: the mean fit per output, simulation over 2 s windows (initial state
-    estimated per window) and 1-step prediction, as ``sysid compare`` reports them, the
-    share of samples with an input at its limit (:func:`groundstation.plan.design.saturated`)
-    and the top-band share of each axis' motor combination
-    (:func:`groundstation.plan.aliasing.axis_shares`)."""
+    estimated per window; longer for many states on few outputs:
+    :func:`sysid.validate.simulation_window`) and 1-step prediction, as ``sysid compare``
+    reports them, the share of samples with an input at its limit
+    (:func:`groundstation.plan.design.saturated`) and the top-band share of each axis' motor
+    combination (:func:`groundstation.plan.aliasing.axis_shares`)."""
     from sysid import compare, detrend_data
     from sysid.errors import SysIdError
     from sysid.session_io import load_experiments
     from sysid.validate import simulation_window
 
-    window, one, at, inputs = [], [], [], []
+    window, one, at, inputs, lengths = [], [], [], [], set()
     for path in sessions:
         try:
             raw = load_experiments(path, inputs=model.input_names, outputs=model.output_names,
@@ -346,6 +347,7 @@ def _measured(model: Any, sessions: tuple[Path, ...]
             data = [detrend_data(d)[0] for d in raw]
             win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in data),
                                     n_states=model.n_states, n_outputs=model.n_outputs)
+            lengths.add(f"{win:g}")
             window.append(np.ravel(compare(model, data, window=win, warn=False).fit))
             one.append(np.ravel(compare(model, data, horizon=1, warn=False).fit))
         except SysIdError as exc:
@@ -356,7 +358,8 @@ def _measured(model: Any, sessions: tuple[Path, ...]
     shown = ", ".join(f"{n} {a:.1f}/{b:.1f}" for n, a, b in zip(names, w, h, strict=True)
                       if n.startswith("gyro") or len(names) <= 3)
     return ({n: float(f) for n, f in zip(names, w, strict=True)},
-            f"2 s windows on {len(sessions)} flown session(s); window/1-step: {shown}",
+            f"{'/'.join(sorted(lengths))} s windows on {len(sessions)} flown session(s); "
+            f"window/1-step: {shown}",
             float(np.concatenate(at).mean()),
             axis_shares(inputs, input_names=model.input_names))
 

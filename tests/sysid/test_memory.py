@@ -61,3 +61,27 @@ def test_short_records_and_dead_channels_bound_the_search() -> None:
     # several flights: the regression stacks them, each from its own start
     parts = [sysid.IOData(u=d.u[i:i + 1000], y=d.y[i:i + 1000], dt=1.0) for i in (0, 1000, 2000)]
     assert abs(predictor_memory(parts).lag - predictor_memory([d]).lag) <= 1
+
+
+def test_flights_share_one_model_offsets_and_flat_experiments_do_not_move_the_lag() -> None:
+    """The pooled VARX must hold in every flight: one scale for all of them (a flight with a
+    low-passed input scaled on its own changed the fitted gain and gave lag 3-4 for an ARX(1)),
+    one intercept a flight (an offset of 0.2 output std gave lags 19-37 without it), and a
+    flat experiment too short to take part does not remove an output from the others."""
+    rng = np.random.default_rng(7)
+    n = 3000
+
+    def flight(u: np.ndarray) -> sysid.IOData:
+        e = 0.3 * rng.standard_normal(n)
+        y = scipy.signal.lfilter([0.0, 1.0], [1.0, -0.7], u) \
+            + scipy.signal.lfilter([1.0], [1.0, -0.7], e)
+        return sysid.IOData(u=u[:, None], y=y[:, None], dt=1.0)
+
+    white = flight(rng.standard_normal(n))
+    lowpassed = flight(scipy.signal.lfilter([0.2], [1.0, -0.8], rng.standard_normal(n)))
+    assert predictor_memory([white, lowpassed]).lag <= 2
+    shifted = sysid.IOData(u=white.u, y=white.y + 0.2 * float(white.y.std()), dt=1.0)
+    assert predictor_memory([shifted]).lag == predictor_memory([white]).lag <= 2
+    flat = sysid.IOData(u=np.zeros((10, 1)), y=np.zeros((10, 1)), dt=1.0)
+    with_flat = predictor_memory([white, flat])
+    assert with_flat.lag == predictor_memory([white]).lag and with_flat.n_rows > 0
