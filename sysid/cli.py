@@ -21,9 +21,9 @@ import numpy as np
 from rich.console import Console
 
 from cfcommon.cli import FiniteFloat, check_output, output_table
-from sysid.auto import default_grid
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
 from sysid.cli_compare import compare_cmd, resid
+from sysid.cli_order import order_command
 from sysid.cli_progress import progress
 from sysid.cli_support import (
     JSON_OPTION,
@@ -48,7 +48,6 @@ from sysid.errors import DataError, ParameterError
 from sysid.finish import FOCUS_MODES
 from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.model import load_model
-from sysid.order import information_criteria, singular_values, suggest_order
 from sysid.session_io import read_metadata
 from sysid.stability import STABILITY_MODES
 from sysid.validate import compare, simulation_window
@@ -56,9 +55,6 @@ from sysid.validate import compare, simulation_window
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
-
-#: Largest order `sysid order` scores by information criteria (one model per order).
-_IC_MAX_ORDER = 12
 
 
 class MethodChoice(click.Choice):
@@ -313,55 +309,8 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     Example:
       sysid order flight.h5 --past 60 --future 17
     """
-    flights = load_flights([session], opts=opts)
-    meth = get_method(method)
-    grid = default_grid(flights)
-    past = grid["pasts"][-1] if past is None else past
-    future = grid["futures"][-1] if future is None else future
-    limit = meth.max_order(past=past, future=future, n_inputs=flights[0].n_inputs,
-                           n_outputs=flights[0].n_outputs)
-    sv = singular_values(flights, past=past, future=future, method=meth)
-    ic = information_criteria(flights, orders=range(1, max(min(show, _IC_MAX_ORDER, limit), 1)
-                                                    + 1), past=past, future=future, method=meth)
-    hint = suggest_order(sv, ic, show=show, max_order=limit)
-    if as_json:
-        click.echo(json.dumps({"session": str(session), "method": meth.name, "past": past,
-                               "future": future, "max_order": limit,
-                               "singular_values": sv.tolist(), "suggested_order": hint.order,
-                               "suggestion": {
-                                   "rule": hint.rule, "reason": hint.reason,
-                                   "by_rule": hint.by_rule, "gap_decades": hint.gap_decades,
-                                   "gap_clear": hint.gap_clear},
-                               "information_criteria": {
-                                   "orders": ic.orders.tolist(), "n_params": ic.n_params.tolist(),
-                                   "aic": ic.aic.tolist(), "aicc": ic.aicc.tolist(),
-                                   "bic": ic.bic.tolist(), "chosen": ic.chosen}}, indent=1))
-        return
-    con = console()
-    table = output_table("n", "singular value", "log10 gap to next", console=con,
-                         title=f"{meth.name} p={past} f={future}, orders up to {limit} "
-                               "(> = largest gap)")
-    for i, value in enumerate(sv[: min(show, sv.size)]):
-        gap = (f"{hint.gaps[i]:.2f}" + (" >" if i + 1 == hint.by_rule["gap"] else "")
-               if i < hint.gaps.size else "")
-        table.add_row(str(i + 1), f"{value:.4g}", gap,
-                      style="bold" if i + 1 == hint.order else None)
-    con.print(table)
-    table = output_table("n", "params", "AIC", "AICc", "BIC", console=con,
-                         title="information criteria (one-step errors; * = smallest)")
-    for i, n in enumerate(ic.orders):
-        cells = [f"{v[i]:.1f}" + (" *" if ic.chosen[k] == n else "")
-                 for k, v in (("aic", ic.aic), ("aicc", ic.aicc), ("bic", ic.bic))]
-        table.add_row(str(n), str(ic.n_params[i]), *cells,
-                      style="bold" if n == hint.order else None)
-    con.print(table)
-    con.print(f"largest gap ({hint.gap_decades:.2f} decades) after s_{hint.by_rule['gap']}; "
-              f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
-    con.print(f"suggested order: {hint.order}, by {hint.reason}")
-    con.print(f"to identify with it: sysid identify {session} --method {meth.name} --past "
-              f"{past} --future {future} --order {hint.order} (and the same channel options); "
-              "without --order and the horizons, validation on held-out data chooses them, "
-              "which judges better")
+    order_command(session, method=method, past=past, future=future, show=show,
+                  as_json=as_json, **opts)
 
 
 @main.command("sweep")
