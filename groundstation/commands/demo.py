@@ -48,11 +48,26 @@ def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> Fl
     return result
 
 
+class _Speed(FiniteFloat):
+    """A speed factor, or ``inf``: flat out, in lock-step with the ground station."""
+
+    def convert(self, value: object, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        if isinstance(value, str) and value.strip().lower() == "inf":
+            return float("inf")
+        return super().convert(value, param, ctx)
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return f"{super().get_metavar(param, ctx)}|inf"
+
+
 @click.command("demo")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Folder for the session and model files (default: a new temporary folder).")
-@click.option("--speed", type=FiniteFloat(min=1, max=100), default=10.0, show_default=True,
-              help="Simulation speed factor (the 112 s plan takes 112/speed s).")
+@click.option("--speed", type=_Speed(min=1, max=100), default=10.0, show_default=True,
+              help="Simulation speed factor (the 112 s plan takes 112/speed s); inf: flat out, "
+                   "in lock-step with the ground station, so every run records the same "
+                   "flights and chooses the same model.")
 @click.option("--order", type=click.IntRange(1, 40), default=None,
               help="Model order (default: chosen by validation; the thesis used 8).")
 @click.option("--past", type=click.IntRange(1, 500), default=None,

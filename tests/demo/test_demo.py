@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 
+import pytest
 from click.testing import CliRunner
 
 import groundstation.sim as gsim
@@ -52,3 +53,18 @@ def test_demo_flies_identifies_and_validates(tmp_path):
     assert min(gyro_1step) > 50.0, gyro_1step
     assert min(gyro_sim) > 0.0, gyro_sim
     assert summary["predictor_stable"]
+
+
+@pytest.mark.parametrize(("speed", "ok"), [("inf", True), ("INF", True), ("nan", False),
+                                           ("0.5", False), ("1e9", False)])
+def test_demo_speed_is_a_factor_or_flat_out(speed, ok):
+    """``--speed inf`` flies flat out in lock-step (the same flights every run:
+    tests/flight/test_repeatable.py); anything else must be a finite factor in 1..100."""
+    from groundstation.commands.demo import _Speed
+
+    opt = _Speed(min=1, max=100)
+    if ok:
+        assert opt.convert(speed, None, None) == float("inf")
+        return
+    res = CliRunner().invoke(main, ["demo", "--speed", speed])
+    assert res.exit_code == 2 and "--speed" in res.output and "Traceback" not in res.output
