@@ -52,6 +52,12 @@ _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
 _PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
+_RADIO_PHASE_MS = 20  # lock-step: commander packets take effect a seeded per-flight delay in
+# [0, 20) ms (+-1 ms per packet) after they are handled, as over a radio link, whose packets land
+# at no fixed phase of the firmware's 50 Hz log clock. Without it every setpoint of a lock-step
+# flight lands at one phase (10-11 ms after a log sample), which flatters a strictly proper
+# motors -> gyro model identified from 50 Hz logs.
+_COMMANDER_PORTS = (3, 7)  # CRTP commander (RPYT) and generic commander (stop, notify-stop)
 _PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler; the
 # hold ends at once when the link detaches, so only a scheduler that stops sleeping mid-link
 # (a stalled or crashed client) ever waits it out
@@ -143,12 +149,16 @@ class Simulator:
         self.clock = SimClock(source=self)
         self.dropped_packets = 0  # log packets lost to the drop fault
         self._rng = random.Random(seed * 7919 + 17)
+        self._radio_rng = random.Random(seed * 104729 + 3)
+        self._radio_ms = self._radio_rng.randrange(_RADIO_PHASE_MS)
+        self._delayed: deque[tuple[int, int, int, bytes]] = deque()  # (due ms, token, hdr, data)
         self._sink, self._linger = sink, linger
         self._rx: deque[tuple[int, int, bytes]] = deque()
         self._out: deque[tuple[int, int, bytes]] = deque()  # (release ms, header, payload)
         self._published_ms = vehicle.firmware_ms
         self._published_s = vehicle.time_s
         self._token = 0  # the link currently attached (0: none)
+        self._closed_token = 0  # the link just detached, until its link-down marker is handled
         self._ever_attached = False
         self._cut = False
         self._on_lost: Callable[[str], None] | None = None
@@ -261,7 +271,7 @@ class Simulator:
         """The link ``token`` is gone; nothing more goes out to it."""
         with self.cond:
             if token == self._token:
-                self._token, self._on_lost = 0, None
+                self._token, self._on_lost, self._closed_token = 0, None, token
                 self._out.clear()
                 self._pace_ms = None  # no scheduler on a detached link: time runs freely
                 self._rx.append((-1, 0, b""))  # tells the simulation thread: link down
@@ -329,11 +339,35 @@ class Simulator:
         while rx:
             token, header, data = rx.popleft()
             if token == -1:
+                self._apply_delayed(flush=True)  # what was sent before the link closed lands
+                self._closed_token = 0
                 peer.link_down()
                 continue
-            if self._cut or (token and token != self._token):
+            if self._cut or not self._from_link(token):
+                continue
+            if self._lockstep and (header >> 4) & 0xF in _COMMANDER_PORTS:
+                due = self.vehicle.firmware_ms + max(
+                    0, self._radio_ms + self._radio_rng.choice((-1, 0, 1)))
+                if self._delayed:
+                    due = max(due, self._delayed[-1][0])  # packets keep their order
+                self._delayed.append((due, token, header, data))
                 continue
             self._emit(peer.handle(header=header, data=data))
+        self._apply_delayed()
+
+    def _apply_delayed(self, *, flush: bool = False) -> None:
+        """Lock-step: the commander packets whose radio delay has passed (``flush``: all of
+        them, the stop setpoint included) take effect."""
+        delayed, now = self._delayed, self.vehicle.firmware_ms
+        while delayed and (flush or delayed[0][0] <= now):
+            _, token, header, data = delayed.popleft()
+            if not self._cut and self._from_link(token):
+                self._emit(self.peer.handle(header=header, data=data))
+
+    def _from_link(self, token: int) -> bool:
+        """A packet of the attached link, or of the one just detached (sent before it closed: the
+        stop setpoint before a close must land), not of a link another has replaced."""
+        return not token or token in (self._token, self._closed_token)
 
     def _check_cut(self) -> None:
         cut_at = self.faults.cut_at
@@ -356,11 +390,15 @@ class Simulator:
             due = peer.next_due_ms()
             if due is not None and now < due < step_to:
                 step_to = due
+            if self._delayed and now < self._delayed[0][0] < step_to:
+                step_to = self._delayed[0][0]
             v.advance((step_to - now) / 1000.0)
             self._emit(peer.due_log_packets(), log=True)
             self._check_cut()
             if self._rx:
                 self._process_rx()
+            elif self._delayed:
+                self._apply_delayed()
 
     def _flush_sink(self) -> None:
         out, sink = self._out, self._sink
