@@ -7,13 +7,11 @@ Faithful to the conventions of crazyflie-firmware (``pid.c``, ``attitude_pid_con
 * The estimator's pitch is the *legacy* pitch ``theta_legacy = -theta`` (positive nose up), and the
   rate loop is fed ``(gyro.x, -gyro.y, gyro.z)``; the yaw output is negated before mixing.
 * PID (``pid.c``): ``e = desired - measured``, ``u = kp e + ki sat(int e dt, i_limit)
-  + kd lpf(de/dt)``, the attitude loop's derivative unfiltered (``ATTITUDE_LPF_ENABLE`` is false
-  in the firmware: with the Kalman estimator's 100 Hz attitude steps the yaw D term gives
-  one-tick pulses, see ``SimVehicle``); rate outputs saturate to ``+-32767``. **Not as the
-  firmware:** the rate loop's derivative passes a 2nd-order Butterworth low-pass at 20 Hz, where
-  the firmware's default (``ATTITUDE_RATE_LPF_ENABLE`` false in ``platform_defaults.h``) leaves
-  it unfiltered too; taking the filter out changes every ``sim://`` figure and wants the motor
-  noise calibrated again against the CrazyPAD logs.
+  + kd de/dt``, both loops' derivatives unfiltered as the firmware's defaults leave them
+  (``ATTITUDE_LPF_ENABLE`` and ``ATTITUDE_RATE_LPF_ENABLE`` false; with the Kalman estimator's
+  100 Hz attitude steps the yaw D term gives one-tick pulses, see ``SimVehicle``); rate outputs
+  saturate to ``+-32767``. The rate loop differentiates the gyro as the sensor task passes it on:
+  low-passed at 80 Hz (the accelerometer at 30 Hz), :class:`ImuFilter`.
 * Mixer: ``r = roll/2``, ``p = pitch/2``; ``m1 = T - r + p + y``, ``m2 = T - r - p - y``,
   ``m3 = T + r - p + y``, ``m4 = T + r + p - y``; if one exceeds 65535 all four are reduced by the
   excess, then each is clipped at 0.
@@ -28,6 +26,8 @@ from typing import ClassVar
 __all__ = [
     "RATE_LIMIT",
     "Commander",
+    "ImuFilter",
+    "Lpf2p",
     "Pid",
     "PidController",
     "Setpoint",
@@ -46,44 +46,86 @@ IS_FLYING_HYSTERESIS_MS = 2000
 FLIGHT_THRESHOLD_PWM = 1000
 
 
+class Lpf2p:
+    """``lpf2p.c``: a 2nd-order Butterworth low-pass in direct form II at ``rate_hz``."""
+
+    __slots__ = ("_a1", "_a2", "_b0", "_b1", "_b2", "_d1", "_d2")
+
+    def __init__(self, *, cutoff_hz: float, rate_hz: float) -> None:
+        ohm = math.tan(math.pi * cutoff_hz / rate_hz)
+        c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+        self._b0 = ohm * ohm / c
+        self._b1 = 2.0 * self._b0
+        self._b2 = self._b0
+        self._a1 = 2.0 * (ohm * ohm - 1.0) / c
+        self._a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
+        self.reset()
+
+    def reset(self, sample: float = 0.0) -> None:
+        """``lpf2pReset``: the state of a filter that has seen ``sample`` forever."""
+        self._d1 = self._d2 = sample / (self._b0 + self._b1 + self._b2)
+
+    def apply(self, x: float) -> float:
+        """One sample in, one filtered sample out."""
+        d0 = x - self._d1 * self._a1 - self._d2 * self._a2
+        y = d0 * self._b0 + self._d1 * self._b1 + self._d2 * self._b2
+        self._d2, self._d1 = self._d1, d0
+        return y
+
+
+class ImuFilter:
+    """The sensor task's low-pass filters (``sensors_bmi088_bmp388.c``): gyro at
+    ``GYRO_LPF_CUTOFF_FREQ`` = 80 Hz, accelerometer at ``ACCEL_LPF_CUTOFF_FREQ`` = 30 Hz. The
+    firmware runs them at the IMU's 1 kHz; here at ``rate_hz`` (the emulated firmware's 500 Hz).
+    What the rate loop, the estimator and the ``gyro``/``acc`` logs see."""
+
+    GYRO_CUTOFF_HZ: ClassVar[float] = 80.0
+    ACC_CUTOFF_HZ: ClassVar[float] = 30.0
+
+    def __init__(self, *, rate_hz: float) -> None:
+        self._gyro = [Lpf2p(cutoff_hz=self.GYRO_CUTOFF_HZ, rate_hz=rate_hz) for _ in range(3)]
+        self._acc = [Lpf2p(cutoff_hz=self.ACC_CUTOFF_HZ, rate_hz=rate_hz) for _ in range(3)]
+        self._acc[2].reset(1.0)  # at rest: 1 g up, no start transient
+        self.gx = self.gy = self.gz = self.ax = self.ay = 0.0
+        self.az = 1.0
+
+    def update(self, *, gx: float, gy: float, gz: float, ax: float, ay: float, az: float
+               ) -> None:
+        """One raw sample (deg/s, g) in; the filtered one in the attributes."""
+        g, a = self._gyro, self._acc
+        self.gx, self.gy, self.gz = g[0].apply(gx), g[1].apply(gy), g[2].apply(gz)
+        self.ax, self.ay, self.az = a[0].apply(ax), a[1].apply(ay), a[2].apply(az)
+
+
 class Pid:
     """One ``pid.c`` loop (units of the caller: deg and deg/s in, deg/s or PWM counts out)."""
 
-    __slots__ = ("_a1", "_a2", "_b0", "_b1", "_b2", "_d1", "_d2", "dt", "filtered", "i_limit",
-                 "integ", "kd", "ki", "kp", "out_limit", "prev_error")
+    __slots__ = ("dt", "i_limit", "integ", "kd", "ki", "kp", "lpf", "out_limit", "prev_error")
 
     def __init__(self, *, kp: float, ki: float, kd: float, i_limit: float, out_limit: float,
                  dt: float, cutoff_hz: float) -> None:
         self.kp, self.ki, self.kd = kp, ki, kd
         self.i_limit, self.out_limit, self.dt = i_limit, out_limit, dt
-        self.filtered = cutoff_hz > 0.0   # pid.c's enableDFilter; 0 Hz: unfiltered
-        self._a1 = self._a2 = self._b0 = self._b1 = self._b2 = 0.0
-        if self.filtered:  # lpf2p.c: 2nd-order Butterworth, direct form II.
-            ohm = math.tan(math.pi * cutoff_hz * dt)
-            c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
-            self._b0 = ohm * ohm / c
-            self._b1 = 2.0 * self._b0
-            self._b2 = self._b0
-            self._a1 = 2.0 * (ohm * ohm - 1.0) / c
-            self._a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
+        # pid.c's enableDFilter; 0 Hz: unfiltered
+        self.lpf = Lpf2p(cutoff_hz=cutoff_hz, rate_hz=1.0 / dt) if cutoff_hz > 0.0 else None
         self.reset()
+
+    @property
+    def filtered(self) -> bool:
+        return self.lpf is not None
 
     def reset(self) -> None:
         """``pidReset``: clear integral, previous error and the derivative filter."""
         self.integ = 0.0
         self.prev_error = 0.0
-        self._d1 = self._d2 = 0.0
+        if self.lpf is not None:
+            self.lpf.reset()
 
     def update(self, error: float) -> float:
         """One update with ``error = desired - measured``; returns the (limited) output."""
         dt = self.dt
         deriv = (error - self.prev_error) / dt
-        if self.filtered:
-            d0 = deriv - self._d1 * self._a1 - self._d2 * self._a2
-            fd = d0 * self._b0 + self._d1 * self._b1 + self._d2 * self._b2
-            self._d2, self._d1 = self._d1, d0
-        else:
-            fd = deriv
+        fd = deriv if self.lpf is None else self.lpf.apply(deriv)
         integ = self.integ + error * dt
         lim = self.i_limit
         if lim != 0.0:
@@ -123,7 +165,7 @@ class PidController:
             rate = name.endswith("_rate")
             self.pids[name] = Pid(kp=kp, ki=ki, kd=kd, i_limit=il,
                                   out_limit=RATE_LIMIT if rate else 0.0, dt=dt,
-                                  cutoff_hz=20.0 if rate else 0.0)
+                                  cutoff_hz=0.0)
         self._ordered = tuple(self.pids[n] for n in ("roll", "pitch", "yaw", "roll_rate",
                                                        "pitch_rate", "yaw_rate"))
         self.reset(yaw_deg=0.0)

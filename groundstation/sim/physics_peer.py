@@ -109,7 +109,7 @@ class PhysicsPeer:
         rng = random.Random(seed)
         self.body = RigidBody(c=self.const)
         self.battery = Battery(full_v=vbat_full, c=self.const)
-        self.sensors = Sensors(rng=rng, noise=noise)
+        self.sensors = Sensors(rng=rng, noise=noise, rate_hz=1.0 / DT_S)  # the IMU's 1 kHz
         self.pwm: tuple[int, int, int, int] = (0, 0, 0, 0)   # the firmware's motor commands
         self.duty_pwm: tuple[int, int, int, int] = (0, 0, 0, 0)  # after battery compensation
         self.steps = 0

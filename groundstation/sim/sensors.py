@@ -7,13 +7,16 @@ Model, per axis ``k`` and sample (500 Hz, the controller's rate):
 
 with ``omega`` the body rates, ``f`` the specific force in the body frame, ``b``/``a`` small biases
 drawn once at power-on (what remains after the firmware's gyro calibration), ``d`` the mean motor
-duty (0..1), ``n`` standard normal noise. The vibration terms are calibrated so that a simulated
-hover shows the standard deviations measured on the real hover of ``shared/data/crazypad``
-(see docs/simulator.md and :data:`HOVER_GYRO_STD_DPS`, :data:`HOVER_ACC_STD_G`).
+duty (0..1), ``n`` standard normal noise: the raw samples, before the firmware's sensor
+filters (:class:`groundstation.sim.firmware.ImuFilter`, gyro 80 Hz, acc 30 Hz). The rest and
+vibration terms are calibrated so that a simulated hover, *after* those filters, shows the
+standard deviations measured on the real hover of ``shared/data/crazypad`` (see
+docs/simulator.md and :data:`HOVER_GYRO_STD_DPS`, :data:`HOVER_ACC_STD_G`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 from dataclasses import dataclass
@@ -25,11 +28,14 @@ from groundstation.sim.physics import GRAVITY_M_S2, RigidBody
 __all__ = [
     "HOVER_ACC_STD_G",
     "HOVER_GYRO_STD_DPS",
+    "NOISE_RATE_HZ",
     "NoiseModel",
     "Sensors",
     "hover_noise_std",
 ]
 
+NOISE_RATE_HZ = 500.0
+"""Sample rate the levels of :class:`NoiseModel` are given at (the emulated firmware's)."""
 HOVER_GYRO_STD_DPS = (1.97, 1.27, 0.33)
 """Calibration target: hover noise std of gyro x, y, z (deg/s) on the real CF2.1 (CrazyPAD E8).
 
@@ -56,29 +62,37 @@ def hover_noise_std(x: np.ndarray, *, window: int = 10) -> float:
 class NoiseModel:
     """Per-axis (x, y, z) noise std: ``*_rest`` with motors off, ``*_vib`` added at full duty.
 
-    The total std at mean duty ``d`` is ``rest + vib * d^2``. Rest levels are the real vehicle's
-    before take-off; vibration levels are fitted so a simulated hover matches the targets.
+    The total std at mean duty ``d`` is ``rest + vib * d^2``, of the raw 500 Hz samples. Rest
+    levels are fitted so the filtered samples show the real vehicle's before take-off; vibration
+    levels so a simulated, filtered hover matches the targets.
     """
 
-    gyro_rest_dps: tuple[float, float, float] = (0.10, 0.18, 0.11)
-    gyro_vib_dps: tuple[float, float, float] = (4.65, 2.95, 0.67)
-    acc_rest_g: tuple[float, float, float] = (0.0013, 0.0013, 0.0013)
-    acc_vib_g: tuple[float, float, float] = (0.0186, 0.0247, 0.0200)
+    gyro_rest_dps: tuple[float, float, float] = (0.167, 0.278, 0.184)
+    gyro_vib_dps: tuple[float, float, float] = (7.75, 4.55, 1.12)
+    acc_rest_g: tuple[float, float, float] = (0.0036, 0.0038, 0.0039)
+    acc_vib_g: tuple[float, float, float] = (0.0512, 0.0722, 0.0598)
     gyro_bias_dps: float = 0.1
     acc_bias_g: float = 0.003
 
 
 class Sensors:
-    """Holds the latest gyro (deg/s) and accelerometer (g) sample."""
+    """Holds the latest raw gyro (deg/s) and accelerometer (g) sample, taken at ``rate_hz``
+    (the noise levels of ``noise`` are those of :data:`NOISE_RATE_HZ` samples)."""
 
     _BLOCK = 6 * 4096   # normals drawn per numpy call (one list index per sample afterwards)
 
-    def __init__(self, *, rng: random.Random, noise: NoiseModel | None = None) -> None:
-        self.noise = noise or NoiseModel()
+    def __init__(self, *, rng: random.Random, noise: NoiseModel | None = None,
+                 rate_hz: float = NOISE_RATE_HZ) -> None:
+        nm = noise or NoiseModel()
+        # The levels are per sample at NOISE_RATE_HZ; sampled faster, the same noise density
+        # (what the firmware's 80 Hz and 30 Hz filters pass on) has a larger per-sample std.
+        k = math.sqrt(rate_hz / NOISE_RATE_HZ)
+        self.noise = dataclasses.replace(
+            nm, **{f: tuple(k * x for x in getattr(nm, f))
+                   for f in ("gyro_rest_dps", "gyro_vib_dps", "acc_rest_g", "acc_vib_g")})
         self._np_rng = np.random.default_rng(rng.getrandbits(64))
         self._normals: list[float] = []
         self._k = 0
-        nm = self.noise
         self.bias_g = tuple(rng.gauss(0.0, nm.gyro_bias_dps) for _ in range(3))
         self.bias_a = tuple(rng.gauss(0.0, nm.acc_bias_g) for _ in range(3))
         self.gx = self.gy = self.gz = 0.0

@@ -19,6 +19,7 @@ from typing import ClassVar
 from groundstation.errors import GroundStationError
 from groundstation.sim.firmware import (
     Commander,
+    ImuFilter,
     PidController,
     Supervisor,
     battery_compensated_pwm,
@@ -142,6 +143,7 @@ class SimVehicle:
         self.body = RigidBody(c=self.const)
         self.battery = Battery(full_v=vbat_full, c=self.const)
         self.sensors = Sensors(rng=self._rng, noise=noise)
+        self.imu = ImuFilter(rate_hz=1.0 / _PID_DT_S)  # what the firmware's sensor task passes on
         self.controller = PidController(dt=_PID_DT_S)
         self.commander = Commander()
         self.supervisor = Supervisor(auto_arm=auto_arm)
@@ -204,6 +206,9 @@ class SimVehicle:
         pwm = self._pwm
         out = self._duty_pwm
         sensors.sample(body=body, duty=(out[0] + out[1] + out[2] + out[3]) / 262140.0)
+        imu = self.imu
+        imu.update(gx=sensors.gx, gy=sensors.gy, gz=sensors.gz, ax=sensors.ax, ay=sensors.ay,
+                   az=sensors.az)
         if self._params["stabilizer.estimator"] != _KALMAN:
             roll, pitch, yaw = body.euler_deg()
             self._att = (roll, -pitch, yaw)                  # legacy CF2 pitch convention
@@ -230,7 +235,7 @@ class SimVehicle:
             self._control = (0.0, 0.0, 0.0, 0.0)
         else:
             r, p, y = ctrl.update(sp=sp, roll=roll, pitch_legacy=pitch, yaw=yaw,
-                                  gx=sensors.gx, gy=sensors.gy, gz=sensors.gz)
+                                  gx=imu.gx, gy=imu.gy, gz=imu.gz)
             self._control = (thrust, r, p, y)
         if may_run and not self._emergency_stop and thrust != 0.0:
             t, r, p, y = self._control
@@ -278,7 +283,7 @@ class SimVehicle:
 
     # ----------------------------------------------------------------- log, params, console
     def _make_log_getters(self) -> dict[str, Callable[[], float]]:
-        s, b = self.sensors, self.body
+        s, b = self.imu, self.body
         g: dict[str, Callable[[], float]] = {
             "acc.x": lambda: s.ax, "acc.y": lambda: s.ay, "acc.z": lambda: s.az,
             "gyro.x": lambda: s.gx, "gyro.y": lambda: s.gy, "gyro.z": lambda: s.gz,

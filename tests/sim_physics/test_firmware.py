@@ -8,7 +8,9 @@ import pytest
 from groundstation.importers import read_usd
 from groundstation.sim.firmware import (
     RATE_LIMIT,
+    ImuFilter,
     Pid,
+    PidController,
     battery_compensated_pwm,
     mix_legacy_x,
 )
@@ -48,6 +50,40 @@ def test_pid_integral_limit_and_output_saturation():
     assert out == RATE_LIMIT
     pid.reset()
     assert pid.update(1.0) == pytest.approx(250.0 + 500.0 * 0.002, rel=0.01)
+
+
+def _gain(filt_apply, *, f_hz: float, rate_hz: float = 500.0) -> float:
+    """Steady-state gain of a filter at ``f_hz`` (a sine through it, the last second)."""
+    t = np.arange(int(3 * rate_hz)) / rate_hz
+    out = np.array([filt_apply(x) for x in np.sin(2 * np.pi * f_hz * t)])
+    return float(np.ptp(out[-int(rate_hz):]) / 2)
+
+
+def test_sensor_filters_and_rate_loop_are_the_firmwares():
+    """The firmware low-passes the gyro at 80 Hz and the accelerometer at 30 Hz (``lpf2p``,
+    Butterworth: -3 dB at the cut-off) and leaves the rate loop's D term unfiltered
+    (``ATTITUDE_RATE_LPF_ENABLE`` false): what the rate loop differentiates is the filtered gyro."""
+    imu = ImuFilter(rate_hz=500.0)
+    assert imu.az == 1.0
+    for _ in range(50):  # at rest from power-on: no start transient on the 1 g
+        imu.update(gx=0.0, gy=0.0, gz=0.0, ax=0.0, ay=0.0, az=1.0)
+        assert imu.az == pytest.approx(1.0, abs=1e-12)
+    gyro, acc = ImuFilter(rate_hz=500.0), ImuFilter(rate_hz=500.0)
+
+    def g(x: float) -> float:
+        gyro.update(gx=x, gy=0.0, gz=0.0, ax=0.0, ay=0.0, az=1.0)
+        return gyro.gx
+
+    def a(x: float) -> float:
+        acc.update(gx=0.0, gy=0.0, gz=0.0, ax=x, ay=0.0, az=1.0)
+        return acc.ax
+
+    assert _gain(g, f_hz=2.0) == pytest.approx(1.0, abs=0.01)
+    assert _gain(g, f_hz=80.0) == pytest.approx(2 ** -0.5, abs=0.02)
+    assert _gain(a, f_hz=30.0) == pytest.approx(2 ** -0.5, abs=0.02)
+    assert _gain(a, f_hz=80.0) < 0.2
+    pids = PidController().pids
+    assert not any(pids[f"{axis}_rate"].filtered for axis in ("roll", "pitch", "yaw"))
 
 
 def test_thrust_lock_until_a_zero_thrust_setpoint():
