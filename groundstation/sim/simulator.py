@@ -158,7 +158,8 @@ class Simulator:
         self._published_ms = vehicle.firmware_ms
         self._published_s = vehicle.time_s
         self._token = 0  # the link currently attached (0: none)
-        self._closed_token = 0  # the link just detached, until its link-down marker is handled
+        self._last_token = 0  # tokens only grow: a late packet of an old link is never taken
+        self._closed: set[int] = set()  # links detached whose link-down marker waits in _rx
         self._ever_attached = False
         self._cut = False
         self._on_lost: Callable[[str], None] | None = None
@@ -261,7 +262,8 @@ class Simulator:
                on_lost: Callable[[str], None] | None = None) -> int:
         """Attach a new link (replacing any other); returns its token."""
         with self.cond:
-            self._token += 1
+            self._last_token += 1
+            self._token = self._last_token
             self._ever_attached, self._cut, self._on_lost = True, False, on_lost
             self.faults = faults or Faults()
             self._out.clear()
@@ -271,10 +273,12 @@ class Simulator:
         """The link ``token`` is gone; nothing more goes out to it."""
         with self.cond:
             if token == self._token:
-                self._token, self._on_lost, self._closed_token = 0, None, token
+                self._closed.add(token)  # before the token goes: its packets still land
+                self._token, self._on_lost = 0, None
                 self._out.clear()
                 self._pace_ms = None  # no scheduler on a detached link: time runs freely
-                self._rx.append((-1, 0, b""))  # tells the simulation thread: link down
+                self._rx.append((-1, token, b""))  # tells the simulation thread: link down
+                self._wake.set()
                 self.cond.notify_all()
 
     def submit(self, *, header: int, data: bytes, token: int = 0) -> None:
@@ -338,9 +342,9 @@ class Simulator:
         self._check_cut()  # a cut due now drops this batch too, also while time is held
         while rx:
             token, header, data = rx.popleft()
-            if token == -1:
+            if token == -1:  # link ``header`` detached
                 self._apply_delayed(flush=True)  # what was sent before the link closed lands
-                self._closed_token = 0
+                self._closed.discard(header)
                 peer.link_down()
                 continue
             if self._cut or not self._from_link(token):
@@ -361,13 +365,13 @@ class Simulator:
         delayed, now = self._delayed, self.vehicle.firmware_ms
         while delayed and (flush or delayed[0][0] <= now):
             _, token, header, data = delayed.popleft()
-            if not self._cut and self._from_link(token):
+            if self._from_link(token):  # handled before any cut: it is on board already
                 self._emit(self.peer.handle(header=header, data=data))
 
     def _from_link(self, token: int) -> bool:
         """A packet of the attached link, or of the one just detached (sent before it closed: the
         stop setpoint before a close must land), not of a link another has replaced."""
-        return not token or token in (self._token, self._closed_token)
+        return not token or token == self._token or token in self._closed
 
     def _check_cut(self) -> None:
         cut_at = self.faults.cut_at
@@ -476,6 +480,10 @@ class Simulator:
             elif held:  # until the scheduler's next sleep_until (or a packet)
                 self._wake.wait(_WAKE_S)
                 self._wake.clear()
+        # Powered off (or at rest with no link): what was sent before lands first, the stop
+        # setpoint of a link closed right before included.
+        self._process_rx()
+        self._apply_delayed(flush=True)
         with self.cond:
             self.cond.notify_all()
 

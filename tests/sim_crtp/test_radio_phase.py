@@ -9,7 +9,9 @@ import math
 import struct
 import time
 
-from groundstation.sim.simulator import Simulator
+import pytest
+
+from groundstation.sim.simulator import Faults, Simulator
 
 RPYT = 0x30  # port 3 (commander), channel 0: roll, pitch, yaw rate, thrust
 STOP = 0x70  # port 7 (generic commander), channel 0, type 0: the stop setpoint
@@ -60,5 +62,45 @@ def test_a_stop_sent_just_before_the_link_closes_lands():
         sim.detach(token=token)
         _wait(lambda: sim.vehicle.stop_count == 1, "the stop setpoint never reached the vehicle")
         assert sim.vehicle.commander.sp.thrust == 0  # the stop came after the setpoint
+    finally:
+        sim.close()
+
+
+@pytest.mark.parametrize("speed", [math.inf, 20.0])
+def test_a_stop_sent_just_before_the_vehicle_is_switched_off_lands(speed):
+    """``sim://``'s driver, closing on purpose, detaches and powers the vehicle off at once."""
+    sim = Simulator(speed=speed, seed=3)
+    token = sim.attach()
+    sim.submit(header=STOP, data=b"\x00", token=token)
+    sim.detach(token=token)
+    sim.close()
+    assert sim.vehicle.stop_count == 1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_stop_handled_before_a_cut_lands_after_its_radio_delay(seed):
+    sim = Simulator(speed=math.inf, seed=seed)
+    try:
+        token, clock = sim.attach(faults=Faults(cut_at=0.100)), sim.clock
+        clock.sleep_until(0.090)  # held at 95 ms (the lead): handled 5 ms before the cut
+        sim.submit(header=STOP, data=b"\x00", token=token)
+        clock.sleep_until(0.2)
+        assert sim.vehicle.stop_count == 1
+    finally:
+        sim.close()
+
+
+def test_a_late_packet_of_a_detached_link_is_not_taken_for_the_next_one():
+    sim = Simulator(speed=math.inf, seed=1)
+    try:
+        first = sim.attach()
+        sim.detach(token=first)
+        second = sim.attach()
+        assert second != first
+        clock = sim.clock
+        clock.sleep_until(clock.now() + 0.05)  # the first link's marker is handled
+        sim.submit(header=STOP, data=b"\x00", token=first)  # late, from the old link
+        clock.sleep_until(clock.now() + 0.05)
+        assert sim.vehicle.stop_count == 0
     finally:
         sim.close()
