@@ -85,7 +85,7 @@ class SimClock:
 
 
 def _clock_for(uri: str) -> Clock | None:
-    from groundstation.sim.simulator import simulator_for_uri
+    from groundstation.sim.registry import simulator_for_uri
 
     return simulator_for_uri(uri).clock
 

@@ -35,7 +35,8 @@ from types import SimpleNamespace
 from typing import Any, Literal
 
 from groundstation.sim.radio_noise import Air, RadioNoise, RadioStats
-from groundstation.sim.simulator import Faults, Simulator
+from groundstation.sim.simulator import Simulator
+from groundstation.sim.uri import Faults
 
 __all__ = ["FIRMWARE_BCD", "PID", "VID", "DataRate", "EmulatedCrazyradio", "RadioVehicle"]
 

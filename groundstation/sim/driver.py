@@ -2,7 +2,7 @@
 
 :func:`install` puts :class:`SimDriver` at the front of ``cflib.crtp.CLASSES`` (no patching of
 cflib); cflib then opens ``sim://N?speed=...`` like any other URI (options in
-:mod:`groundstation.sim.simulator`). Closing the link on purpose powers the simulation off.
+:mod:`groundstation.sim.uri`). Closing the link on purpose powers the simulation off.
 """
 
 from __future__ import annotations
@@ -15,7 +15,9 @@ from cflib.crtp.crtpdriver import CRTPDriver
 from cflib.crtp.crtpstack import CRTPPacket
 from cflib.crtp.exceptions import WrongUriType
 
-from groundstation.sim.simulator import Simulator, parse_uri, running_addresses, simulator_for_uri
+from groundstation.sim.registry import running_addresses, simulator_for_uri
+from groundstation.sim.simulator import Simulator
+from groundstation.sim.uri import parse_uri
 
 __all__ = ["SimDriver", "install"]
 

@@ -1,26 +1,17 @@
-"""The simulation behind a ``sim://`` URI: a simulated Crazyflie on its own thread.
-
-URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every option optional):
-
-====================  ==========================================================================
-``N``                 which simulated vehicle (default 0); one simulation per ``N`` at a time
-``speed``             simulation seconds per wall-clock second (default 1, at most 100; ``inf``:
-                      flat out)
-``seed``              the vehicle's random seed (default 0)
-``drop``              fraction of log data packets lost on the way down (default 0)
-``latency_ms``        delay, in simulation ms, added to every packet the link returns
-``cut_at``            simulation time, s, at which the link goes silent for good
-====================  ==========================================================================
+"""The simulation behind a ``sim://`` URI (options: :mod:`groundstation.sim.uri`; one per URI:
+:mod:`groundstation.sim.registry`): a simulated Crazyflie on its own thread.
 
 A :class:`Simulator` steps the vehicle from one thread at ``speed`` x real time, splitting its steps
 at the firmware ms where log packets are due, so every log packet carries the exact firmware time;
 a scheduler sleeping on its clock paces it (:meth:`Simulator.pace`); flat out (``speed=inf``) it
 also runs in lock-step with its link (:attr:`Simulator.quiescent`), so same-seed flights are
-identical. Faults act on what the link
+identical, and its commander packets take effect a seeded per-flight delay of 0-19 ms after they
+are handled, as a radio's land at no fixed phase of the 50 Hz logs. Faults act on what the link
 returns (log packets dropped, everything delayed); a cut link stops both directions and fires the
 link's error callback, the vehicle left to its supervisor watchdog. A lost link (``cut_at``)
 leaves the simulation running until the vehicle has been at rest for a second, as a real one
-would; :func:`instance` reaches it for inspection. The cflib side: :mod:`groundstation.sim.driver`.
+would; :func:`groundstation.sim.registry.instance` reaches it for inspection. The cflib side:
+:mod:`groundstation.sim.driver`.
 """
 
 from __future__ import annotations
@@ -32,21 +23,16 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
-from urllib.parse import parse_qsl, urlsplit
 
-from groundstation.errors import LinkError
 from groundstation.sim.clock import SimClock
 from groundstation.sim.crtp import CrtpPeer, Packet
+from groundstation.sim.uri import Faults
 
-__all__ = ["Faults", "SimOptions", "Simulator", "close_all", "instance", "parse_uri",
-           "running_addresses", "simulator_for_uri"]
+__all__ = ["Simulator"]
 
 logger = logging.getLogger(__name__)
 
-MAX_SPEED = 100.0
-"""The largest finite ``speed`` (the simulator manages ~45x flat out; ``inf`` asks for that)."""
 _WAKE_S = 0.010  # longest the simulation thread sleeps (wall s) between steps
 _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
@@ -63,65 +49,6 @@ _PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the sch
 # (a stalled or crashed client) ever waits it out
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
 _NEVER_ATTACHED_S = 10.0  # ... or this long if no link ever attached (created by its clock)
-
-
-@dataclass
-class Faults:
-    """Link faults: ``drop`` fraction of log packets, ``latency_ms`` added to every packet the
-    link returns (simulation ms), the link cut for good at ``cut_at`` simulation seconds."""
-
-    drop: float = 0.0
-    latency_ms: float = 0.0
-    cut_at: float | None = None
-
-
-@dataclass
-class SimOptions:
-    """A parsed ``sim://`` URI."""
-
-    address: str = "0"
-    speed: float = 1.0
-    seed: int = 0
-    faults: Faults | None = None
-
-
-def _number(name: str, text: str, *, kind: type, low: float, high: float = math.inf) -> Any:
-    try:
-        value = kind(text)
-    except ValueError:
-        value = None
-    if value is None or not (low <= value <= high) or (kind is float and math.isnan(value)):
-        raise LinkError(f"sim:// option {name}={text!r} must be a number in [{low}, {high}]; "
-                        "e.g. sim://0?speed=20&seed=3")
-    return value
-
-
-def parse_uri(uri: str) -> SimOptions:
-    """The options of a ``sim://`` URI (:class:`LinkError` naming a bad option)."""
-    parts = urlsplit(uri)
-    if parts.scheme != "sim":
-        raise LinkError(f"{uri!r} is not a sim:// URI; use e.g. sim://0?speed=20")
-    opts, faults = SimOptions(address=(parts.netloc + parts.path).strip("/") or "0"), Faults()
-    for key, text in parse_qsl(parts.query, keep_blank_values=True):
-        if key == "speed":
-            opts.speed = _number(key, text, kind=float, low=1e-3)
-            if MAX_SPEED < opts.speed < math.inf:
-                raise LinkError(f"sim:// option speed={text!r} is beyond {MAX_SPEED:g}; the "
-                                "simulator manages about 45x flat out: use speed=20, or "
-                                "speed=inf for as fast as it can")
-        elif key == "seed":
-            opts.seed = _number(key, text, kind=int, low=0, high=2**63)
-        elif key == "drop":
-            faults.drop = _number(key, text, kind=float, low=0.0, high=1.0)
-        elif key == "latency_ms":
-            faults.latency_ms = _number(key, text, kind=float, low=0.0, high=60_000.0)
-        elif key == "cut_at":
-            faults.cut_at = _number(key, text, kind=float, low=0.0)
-        else:
-            raise LinkError(f"unknown sim:// option {key!r}; "
-                            "use speed, seed, drop, latency_ms or cut_at")
-    opts.faults = faults
-    return opts
 
 
 class Simulator:
@@ -486,44 +413,3 @@ class Simulator:
         self._apply_delayed(flush=True)
         with self.cond:
             self.cond.notify_all()
-
-
-# ---------------------------------------------------------------------- registry
-_registry: dict[str, Simulator] = {}
-_registry_lock = threading.Lock()
-
-
-def simulator_for_uri(uri: str) -> Simulator:
-    """The running simulation behind ``uri``, powered on (from the URI's options) if there is
-    none."""
-    opts = parse_uri(uri)
-    with _registry_lock:
-        sim = _registry.get(opts.address)
-        if sim is None or not sim.running:
-            sim = Simulator(address=opts.address, speed=opts.speed, seed=opts.seed)
-            _registry[opts.address] = sim
-        return sim
-
-
-def instance(uri: str) -> Simulator:
-    """The simulation behind ``uri`` (running, or the last one, powered off, for inspection)."""
-    address = parse_uri(uri).address
-    with _registry_lock:
-        sim = _registry.get(address)
-    if sim is None:
-        raise LinkError(f"no simulation for {uri!r}; connect to it (or get its clock) first")
-    return sim
-
-
-def running_addresses() -> list[str]:
-    """Addresses ``N`` of the simulations running now (what a ``sim://`` scan finds)."""
-    with _registry_lock:
-        return [a for a, s in _registry.items() if s.running]
-
-
-def close_all() -> None:
-    """Power off every simulation (tests call this in teardown)."""
-    with _registry_lock:
-        sims = list(_registry.values())
-    for sim in sims:
-        sim.close()

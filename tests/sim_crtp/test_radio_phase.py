@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from groundstation.sim.simulator import Faults, Simulator
+from groundstation.sim.simulator import Simulator
+from groundstation.sim.uri import Faults
 
 RPYT = 0x30  # port 3 (commander), channel 0: roll, pitch, yaw rate, thrust
 STOP = 0x70  # port 7 (generic commander), channel 0, type 0: the stop setpoint
