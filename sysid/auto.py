@@ -18,6 +18,12 @@ horizons allow.
 focus choices and the one whose chosen model scores best on the held-out data wins; the
 method's default (IEM: prediction) unless the other is better by more than 0.5 points.
 
+**Direct term** (``choose_feedthrough``, for open-loop data): a method without one (IEM's
+default) runs the grid once more with ``feedthrough=True`` (the chosen focus) and keeps that
+choice only when it scores better on the held-out data by more than 0.5 points. Off by default:
+on closed-loop data (every flight) a direct term fitted on the logged inputs is biased by the
+feedback, and held-out data from the same loop would reward the bias.
+
 **Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
 scored by simulation over windows of ``min(2 s, shortest validation record)`` (at least 10
 output values per state of the initial state fitted on each) on the held-out data, ranked by
@@ -49,8 +55,8 @@ from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import SIMULATION_WINDOW_S, simulation_window
 
 __all__ = ["HOLDOUT_FRACTION", "NoStableModel", "Plan", "Selection", "default_grid", "finish",
-           "focus_order", "holdout", "max_blocks", "n_runs", "pick_focus", "plan", "select",
-           "select_plan"]
+           "focus_order", "holdout", "max_blocks", "n_runs", "pick_feedthrough", "pick_focus",
+           "plan", "select", "select_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +87,7 @@ class Selection:
     focus_note: str = ""
     memory: int | None = None
     focus_scores: dict[str, float] | None = None
+    feedthrough_note: str = ""
 
     def top(self, count: int = 8) -> list[SweepRow]:
         """The best ``count`` models by score, and the chosen one after them when it is not
@@ -323,40 +330,52 @@ class NoStableModel(DataError):
         self.results = tuple(results)
 
 
-def n_runs(options: Options, *, choose_focus: bool) -> int:
-    """How many times :func:`select_plan` runs the grid: once per focus it tries."""
-    return len(focus_order(options.focus)) if choose_focus else 1
+def n_runs(options: Options, *, choose_focus: bool, choose_feedthrough: bool = False) -> int:
+    """How many times :func:`select_plan` runs the grid: once per focus it tries, and once
+    more when it tries a direct term."""
+    return ((len(focus_order(options.focus)) if choose_focus else 1)
+            + int(_tries_feedthrough(options, choose_feedthrough)))
+
+
+def _tries_feedthrough(options: Options, choose: bool) -> bool:
+    return choose and getattr(options, "feedthrough", True) is False
 
 
 def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
            pasts: Sequence[int] | None = None, futures: Sequence[int] | None = None,
            orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
            workers: int = 1, progress: Callable[[int, int], None] | None = None,
-           keep_models: bool = False, choose_focus: bool = False, horizon: int | None = None,
+           keep_models: bool = False, choose_focus: bool = False,
+           choose_feedthrough: bool = False, horizon: int | None = None,
            window: float | None = None, client: Any | None = None) -> Selection:
     """Choose past, future and order (module docstring) and identify the chosen model on all
     the data: :func:`plan`, then :func:`select_plan` (the other keywords are its own)."""
     p = plan(groups, pasts=pasts, futures=futures, orders=orders, validation=validation)
     return select_plan(p, method=method, options=options, workers=workers, progress=progress,
-                       keep_models=keep_models, choose_focus=choose_focus, horizon=horizon,
-                       window=window, client=client)
+                       keep_models=keep_models, choose_focus=choose_focus,
+                       choose_feedthrough=choose_feedthrough, horizon=horizon, window=window,
+                       client=client)
 
 
 def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                 progress: Callable[[int, int], None] | None = None, keep_models: bool = False,
-                choose_focus: bool = False, horizon: int | None = None,
-                window: float | None = None, client: Any | None = None) -> Selection:
+                choose_focus: bool = False, choose_feedthrough: bool = False,
+                horizon: int | None = None, window: float | None = None,
+                client: Any | None = None) -> Selection:
     """The selection on the data and grid of ``p``: :func:`sysid.sweep.sweep`, then
     :func:`finish`. With ``choose_focus`` the grid runs for both focus choices and
-    :func:`pick_focus` decides. ``progress(done, total)`` counts models over every focus run
-    (``total`` is ``p.n_models * n_runs(...)``). ``horizon`` (k-step prediction) or ``window``
+    :func:`pick_focus` decides; with ``choose_feedthrough`` (open-loop data only: module
+    docstring) once more with a direct term, kept when it scores better.
+    ``progress(done, total)`` counts models over every run (``total`` is
+    ``p.n_models * n_runs(...)``). ``horizon`` (k-step prediction) or ``window``
     (simulation windows, s) replace the score's default (simulation over ``p.window_s``);
     ``client`` (Dask) runs the sweeps on a cluster. Raises :class:`NoStableModel` when no
     model of the grid is stable."""
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
     per_run = p.n_models
-    total = per_run * len(variants)
+    total = per_run * n_runs(options, choose_focus=choose_focus,
+                             choose_feedthrough=choose_feedthrough)
     score_window = None if horizon is not None else p.window_s if window is None else window
     selections, results = [], []
     for i, opts in enumerate(variants):
@@ -375,4 +394,33 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                             + (", with either focus" if choose_focus else "")
                             + "; give horizons and an order (--past/--future/--order), other "
                               "channels or a longer window", plan=p, results=results)
-    return pick_focus(selections) if choose_focus else selections[0]
+    chosen = pick_focus(selections) if choose_focus else selections[0]
+    if not _tries_feedthrough(options, choose_feedthrough):
+        return chosen
+    opts = dataclasses.replace(options, focus=chosen.model.provenance.get("focus", options.focus),
+                               feedthrough=True)
+    report = None if progress is None else (
+        lambda done, _n: progress(len(variants) * per_run + done, total))
+    result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
+                   horizon=horizon, window=score_window, workers=workers, progress=report,
+                   keep_models=keep_models, client=client)
+    try:
+        with_d = finish(p, result, method=method, options=opts)
+    except DataError as exc:
+        log.info("selection: with a direct term: %s", exc)
+        return chosen
+    return pick_feedthrough(chosen, with_d)
+
+
+def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float = 0.5) -> Selection:
+    """``with_d`` (a direct term) when its chosen model scores better on the held-out data than
+    ``without``'s by more than ``tol`` points, else ``without``; the reason in
+    :attr:`Selection.feedthrough_note`."""
+    better = with_d.best.score > without.best.score + tol
+    note = (f"direct term {'kept' if better else 'left out'}: best held-out score "
+            f"{with_d.best.score:.1f} with, {without.best.score:.1f} without (kept only when "
+            f"better by more than {tol:g} points)")
+    log.info("selection: %s", note)
+    chosen = dataclasses.replace(with_d, focus_note=without.focus_note,
+                                 focus_scores=without.focus_scores) if better else without
+    return dataclasses.replace(chosen, feedthrough_note=note)

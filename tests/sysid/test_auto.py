@@ -124,6 +124,36 @@ def test_focus_is_chosen_on_held_out_data_when_not_given() -> None:
     assert fixed.focus_note == "" and fixed.model.provenance["focus"] == "prediction"
 
 
+def test_a_direct_term_is_chosen_on_open_loop_data_when_asked() -> None:
+    """Open loop, a plant with D != 0: IEM's no-knobs model without a direct term simulates the
+    noise-free validation output at 47 % (it cannot say y(k) moves with u(k)); with
+    ``choose_feedthrough`` the grid runs once more with one, it scores better on the held-out
+    data and is kept (99.5 %). The same plant without D keeps none, and a closed loop
+    (where a direct term would be biased by the feedback) is never tried unless asked."""
+    rng = np.random.default_rng(6)
+    plant = random_stable_system(n_states=4, n_inputs=2, n_outputs=2, rng=rng,
+                                 feedthrough=True)
+    run = open_loop(plant, n_samples=1500, rng=rng, noise_std=0.1)
+    ident = sysid.IOData(u=run.data.u[:1000], y=run.data.y[:1000], dt=plant.dt)
+    val = sysid.IOData(u=run.data.u[1000:], y=run.y_clean[1000:], dt=plant.dt)
+    meth = get_method("iem")
+
+    def truth(sel) -> float:
+        return float(np.mean(sysid.compare(sel.model, val, x0="estimate", warn=False).fit))
+
+    plain = select([[ident]], method=meth, options=meth.options(), choose_focus=True)
+    chosen = select([[ident]], method=meth, options=meth.options(), choose_focus=True,
+                    choose_feedthrough=True)
+    assert plain.feedthrough_note == "" and not plain.model.provenance["feedthrough"]
+    assert chosen.model.provenance["feedthrough"] and "kept" in chosen.feedthrough_note
+    assert chosen.focus_note  # the focus choice is reported as before
+    assert truth(chosen) > 97.0 and truth(chosen) > truth(plain) + 3.0
+    strict = open_loop(sysid.StateSpaceModel(A=plant.A, B=plant.B, C=plant.C, K=plant.K,
+                                             dt=plant.dt), n_samples=1000, rng=rng)
+    none = select([[strict.data]], method=meth, options=meth.options(), choose_feedthrough=True)
+    assert not none.model.provenance["feedthrough"] and "left out" in none.feedthrough_note
+
+
 def test_score_follows_horizon_or_window_and_no_stable_model_keeps_each_grid() -> None:
     """select() scores as asked (k-step prediction or given windows, as `sysid sweep
     --horizon/--window-s`), lists the chosen model among the best candidates, and when no
