@@ -377,39 +377,35 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     total = per_run * n_runs(options, choose_focus=choose_focus,
                              choose_feedthrough=choose_feedthrough)
     score_window = None if horizon is not None else p.window_s if window is None else window
-    selections, results = [], []
-    for i, opts in enumerate(variants):
+
+    def run(i: int, opts: Options) -> tuple[SweepResult, Selection | None]:
+        """The ``i``-th run of the grid (for the progress count): sweep, then finish."""
         report = None if progress is None else (
-            lambda done, _n, i=i: progress(i * per_run + done, total))
+            lambda done, _n: progress(i * per_run + done, total))
         result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
                        horizon=horizon, window=score_window, workers=workers, progress=report,
                        keep_models=keep_models, client=client)
-        results.append(result)
         try:
-            selections.append(finish(p, result, method=method, options=opts))
+            return result, finish(p, result, method=method, options=opts)
         except DataError as exc:
-            log.info("selection: focus %s: %s", opts.focus, exc)
+            log.info("selection: focus %s, direct term %s: %s", opts.focus,
+                     getattr(opts, "feedthrough", "-"), exc)
+            return result, None
+
+    runs = [run(i, opts) for i, opts in enumerate(variants)]
+    selections = [sel for _, sel in runs if sel is not None]
     if not selections:
-        raise NoStableModel(f"none of the {total} models of the grid is stable"
+        raise NoStableModel(f"none of the {per_run * len(variants)} models of the grid is stable"
                             + (", with either focus" if choose_focus else "")
                             + "; give horizons and an order (--past/--future/--order), other "
-                              "channels or a longer window", plan=p, results=results)
+                              "channels or a longer window", plan=p,
+                            results=[result for result, _ in runs])
     chosen = pick_focus(selections) if choose_focus else selections[0]
     if not _tries_feedthrough(options, choose_feedthrough):
         return chosen
-    opts = dataclasses.replace(options, focus=chosen.model.provenance.get("focus", options.focus),
-                               feedthrough=True)
-    report = None if progress is None else (
-        lambda done, _n: progress(len(variants) * per_run + done, total))
-    result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
-                   horizon=horizon, window=score_window, workers=workers, progress=report,
-                   keep_models=keep_models, client=client)
-    try:
-        with_d = finish(p, result, method=method, options=opts)
-    except DataError as exc:
-        log.info("selection: with a direct term: %s", exc)
-        return chosen
-    return pick_feedthrough(chosen, with_d)
+    _, with_d = run(len(variants), dataclasses.replace(
+        options, focus=chosen.model.provenance.get("focus", options.focus), feedthrough=True))
+    return chosen if with_d is None else pick_feedthrough(chosen, with_d)
 
 
 def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float = 0.5) -> Selection:

@@ -33,6 +33,7 @@ __all__ = [
     "CrtpPeer",
     "Packet",
     "crtp_header",
+    "crtp_port",
 ]
 
 logger = logging.getLogger(__name__)
@@ -71,6 +72,11 @@ _DEVICE_NAME = b"Crazyflie 2.1 (sim)"
 def crtp_header(port: int, channel: int) -> int:
     """The CRTP header byte of ``port`` and ``channel`` (the two link bits 0x0C set)."""
     return (port & 0x0F) << 4 | 0x0C | (channel & 0x03)
+
+
+def crtp_port(header: int) -> int:
+    """The port of a CRTP header byte."""
+    return (header >> 4) & 0x0F
 
 
 def _int_wire(value: float, size: int) -> int:
@@ -156,7 +162,7 @@ class CrtpPeer:
         """The replies to one incoming packet (never raises: bad requests get error codes or
         are ignored, as the firmware does)."""
         self.last_rx_ms = self.vehicle.firmware_ms
-        handler = self._handlers.get((header >> 4) & 0x0F)
+        handler = self._handlers.get(crtp_port(header))
         if handler is None:
             return []
         try:

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from typing import Any
 
 from groundstation.sim.clock import SimClock
-from groundstation.sim.crtp import CrtpPeer, Packet
+from groundstation.sim.crtp import P_COMMANDER, P_GENERIC, CrtpPeer, Packet, crtp_port
 from groundstation.sim.uri import Faults
 
 __all__ = ["Simulator"]
@@ -43,7 +43,7 @@ _RADIO_PHASE_MS = 20  # lock-step: commander packets take effect a seeded per-fl
 # at no fixed phase of the firmware's 50 Hz log clock. Without it every setpoint of a lock-step
 # flight lands at one phase (10-11 ms after a log sample), which flatters a strictly proper
 # motors -> gyro model identified from 50 Hz logs.
-_COMMANDER_PORTS = (3, 7)  # CRTP commander (RPYT) and generic commander (stop, notify-stop)
+_COMMANDER_PORTS = (P_COMMANDER, P_GENERIC)  # RPYT setpoints; stop and notify-stop
 _PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler; the
 # hold ends at once when the link detaches, so only a scheduler that stops sleeping mid-link
 # (a stalled or crashed client) ever waits it out
@@ -276,7 +276,7 @@ class Simulator:
                 continue
             if self._cut or not self._from_link(token):
                 continue
-            if self._lockstep and (header >> 4) & 0xF in _COMMANDER_PORTS:
+            if self._lockstep and crtp_port(header) in _COMMANDER_PORTS:
                 due = self.vehicle.firmware_ms + max(
                     0, self._radio_ms + self._radio_rng.choice((-1, 0, 1)))
                 if self._delayed:

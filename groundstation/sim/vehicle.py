@@ -142,7 +142,7 @@ class SimVehicle:
         self._rng = random.Random(seed)
         self.body = RigidBody(c=self.const)
         self.battery = Battery(full_v=vbat_full, c=self.const)
-        self.sensors = Sensors(rng=self._rng, noise=noise)
+        self.sensors = Sensors(rng=self._rng, noise=noise, rate_hz=1.0 / _PID_DT_S)
         self.imu = ImuFilter(rate_hz=1.0 / _PID_DT_S)  # what the firmware's sensor task passes on
         self.controller = PidController(dt=_PID_DT_S)
         self.commander = Commander()
