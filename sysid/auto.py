@@ -29,7 +29,9 @@ scored by simulation over windows of ``min(2 s, shortest validation record)`` (a
 output values per state of the initial state fitted on each) on the held-out data, ranked by
 the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious best stable
 model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
-grid (largest or smallest past, future or order tried, when more than one was) is flagged.
+grid (largest or smallest past, future or order tried, when more than one was) is flagged when
+no row inside the grid in that parameter scores within the tolerance of the best (the score
+still rises towards the edge; on a flat top the edge says nothing).
 The chosen horizons and order are then identified again on all the data. ``sysid identify``
 (without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
 same data and grid they choose the same past, future, order and focus.
@@ -164,22 +166,38 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
     p_hi = max(1, min(round(PAST_X[1] * lag), room - futures[-1]))
     p_lo = max(1, min(round(PAST_X[0] * lag), p_hi))
     pasts = _spread(p_lo, p_hi, 6)
-    top = min((futures[-1] - 1) * ell, ORDERS[1])
-    orders = list(range(min(ORDERS[0], top), top + 1))
     capped = p_hi < round(PAST_X[1] * lag) or memory.capped  # short data, or the longest lag
-    return {"pasts": pasts, "futures": futures, "orders": orders}, capped, lag
+    return {"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}, capped, lag
 
 
-def _edges(best: SweepRow, grid: dict[str, list[int]], *, capped: bool) -> list[str]:
+def _orders(future: int, n_outputs: int) -> list[int]:
+    """Orders 2 to 12, capped by the rank a largest future of ``future`` allows."""
+    top = max(1, min((future - 1) * n_outputs, ORDERS[1]))
+    return list(range(min(ORDERS[0], top), top + 1))
+
+
+def _edges(best: SweepRow, result: SweepResult, grid: dict[str, list[int]], *, capped: bool,
+           tol: float = 0.5) -> list[str]:
+    """Warnings for a choice at the edge of the grid that the scores say may be binding.
+
+    The choice sits at the largest (smallest) past, future or order tried, and no stable row
+    with another value of that parameter scores within ``tol`` points of the best score: the
+    score is still rising towards the edge. When rows inside the grid score as well (a flat
+    top: the held-out score cannot tell them apart), the edge is not flagged."""
+    ranked = result.ranked(require_stable=True)
+    top = ranked[0].score if ranked else best.score
     out = []
     for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
         values = grid[f"{name}s"]
-        if len(values) < 2:
+        if len(values) < 2 or value not in (min(values), max(values)):
+            continue
+        inside = [r.score for r in ranked if getattr(r, name) != value]
+        if inside and max(inside) >= top - tol:
             continue
         if value == max(values):
             why = " (the data allow no longer horizons)" if capped and name != "order" else ""
             out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
-        elif value == min(values):
+        else:
             out.append(f"{name} {value} is the smallest tried: the best may lie below")
     return out
 
@@ -217,7 +235,10 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
-    auto, capped, memory = _grid(ident)
+    if pasts and futures:  # the memory only sets horizons: not needed
+        auto, capped, memory = {"orders": _orders(max(futures), ident[0].n_outputs)}, False, None
+    else:
+        auto, capped, memory = _grid(ident)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"],
             "orders": sorted(orders) if orders else auto["orders"]}
@@ -227,8 +248,7 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
                 window_s=simulation_window(dt=ident[0].dt, n_samples=shortest,
                                           n_states=grid["orders"][-1],
                                           n_outputs=ident[0].n_outputs), capped=capped,
-                given_validation=bool(validation),
-                memory=None if pasts and futures else memory)
+                given_validation=bool(validation), memory=memory)
 
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
@@ -241,7 +261,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     the sweep scored, identified on the identification part, is returned instead, and a
     warning says so."""
     best = result.best()
-    warnings = _edges(best, p.grid, capped=p.capped)
+    warnings = _edges(best, result, p.grid, capped=p.capped)
     final = p.ident if p.given_validation else p.everything
     try:
         model = method.identify(final, order=best.order, past=best.past, future=best.future,

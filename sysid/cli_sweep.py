@@ -153,9 +153,10 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
     val = load_flights(list(validate), opts=opts) if validate else None
     if "pasts" in lazy or "futures" in lazy:
         ident = groups[0] if val else holdout(groups)[0]
-        default = default_grid(ident)
-        check_sweep_horizons(ident, pasts=lazy.get("pasts", default["pasts"]),
-                             futures=lazy.get("futures", default["futures"]))
+        # the default grid (and the memory it takes) only for what was not given
+        default = {} if "pasts" in lazy and "futures" in lazy else default_grid(ident)
+        check_sweep_horizons(ident, pasts=lazy.get("pasts") or default["pasts"],
+                             futures=lazy.get("futures") or default["futures"])
     total = int(np.prod([len(v) for v in lazy.values()], dtype=float))
     if total > MAX_SWEEP_MODELS:  # before the lazy ranges become lists
         raise DataError(f"the grid has {total} models, more than {MAX_SWEEP_MODELS}; use "

@@ -10,6 +10,7 @@ import pytest
 import sysid
 from sysid.auto import NoStableModel, default_grid, holdout, select
 from sysid.methods import get_method
+from sysid.sweep import SweepResult, SweepRow
 from tests.sysid.systems import (
     closed_loop,
     open_loop,
@@ -214,3 +215,29 @@ def test_the_chosen_model_stays_stable_when_all_the_data_tip_a_pole_out(seed, ke
     # the model returned is the one scored (its poles to numerical precision)
     np.testing.assert_allclose(np.sort_complex(sel.model.poles()),
                                np.sort_complex(sel.best.poles), atol=1e-9)
+
+
+def _row(past: int, future: int, order: int, fit: float) -> SweepRow:
+    return SweepRow(past=past, future=future, order=order, fit=np.array([fit]),
+                    poles=np.zeros(order, complex), stable=True, predictor_stable=True,
+                    seconds=0.0)
+
+
+def test_an_edge_is_flagged_only_while_the_score_rises_towards_it() -> None:
+    """A choice at the grid's edge with an inside row as good (a flat top, the demo flights:
+    42.2 inside against 41.8 at the largest future) says nothing; a score that still rises
+    towards the edge is flagged (largest future, smallest past)."""
+    from sysid.auto import _edges
+
+    grid = {"pasts": [4, 8, 16], "futures": [3, 6, 9], "orders": [2, 3, 4]}
+    flat = SweepResult(rows=(_row(8, 9, 3, 41.8), _row(8, 6, 4, 42.2), _row(4, 3, 2, 30.0)),
+                       method="iem", horizon=None, window=2.0)
+    best = flat.best()
+    assert (best.future, best.order) == (9, 3)
+    assert _edges(best, flat, grid, capped=False) == []
+    rising = SweepResult(rows=(_row(4, 9, 3, 60.0), _row(8, 6, 3, 55.0), _row(16, 3, 3, 50.0)),
+                         method="iem", horizon=None, window=2.0)
+    assert _edges(rising.best(), rising, grid, capped=True) == [
+        "past 4 is the smallest tried: the best may lie below",
+        "future 9 is the largest tried (the data allow no longer horizons): the best may lie "
+        "beyond"]
