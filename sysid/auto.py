@@ -25,8 +25,10 @@ on closed-loop data (every flight) a direct term fitted on the logged inputs is 
 feedback, and held-out data from the same loop would reward the bias.
 
 **Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
-scored by simulation over windows of ``min(2 s, shortest validation record)`` (at least 10
-output values per state of the initial state fitted on each) on the held-out data, ranked by
+scored by simulation over windows of :data:`SCORE_WINDOW_X` times the data's memory (in
+samples, so the choice does not depend on the sample time; at least 20 samples and 10 output
+values per state of the initial state fitted on each, at most the shortest held-out record)
+on the held-out data, ranked by
 the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious best stable
 model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
 grid (largest or smallest past, future or order tried, when more than one was) is flagged when
@@ -54,11 +56,11 @@ from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.sweep import SweepResult, SweepRow, sweep
-from sysid.validate import SIMULATION_WINDOW_S, simulation_window
+from sysid.validate import simulation_window
 
-__all__ = ["HOLDOUT_FRACTION", "NoStableModel", "Plan", "Selection", "default_grid", "finish",
-           "focus_order", "holdout", "max_blocks", "n_runs", "pick_feedthrough", "pick_focus",
-           "plan", "select", "select_plan"]
+__all__ = ["HOLDOUT_FRACTION", "SCORE_WINDOW_X", "NoStableModel", "Plan", "Selection",
+           "default_grid", "finish", "focus_order", "holdout", "max_blocks", "n_runs",
+           "pick_feedthrough", "pick_focus", "plan", "select", "select_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -70,9 +72,10 @@ COLUMNS_PER_ROW = 3.0
 PAST_X = (1 / 3, 3.0)
 FUTURE_X = (1 / 6, 1.5)
 ORDERS = (2, 12)
-#: Simulation window of the score, seconds (at least 20 samples, at most the shortest
-#: validation record: :func:`sysid.validate.simulation_window`).
-SCORE_WINDOW_S = SIMULATION_WINDOW_S
+#: Simulation windows of the score, in multiples of the data's memory (samples; at least 20
+#: samples and 10 output values per initial-state parameter, at most the shortest validation
+#: record: :func:`sysid.validate.simulation_window`).
+SCORE_WINDOW_X = 12
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,10 +238,9 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
-    if pasts and futures:  # the memory only sets horizons: not needed
-        auto, capped, memory = {"orders": _orders(max(futures), ident[0].n_outputs)}, False, None
-    else:
-        auto, capped, memory = _grid(ident)
+    auto, capped, memory = _grid(ident)
+    if pasts and futures:  # orders as the given futures allow
+        auto["orders"] = _orders(max(futures), ident[0].n_outputs)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"],
             "orders": sorted(orders) if orders else auto["orders"]}
@@ -246,9 +248,11 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
     capped = capped and not pasts
     return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
                 window_s=simulation_window(dt=ident[0].dt, n_samples=shortest,
+                                          samples=SCORE_WINDOW_X * memory,
                                           n_states=grid["orders"][-1],
                                           n_outputs=ident[0].n_outputs), capped=capped,
-                given_validation=bool(validation), memory=memory)
+                given_validation=bool(validation),
+                memory=None if pasts and futures else memory)
 
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:

@@ -70,12 +70,13 @@ SAMPLES_PER_STATE = 10
 
 
 def simulation_window(*, dt: float, n_samples: int | None = None, n_states: int = 0,
-                      n_outputs: int = 1) -> float:
-    """Seconds of the default simulation window: :data:`SIMULATION_WINDOW_S`, at least
-    :data:`MIN_WINDOW_SAMPLES` samples of ``dt`` and :data:`SAMPLES_PER_STATE` output values
-    per initial-state parameter (``n_states`` fitted on ``n_outputs`` channels each window),
-    at most the record (``n_samples``, if known)."""
-    samples = max(round(SIMULATION_WINDOW_S / dt), MIN_WINDOW_SAMPLES,
+                      n_outputs: int = 1, samples: int | None = None) -> float:
+    """Seconds of the default simulation window: :data:`SIMULATION_WINDOW_S` (or ``samples``
+    samples, when given), at least :data:`MIN_WINDOW_SAMPLES` samples of ``dt`` and
+    :data:`SAMPLES_PER_STATE` output values per initial-state parameter (``n_states`` fitted on
+    ``n_outputs`` channels each window), at most the record (``n_samples``, if known)."""
+    base = round(SIMULATION_WINDOW_S / dt) if samples is None else samples
+    samples = max(base, MIN_WINDOW_SAMPLES,
                   math.ceil(SAMPLES_PER_STATE * n_states / max(n_outputs, 1)))
     return (samples if n_samples is None else min(samples, n_samples)) * dt
 
