@@ -23,7 +23,9 @@ could hold (chunked: the allocated chunks plus slack; contiguous: its storage; a
 :data:`MAX_EXPANSION` times the file size); stream datasets that are not one-dimensional or
 whose fields are not numbers or fixed-length text; more than :data:`MAX_OBJECTS` streams or
 attributes. Attributes larger than :data:`MAX_ATTR_BYTES`, or of a type other than numbers and
-text, are skipped unread and listed as problems.
+text, are skipped unread and listed as problems; so is variable-length text whose declared length
+(read from the file's own bytes by :mod:`cfsession.vlen_text`: HDF5 allocates and clears what it
+declares before it finds out it is false, 4 GB for 16 stored bytes) exceeds that or cannot be found.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import contextlib
 import io
 import mmap
 import os
+import weakref
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -40,6 +43,7 @@ import h5py
 import numpy as np
 
 from cfsession.errors import SessionError
+from cfsession.vlen_text import Texts, declared_text_bytes, is_vlen_text, text_problem
 
 __all__ = ["MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
            "check_dataset", "check_storage", "file_size", "hard_links", "open_untrusted",
@@ -114,7 +118,7 @@ def _superblock(head: bytes) -> tuple[int, int, int] | None:
     return head[11], int.from_bytes(head[28:36], "little"), 44
 
 
-def _cleared_copy(path: Path, size: int) -> io.BytesIO:
+def _cleared_copy(path: Path, size: int) -> _Image:
     """The file's bytes with the superblock's status flags cleared (checksum recomputed)."""
     if size > MAX_UNCLEAN_BYTES:
         raise SessionError(f"{path}: not closed cleanly and {size / 2**20:.0f} MiB, more than "
@@ -122,7 +126,20 @@ def _cleared_copy(path: Path, size: int) -> io.BytesIO:
     data = bytearray(path.read_bytes())
     data[11] = 0
     data[44:48] = lookup3(bytes(data[:44])).to_bytes(4, "little")
-    return io.BytesIO(bytes(data))
+    copy = _Image(bytes(data))
+    _IMAGES[repr(copy)] = copy  # h5py names a file object by its repr
+    return copy
+
+
+class _Image(io.BytesIO):
+    """A private copy opened by HDF5 whose bytes :func:`read_attrs` checks as well."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(data)  # shares ``data`` until written to, which HDF5 never does
+        self.image = data
+
+
+_IMAGES: weakref.WeakValueDictionary[str, _Image] = weakref.WeakValueDictionary()
 
 
 def _heap_loop(data: bytes | mmap.mmap) -> int | None:
@@ -229,6 +246,7 @@ def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],
         raise SessionError(f"{where}: {len(names)} attributes, more than a {kind} has "
                            f"({MAX_OBJECTS})")
     out: dict[str, Any] = {}
+    texts: Texts | None = None
     for name in names:
         try:
             aid = attrs.get_id(name)
@@ -243,6 +261,16 @@ def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],
                                 f"{_CLASS_NAMES.get(type_class, type_class)}, not a number "
                                 "or text)")
                 continue
+            if is_vlen_text(aid):
+                if texts is None:
+                    image = _IMAGES.get(obj.file.filename) if obj.file.driver == "fileobj" else None
+                    texts = declared_text_bytes(obj, image=None if image is None else image.image)
+                why = text_problem(texts, name, aid.get_space().get_simple_extent_npoints(),
+                                   limit=MAX_ATTR_BYTES)
+                if why:
+                    problems.append(f"{where}: attribute {name!r} skipped (variable-length text "
+                                    f"{why})")
+                    continue
             out[name] = attrs[name]
         except Exception as exc:
             problems.append(f"{where}: attribute {name!r} unreadable ({short_error(exc)})")

@@ -5,6 +5,14 @@ HDF5 layout (root attributes ``format``, ``version``, ``dt`` with ``dt_unit = "s
 ``A, B, C, D, K`` (and ``noise_cov`` when known), each with attributes ``row_units`` and
 ``col_units`` (JSON lists; state coordinates are ``"state"``).
 
+:func:`save` refuses, in one line and before writing, a model that :func:`load` would refuse
+(more than :data:`MAX_DIMENSION` states, inputs or outputs; a ``.mat`` or ``.json`` file over
+:data:`MAX_FILE_BYTES`; in ``.h5`` or ``.mat``, a text over :data:`MAX_TEXT_BYTES`), naming the
+limit and the format that holds it: the caps bound what an untrusted file costs to read, so they
+are not raised to the largest model the formats can hold (a 2000-state model with a few channels
+is 31 MB as ``.mat``, about 100 MB as JSON: only hundreds of channels, over a thousand as ``.mat``,
+pass :data:`MAX_FILE_BYTES`).
+
 **Model files come from anywhere**, so :func:`load` reads each format into one plain dict
 and checks it before a model is made: the format name; a version from 1 to
 :data:`~sysid.model.FORMAT_VERSION` (none is refused); every matrix present, real, finite,
@@ -73,13 +81,17 @@ def save(model: StateSpaceModel, path: Path) -> Path:
     """Write ``model`` to ``path`` in the format its suffix names (one-line
     :class:`ModelFileError` when it cannot be written)."""
     suffix = path.suffix.lower()
-    writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat,
-               ".json": lambda m, p: p.write_text(m.to_json())}
+    writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat, ".json": _save_json}
     if suffix not in writers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
     if not path.parent.is_dir():
         raise ModelFileError(f"cannot write model file {str(path)!r}: folder "
                              f"{str(path.parent)!r} does not exist; create it first")
+    for count, what in ((model.n_states, "states"), (model.n_inputs, "inputs"),
+                        (model.n_outputs, "outputs")):
+        if count > MAX_DIMENSION:
+            raise ModelFileError(f"cannot write model file {str(path)!r}: {count} {what}, more "
+                                 f"than the {MAX_DIMENSION} that load reads (MAX_DIMENSION)")
     try:
         writers[suffix](model, path)
     except OSError as exc:
@@ -306,19 +318,38 @@ def _load_h5(path: Path) -> dict[str, Any]:
     return d
 
 
+def _within(path: Path, what: str, size: int, limit: tuple[int, str], instead: str) -> None:
+    """Refuse to write what :func:`load` would refuse: ``size`` bytes over ``limit`` (its value
+    and name)."""
+    if size > limit[0]:
+        raise ModelFileError(f"cannot write model file {str(path)!r}: {what} would be {size} "
+                             f"bytes, more than the {limit[0]} that load reads ({limit[1]}); "
+                             f"save the model as {instead}")
+
+
+def _save_json(model: StateSpaceModel, path: Path) -> None:
+    data = model.to_json().encode()
+    _within(path, "the JSON file", len(data), (MAX_FILE_BYTES, "MAX_FILE_BYTES"), ".h5")
+    path.write_bytes(data)
+
+
 def _save_h5(model: StateSpaceModel, path: Path) -> None:
     import h5py
 
     d = model.to_dict()
     units = _units(model)
+    texts = {"provenance": json.dumps(d["provenance"]),
+             **{attr: json.dumps(d[attr]) for attr in _LABELS}}
+    for attr, text in texts.items():
+        _within(path, f"its {attr} text", len(text.encode()),
+                 (MAX_TEXT_BYTES, "MAX_TEXT_BYTES"), ".json")
     with h5py.File(path, "w") as f:
         f.attrs["format"] = d["format"]
         f.attrs["version"] = d["version"]
         f.attrs["dt"] = model.dt
         f.attrs["dt_unit"] = "s"
-        f.attrs["provenance"] = json.dumps(d["provenance"])
-        for attr in ("input_names", "output_names", "input_units", "output_units"):
-            f.attrs[attr] = json.dumps(d[attr])
+        for attr, text in texts.items():
+            f.attrs[attr] = text
         for name in ("A", "B", "C", "D", "K", "noise_cov"):
             value = getattr(model, name)
             if value is None:
@@ -342,8 +373,13 @@ def _save_mat(model: StateSpaceModel, path: Path) -> None:
                  InputUnit=np.array(d["input_units"], dtype=object),
                  OutputUnit=np.array(d["output_units"], dtype=object),
                  provenance=json.dumps(d["provenance"]))
+    _within(path, "its provenance text", len(mdict["provenance"].encode()),
+             (MAX_TEXT_BYTES, "MAX_TEXT_BYTES"), ".json")
+    buf = io.BytesIO()
+    savemat(buf, mdict)
+    _within(path, "the .mat file", buf.tell(), (MAX_FILE_BYTES, "MAX_FILE_BYTES"), ".h5")
     with open(path, "wb") as fh:  # opened here so an OS error keeps its errno
-        savemat(fh, mdict)
+        fh.write(buf.getbuffer())
 
 
 def _load_mat(path: Path) -> dict[str, Any]:

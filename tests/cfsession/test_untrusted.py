@@ -7,6 +7,7 @@ in the fuzz campaign: a flipped byte in a killed writer's file hung ``info`` for
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -23,11 +24,13 @@ from cfsession.schema import log_block_spec
 from cfsession.writer import SessionWriter, standard_streams
 from groundstation.cli import main
 
+from .hostile import declare_text_length, mark_killed
 
-def _write(path, *, close: bool = True, compress: bool = False):
+
+def _write(path, *, close: bool = True, compress: bool = False, metadata=None):
     gyro = log_block_spec(name="gyro", variables=[("gyro.x", "float")], period_s=0.02)
-    w = SessionWriter(path, streams=[gyro, *standard_streams()], metadata={"uri": "sim://0"},
-                      compress_on_close=compress)
+    w = SessionWriter(path, streams=[gyro, *standard_streams()],
+                      metadata=metadata or {"uri": "sim://0"}, compress_on_close=compress)
     for k in range(100):
         w.append("gyro", (k * 0.02, 20 * k, float(k)))
     w.event(t=0.0, text="hello")
@@ -213,3 +216,81 @@ def test_a_global_heap_that_hdf5_would_walk_for_ever_is_refused(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert "would be read for ever" in out.stdout, out
+
+
+# The child's peak resident memory since its exec (VmHWM: ru_maxrss would keep the pytest
+# worker's peak across fork and exec, hundreds of MiB after other tests).
+_READ_IN_A_CHILD = textwrap.dedent("""
+    import json, sys
+    def _peak_mib():
+        status = open("/proc/self/status").read()
+        return int(status.split("VmHWM:")[1].split()[0]) >> 10
+    from cfsession import open_session
+    s = open_session(sys.argv[1])
+    print(json.dumps({"problems": s.problems, "meta": sorted(s.meta), "rows": len(s["gyro"]),
+                      "gyro": sorted(s["gyro"].attrs), "units": s["gyro"].units,
+                      "peak_mib": _peak_mib()}))
+""")
+
+
+@pytest.mark.parametrize("where", ["stream group", "root", "root beside a huge attribute",
+                                   "killed writer's root"])
+def test_text_declaring_a_gigabyte_is_skipped_unread(tmp_path, where):
+    """A text attribute whose one value (16 bytes stored) declares 1 GiB for a 40-byte heap
+    object: HDF5 allocated and cleared the declared length before failing (measured for 3.75
+    GiB: 3.9 GB peak, 11 s). Now skipped and listed, unread, wherever the file keeps it: a
+    stream's object header, the root's many-attribute heap (its blocks, or the whole file when
+    that heap holds a huge attribute), the private copy of a file whose writer died. The rest
+    reads as usual. Read in a child process, whose peak memory is the measure (no timing)."""
+    path = tmp_path / "s.h5"
+    _write(path)
+    text = b"Q" * 40
+    with h5py.File(path, "a") as f:
+        if "huge" in where:
+            f.attrs["table"] = np.arange(5000.0)  # 40 kB: stored apart, as a huge heap object
+        (f["gyro"] if where == "stream group" else f).attrs["note"] = text.decode()
+        meta, gyro = sorted(f.attrs), sorted(f["gyro"].attrs)
+    declare_text_length(path, text, 1 << 30)
+    if "killed" in where:
+        mark_killed(path)
+    out = subprocess.run([sys.executable, "-c", _READ_IN_A_CHILD, str(path)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout)
+    skipped = [p for p in got["problems"] if "'note'" in p]
+    assert len(skipped) == 1 and skipped[0].startswith(str(path)), got["problems"]
+    assert skipped[0].endswith("attribute 'note' skipped (variable-length text of 1073741824 "
+                               "declared bytes)"), skipped
+    assert got["peak_mib"] < 300, got["peak_mib"]  # about 50 MiB; 1 GiB and more before
+    assert len(got["problems"]) == 1 + ("killed" in where), got["problems"]
+    assert set(got["meta"]) == set(meta) - {"note"} and set(got["gyro"]) == set(gyro) - {"note"}
+    assert got["rows"] == 100 and got["units"]["x"] == "deg/s"  # a list of texts, read
+
+
+@pytest.mark.parametrize("variant", ["clean", "compressed", "killed"])
+def test_every_attribute_the_writer_writes_is_read(tmp_path, variant):
+    """Text attributes are read after their lengths are checked in the file's bytes: every one
+    the writer writes (texts, lists of texts; at the root, more than HDF5 keeps in the object
+    header, and a 40 kB array stored apart) is read, equal to h5py's own reading."""
+    metadata = {"uri": "sim://0", "plan_name": "prbs", "phase_table": [{"name": "hover"}],
+                "trim": np.arange(5000.0), **{f"note{i}": "x" * i for i in range(20)}}
+    ref = tmp_path / "ref.h5"
+    _write(ref, metadata=metadata)
+    with h5py.File(ref, "r") as f:
+        want = {"/": dict(f.attrs), "gyro": dict(f["gyro"].attrs),
+                "gyro/data": dict(f["gyro/data"].attrs)}
+    path = tmp_path / "s.h5"
+    w = _write(path, metadata=metadata, close=variant != "killed",
+               compress=variant == "compressed")
+    s = open_session(path)
+    assert s.problems == ([] if variant != "killed" else [
+        "writer did not close the file (crash or kill): data up to the last flush"])
+    assert set(s.meta) == set(want["/"]) and set(s["gyro"].attrs) == set(want["gyro"])
+    for key in ("uri", "plan_name", "phase_table", "note19", "software_version"):
+        assert s.meta[key] == want["/"][key], key
+    assert np.array_equal(s.meta["trim"], want["/"]["trim"])
+    assert s["gyro"].attrs == {k: str(v) if isinstance(v, str) else v
+                               for k, v in want["gyro"].items()}
+    assert s["gyro"].sources == dict(zip(["host_time", "fw_time_ms", "x"],
+                                         want["gyro/data"]["sources"], strict=True))
+    w.close()

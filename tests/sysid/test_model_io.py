@@ -27,6 +27,7 @@ from sysid.cli import main
 from sysid.errors import ModelFileError
 from sysid.model import StateSpaceModel
 from sysid.model_io import load, save
+from tests.cfsession.hostile import declare_text_length
 
 SECRET = b"root:x:0:0:root:/root:/bin/bash\n" * 4  # stands in for /etc/passwd
 
@@ -242,6 +243,25 @@ def test_a_damaged_string_type_is_one_line_not_a_crash(tmp_path):
     assert "'dt_unit' skipped" in done.stdout and "\n" not in done.stdout.strip()
 
 
+def test_text_declaring_a_gigabyte_is_one_line_unread(tmp_path):
+    """The provenance text's one value declares 1 GiB for its heap object (a version 1 object
+    header: no checksum to mend). HDF5 allocated and cleared it before failing (3.9 GB, 10 s for
+    3.75 GiB); now one line, read in a child process whose peak memory stays small."""
+    path = save(_model(), tmp_path / "m.h5")
+    declare_text_length(path, json.dumps(_model().to_dict()["provenance"]).encode(), 1 << 30)
+    # peak resident memory since exec (VmHWM; ru_maxrss keeps the pytest worker's across exec)
+    code = ("import sys, sysid\ntry:\n    sysid.load_model(sys.argv[1])\n"
+            "except sysid.SysIdError as e:\n    print(e)\n"
+            "print(int(open('/proc/self/status').read().split('VmHWM:')[1].split()[0]) >> 10)\n")
+    done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    message, peak_mib = done.stdout.strip().split("\n")
+    assert "attribute 'provenance' skipped (variable-length text of 1073741824 declared " \
+           "bytes)" in message, message
+    assert int(peak_mib) < 400, peak_mib  # about 120 MiB with sysid's imports; 1 GiB before
+
+
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("case", list(HDF5_CASES))
 def test_crafted_hdf5_model_is_one_line_and_reads_nothing_else(tmp_path, case):
@@ -329,6 +349,59 @@ def test_json_deeper_than_python_parses_or_larger_than_the_cap(tmp_path, monkeyp
     save(_model(), path)
     monkeypatch.setattr(model_io, "MAX_FILE_BYTES", path.stat().st_size - 1)
     _refused(path, f"larger than {path.stat().st_size - 1} bytes")
+
+
+# ------------------------------------------------- what save writes, load reads (the caps)
+def test_a_2000_state_model_round_trips_as_mat(tmp_path):
+    """MAX_DIMENSION states with a Crazyflie's channels: 31 MB, well within MAX_FILE_BYTES."""
+    n, rng = model_io.MAX_DIMENSION, np.random.default_rng(0)
+    m = StateSpaceModel(A=rng.standard_normal((n, n)) * 0.01, B=rng.standard_normal((n, 4)),
+                        C=rng.standard_normal((6, n)), D=np.zeros((6, 4)), dt=0.01)
+    path = save(m, tmp_path / "m.mat")
+    assert path.stat().st_size < model_io.MAX_FILE_BYTES / 4
+    assert np.array_equal(load(path).A, m.A)
+
+
+@pytest.mark.parametrize("suffix", [".mat", ".json"])
+def test_a_file_larger_than_load_reads_is_not_written(tmp_path, monkeypatch, suffix):
+    """At the cap the file is written and read back; one byte over, save refuses in one line
+    naming the cap (and .h5, which has none) and writes nothing."""
+    size = save(_model(), tmp_path / f"probe{suffix}").stat().st_size
+    monkeypatch.setattr(model_io, "MAX_FILE_BYTES", size)
+    assert load(save(_model(), tmp_path / f"m{suffix}")).provenance == _model().provenance
+    monkeypatch.setattr(model_io, "MAX_FILE_BYTES", size - 1)
+    path = tmp_path / f"n{suffix}"
+    with pytest.raises(ModelFileError, match=rf"would be {size} bytes, more than the {size - 1} "
+                       r"that load reads \(MAX_FILE_BYTES\); save the model as .h5") as err:
+        save(_model(), path)
+    assert "\n" not in str(err.value) and str(path) in str(err.value) and not path.exists()
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".mat"])
+def test_a_text_longer_than_load_reads_is_not_written(tmp_path, suffix):
+    """A provenance of MAX_TEXT_BYTES as JSON (the guard's MAX_ATTR_BYTES for .h5) is written
+    and read back; one byte more, save refuses and points to JSON, which has no such cap."""
+    fits = _model().replace(provenance={"x": "a" * (model_io.MAX_TEXT_BYTES - 9)})
+    assert len(json.dumps(fits.provenance)) == model_io.MAX_TEXT_BYTES
+    assert load(save(fits, tmp_path / f"m{suffix}")).provenance == fits.provenance
+    over = fits.replace(provenance={"x": "a" * (model_io.MAX_TEXT_BYTES - 8)})
+    path = tmp_path / f"n{suffix}"
+    with pytest.raises(ModelFileError, match=r"its provenance text would be 1048577 bytes, "
+                       r"more than the 1048576 that load reads \(MAX_TEXT_BYTES\); save the "
+                       r"model as .json") as err:
+        save(over, path)
+    assert "\n" not in str(err.value) and not path.exists()
+    assert load(save(over, tmp_path / "n.json")).provenance == over.provenance
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".mat", ".json"])
+def test_more_states_than_load_reads_are_not_written(tmp_path, suffix):
+    n = model_io.MAX_DIMENSION + 1
+    m = StateSpaceModel(A=np.zeros((n, n)), B=np.zeros((n, 1)), C=np.zeros((1, n)), dt=0.01)
+    path = tmp_path / f"m{suffix}"
+    with pytest.raises(ModelFileError, match=rf"{n} states, more than the 2000 that load reads"):
+        save(m, path)
+    assert not path.exists()
 
 
 # ------------------------------------------------------------------------- crafted MAT files
