@@ -30,9 +30,7 @@ declares before it finds out it is false, 4 GB for 16 stored bytes) exceeds that
 
 from __future__ import annotations
 
-import contextlib
 import io
-import mmap
 import os
 import weakref
 from collections.abc import Iterator
@@ -43,7 +41,7 @@ import h5py
 import numpy as np
 
 from cfsession.errors import SessionError
-from cfsession.vlen_text import Texts, declared_text_bytes, is_vlen_text, text_problem
+from cfsession.vlen_text import FileBytes, Texts, declared_text_bytes, is_vlen_text, text_problem
 
 __all__ = ["MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
            "check_dataset", "check_storage", "file_size", "hard_links", "open_untrusted",
@@ -142,23 +140,26 @@ class _Image(io.BytesIO):
 _IMAGES: weakref.WeakValueDictionary[str, _Image] = weakref.WeakValueDictionary()
 
 
-def _heap_loop(data: bytes | mmap.mmap) -> int | None:
+def _heap_loop(raw: FileBytes) -> int | None:
     """Offset of a global heap collection (``GCOL``: where variable-length strings live)
     whose object list HDF5 would walk for ever (a free-space object of size 0 does not
-    advance its parser; a size near 2**64 wraps it back), or ``None``."""
-    at = data.find(b"GCOL")
-    while at >= 0:
-        size = int.from_bytes(data[at + 8:at + 16], "little")
-        end = at + min(size, len(data) - at)
-        p = at + 16
+    advance its parser; a size near 2**64 wraps it back), or ``None``. Read in pieces."""
+    for at in raw.find_all(b"GCOL"):
+        size = int.from_bytes(raw.read(at + 8, 8), "little")
+        end = at + min(size, raw.size - at)
+        p, buf_at, buf = at + 16, 0, b""
         while p + 16 <= end:
-            idx = int.from_bytes(data[p:p + 2], "little")
-            obj = int.from_bytes(data[p + 8:p + 16], "little")
+            if p + 16 > buf_at + len(buf):
+                buf_at, buf = p, raw.read(p, min(8 << 20, end - p))
+                if len(buf) < 16:  # cut short since it was opened
+                    break
+            head = buf[p - buf_at:p - buf_at + 16]
+            idx = int.from_bytes(head[0:2], "little")
+            obj = int.from_bytes(head[8:16], "little")
             need = obj if idx == 0 else 16 + (obj + 7) // 8 * 8
             if need == 0 or need >= 1 << 62:
                 return at
             p += need
-        at = data.find(b"GCOL", at + 4)
     return None
 
 
@@ -185,15 +186,11 @@ def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, boo
                            f"{sb[1]} bytes)")
     flagged = sb is not None and sb[0] != 0
     copy = _cleared_copy(path, st.st_size) if flagged else None
-    with contextlib.ExitStack() as stack:
-        if copy is not None:
-            loop = _heap_loop(copy.getbuffer().tobytes())
-        elif st.st_size:
-            fh = stack.enter_context(open(path, "rb"))
-            loop = _heap_loop(stack.enter_context(mmap.mmap(fh.fileno(), 0,
-                                                            access=mmap.ACCESS_READ)))
-        else:
-            loop = None
+    try:
+        with FileBytes(path=path, image=None if copy is None else copy.image) as raw:
+            loop = _heap_loop(raw)
+    except OSError as exc:
+        raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if loop is not None:
         raise SessionError(f"{path}: damaged beyond repair (text heap at byte {loop} would be "
                            "read for ever)")

@@ -8,7 +8,8 @@ object's header (and its continuation chunks), and for an object with many attri
 blocks of the fractal heap holding them. Every attribute message of that name must be found and
 within the caller's limit; one that cannot be checked (shared, in a filtered or huge-object
 heap, an unknown layout) is reported as such. Everything read here is bounded (chunks, blocks,
-messages, places a name is found), so a crafted file cannot make it slow.
+messages, places a name is found), so a crafted file cannot make it slow. :class:`FileBytes`
+also serves the guard's check of the text heaps (:func:`cfsession.guard.open_untrusted`).
 """
 
 from __future__ import annotations
@@ -16,11 +17,12 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import h5py
 import numpy as np
 
-__all__ = ["Texts", "declared_text_bytes", "is_vlen_text", "text_problem"]
+__all__ = ["FileBytes", "Texts", "declared_text_bytes", "is_vlen_text", "text_problem"]
 
 
 _UNDEF = (1 << 64) - 1
@@ -34,15 +36,22 @@ _MAX_VALUES = 1 << 16  # values of one attribute whose lengths are read (16 byte
 Texts = dict[bytes, list[tuple[int, int] | None]] | str
 
 
-class _Raw:
-    """The bytes of the file HDF5 has open (on disk, or its private copy), read by offset."""
+class FileBytes:
+    """The bytes of a file, read by offset: on disk with ``pread`` (a file cut short meanwhile
+    reads short, where a memory map would kill the process), or an image in memory (the private
+    copy HDF5 has open). A context manager; ``size`` is the length when opened."""
 
-    def __init__(self, f: h5py.File, image: bytes | None) -> None:
-        if f.driver != "sec2" and image is None:
-            raise ValueError("a file not opened by open_untrusted")
+    def __init__(self, *, path: str | Path, image: bytes | None = None) -> None:
         self.image = image
         flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)  # a FIFO put there since: no wait
-        self.fd = os.open(f.filename, flags) if image is None else -1
+        self.fd = os.open(path, flags) if image is None else -1
+        self.size = len(image) if image is not None else os.fstat(self.fd).st_size
+
+    def __enter__(self) -> FileBytes:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def read(self, at: int, n: int) -> bytes:
         if self.image is not None:
@@ -78,7 +87,7 @@ def _u(b: bytes, at: int, n: int) -> int:
     return int.from_bytes(b[at:at + n], "little")
 
 
-def _messages(raw: _Raw, addr: int) -> Iterator[tuple[int, int, bytes]]:
+def _messages(raw: FileBytes, addr: int) -> Iterator[tuple[int, int, bytes]]:
     """``(type, flags, body)`` of each message of the object header at ``addr`` (version 1
     or 2), continuation chunks followed; ``ValueError`` for anything else."""
     head = raw.read(addr, 16).ljust(16, b"\xff")
@@ -159,7 +168,7 @@ def _attr_message(get: Callable[[int, int], bytes]) -> tuple[bytes, tuple[int, i
     return name, (values, base * int(lengths.sum()))
 
 
-def _named(raw: _Raw, spans: Iterator[tuple[int, bytes]], names: list[bytes],
+def _named(raw: FileBytes, spans: Iterator[tuple[int, bytes]], names: list[bytes],
            found: dict[bytes, list[tuple[int, int] | None]]) -> None:
     """Add to ``found`` the attribute messages named ``names`` found in ``spans`` (file offset,
     bytes): each place a name is followed by its terminating zero and preceded by the header of
@@ -182,7 +191,7 @@ def _named(raw: _Raw, spans: Iterator[tuple[int, bytes]], names: list[bytes],
                 i = span.find(name + b"\0", i + 1)
 
 
-def _dense(raw: _Raw, info: bytes, names: list[bytes],
+def _dense(raw: FileBytes, info: bytes, names: list[bytes],
            found: dict[bytes, list[tuple[int, int] | None]]) -> None:
     """Add to ``found`` the attribute messages named ``names`` in the fractal heap an attribute
     info message names (where an object with many attributes keeps them): every direct block
@@ -208,29 +217,28 @@ def declared_text_bytes(obj: h5py.HLObject, *, image: bytes | None = None) -> Te
     """Values and declared bytes of every variable-length text attribute message of ``obj``,
     by name (``None`` for one that cannot be checked), read from the file's bytes (``image``:
     the private copy HDF5 has open instead of the file on disk); or why they cannot be found."""
-    raw = None
+    if obj.file.driver != "sec2" and image is None:
+        return "(a file not opened by open_untrusted)"
     try:
-        raw = _Raw(obj.file, image)
-        head = raw.read(0, 16)
-        if (head[13:15] if head[8:9] in (b"\0", b"\1") else head[9:11]) != b"\x08\x08":
-            return "(not 8-byte addresses)"
-        found: dict[bytes, list[tuple[int, int] | None]] = {}
-        infos = []
-        for kind, flags, body in _messages(raw, h5py.h5o.get_info(obj.id).addr):
-            if kind == 0x0C and flags & 0x02:
-                return "(a shared attribute message)"
-            if kind == 0x0C and (got := _attr_message(lambda lo, hi, b=body: b[lo:hi])):
-                found.setdefault(got[0], []).append(got[1])
-            elif kind == 0x15:
-                infos.append(body)
-        names = [n.encode() for n in obj.attrs if infos and is_vlen_text(obj.attrs.get_id(n))]
-        for info in infos:
-            _dense(raw, info, names, found)
+        with FileBytes(path=obj.file.filename, image=image) as raw:
+            head = raw.read(0, 16)
+            if (head[13:15] if head[8:9] in (b"\0", b"\1") else head[9:11]) != b"\x08\x08":
+                return "(not 8-byte addresses)"
+            found: dict[bytes, list[tuple[int, int] | None]] = {}
+            infos = []
+            for kind, flags, body in _messages(raw, h5py.h5o.get_info(obj.id).addr):
+                if kind == 0x0C and flags & 0x02:
+                    return "(a shared attribute message)"
+                if kind == 0x0C and (got := _attr_message(lambda lo, hi, b=body: b[lo:hi])):
+                    found.setdefault(got[0], []).append(got[1])
+                elif kind == 0x15:
+                    infos.append(body)
+            names = [n.encode() for n in obj.attrs
+                     if infos and is_vlen_text(obj.attrs.get_id(n))]
+            for info in infos:
+                _dense(raw, info, names, found)
     except (ValueError, OSError) as exc:
         return f"({exc})"
-    finally:
-        if raw is not None:
-            raw.close()
     return found
 
 

@@ -218,6 +218,29 @@ def test_a_global_heap_that_hdf5_would_walk_for_ever_is_refused(tmp_path):
     assert "would be read for ever" in out.stdout, out
 
 
+def test_the_heap_check_reads_a_file_cut_short_while_it_is_read(tmp_path):
+    """The text-heap check reads the file in pieces by offset: a file cut short after it was
+    opened (a copy being replaced, a disk filling) reads short. It was a memory map, which kills
+    the process (SIGBUS) on a page beyond the new end. The same file whole is checked as
+    before: a heap walked for ever is found in pieces too."""
+    from cfsession.guard import _heap_loop
+    from cfsession.vlen_text import FileBytes
+
+    path = tmp_path / "s.h5"
+    _write(path)
+    data = path.read_bytes()
+    at = data.find(b"GCOL")
+    assert at > 0
+    with FileBytes(path=path) as raw:
+        with open(path, "r+b") as fh:
+            fh.truncate(at + 24)  # inside the heap collection's first object
+        assert raw.size == len(data) and _heap_loop(raw) is None
+    looped = bytearray(data)
+    looped[at + 16:at + 18] = bytes(2)  # the first object made free space (index 0) ...
+    looped[at + 24:at + 32] = bytes(8)  # ... of 0 bytes
+    assert _heap_loop(FileBytes(path=path, image=bytes(looped))) == at
+
+
 # The child's peak resident memory since its exec (VmHWM: ru_maxrss would keep the pytest
 # worker's peak across fork and exec, hundreds of MiB after other tests).
 _READ_IN_A_CHILD = textwrap.dedent("""
