@@ -187,8 +187,8 @@ def _edges(best: SweepRow, result: SweepResult, grid: dict[str, list[int]], *, c
     with another value of that parameter scores within ``tol`` points of the best score: the
     score is still rising towards the edge. When rows inside the grid score as well (a flat
     top: the held-out score cannot tell them apart), the edge is not flagged."""
-    ranked = result.ranked(require_stable=True)
-    top = ranked[0].score if ranked else best.score
+    ranked = result.ranked(require_stable=True)  # not empty: ``best`` is one of them
+    top = ranked[0].score
     out = []
     for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
         values = grid[f"{name}s"]
@@ -231,7 +231,8 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
          futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
          validation: Sequence[IOData] | None = None) -> Plan:
     """Split the data (held-out rule, or ``validation``) and choose the grid; given
-    ``pasts``/``futures``/``orders`` replace the default grid's."""
+    ``pasts``/``futures``/``orders`` replace the default grid's (orders not given go as high as
+    the largest future allows)."""
     everything = [e for g in groups for e in g]
     if validation:
         ident, val = everything, list(validation)
@@ -239,11 +240,10 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
     else:
         ident, val, rule = holdout(groups)
     auto, capped, memory = _grid(ident)
-    if pasts and futures:  # orders as the given futures allow
-        auto["orders"] = _orders(max(futures), ident[0].n_outputs)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
-            "futures": sorted(futures) if futures else auto["futures"],
-            "orders": sorted(orders) if orders else auto["orders"]}
+            "futures": sorted(futures) if futures else auto["futures"]}
+    grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow
+                      _orders(grid["futures"][-1], ident[0].n_outputs))
     shortest = min(d.n_samples for d in val)
     capped = capped and not pasts
     return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
