@@ -16,11 +16,13 @@ horizons allow.
 
 **Focus** (:func:`pick_focus`): when the caller does not fix it, the grid runs with both
 focus choices and the one whose chosen model scores best on the held-out data wins; the
-method's default (IEM: prediction) unless the other is better by more than 0.5 points.
+method's default (IEM: prediction) unless the other is better by more than one standard error
+of its held-out score (:mod:`sysid.parsimony`).
 
 **Direct term** (``choose_feedthrough``, for open-loop data): a method without one (IEM's
 default) runs the grid once more with ``feedthrough=True`` (the chosen focus) and keeps that
-choice only when it scores better on the held-out data by more than 0.5 points. Off by default:
+choice only when it scores better on the held-out data by more than one standard error of its
+score. Off by default:
 on closed-loop data (every flight) a direct term fitted on the logged inputs is biased by the
 feedback, and held-out data from the same loop would reward the bias.
 
@@ -28,12 +30,14 @@ feedback, and held-out data from the same loop would reward the bias.
 scored by simulation over windows of :data:`SCORE_WINDOW_X` times the data's memory (in
 samples, so the choice does not depend on the sample time; at least 20 samples and 10 output
 values per state of the initial state fitted on each, at most the shortest held-out record)
-on the held-out data, ranked by
-the floored mean fit (:attr:`sysid.sweep.SweepRow.score`), and the parsimonious best stable
-model is taken (:meth:`sysid.sweep.SweepResult.best`). A choice at the edge of the
-grid (largest or smallest past, future or order tried, when more than one was) is flagged when
-no row inside the grid in that parameter scores within the tolerance of the best (the score
-still rises towards the edge; on a flat top the edge says nothing).
+on the held-out data, ranked by the floored mean fit (:attr:`sysid.sweep.SweepRow.score`),
+and the parsimonious best stable model is taken (:meth:`sysid.sweep.SweepResult.best`: the
+smallest order within one standard error of the best score, :mod:`sysid.parsimony`). A choice
+at the edge of the grid (largest or smallest past, future or order tried, when more than one
+was) is flagged when no row inside the grid in that parameter scores within that tolerance of
+the best (the score still rises towards the edge; on a flat top the edge says nothing), and a
+warning says when that standard error is a point or more (held-out data too few to rank the
+models).
 The chosen horizons and order are then identified again on all the data. ``sysid identify``
 (without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
 same data and grid they choose the same past, future, order and focus.
@@ -55,6 +59,13 @@ from sysid.grid import pair_flights
 from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
+from sysid.parsimony import (
+    close_to_best,
+    edge_warnings,
+    ranking_warning,
+    significantly_better,
+    tolerance,
+)
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
 
@@ -93,10 +104,11 @@ class Selection:
     memory: int | None = None
     focus_scores: dict[str, float] | None = None
     feedthrough_note: str = ""
+    tolerance: float | None = None
 
     def top(self, count: int = 8) -> list[SweepRow]:
         """The best ``count`` models by score, and the chosen one after them when it is not
-        among them (a smaller order within 0.5 points of the best can rank lower)."""
+        among them (a smaller order within the tolerance of the best can rank lower)."""
         rows = self.result.ranked()[:count]
         return rows if any(r is self.best for r in rows) else [*rows, self.best]
 
@@ -179,32 +191,6 @@ def _orders(future: int, n_outputs: int) -> list[int]:
     return list(range(min(ORDERS[0], top), top + 1))
 
 
-def _edges(best: SweepRow, result: SweepResult, grid: dict[str, list[int]], *, capped: bool,
-           tol: float = 0.5) -> list[str]:
-    """Warnings for a choice at the edge of the grid that the scores say may be binding.
-
-    The choice sits at the largest (smallest) past, future or order tried, and no stable row
-    with another value of that parameter scores within ``tol`` points of the best score: the
-    score is still rising towards the edge. When rows inside the grid score as well (a flat
-    top: the held-out score cannot tell them apart), the edge is not flagged."""
-    ranked = result.ranked(require_stable=True)  # not empty: ``best`` is one of them
-    top = ranked[0].score
-    out = []
-    for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
-        values = grid[f"{name}s"]
-        if len(values) < 2 or value not in (min(values), max(values)):
-            continue
-        inside = [r.score for r in ranked if getattr(r, name) != value]
-        if inside and max(inside) >= top - tol:
-            continue
-        if value == max(values):
-            why = " (the data allow no longer horizons)" if capped and name != "order" else ""
-            out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
-        else:
-            out.append(f"{name} {value} is the smallest tried: the best may lie below")
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class Plan:
     """The data and grid of a selection: identification and validation experiments, the
@@ -265,7 +251,16 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     the sweep scored, identified on the identification part, is returned instead, and a
     warning says so."""
     best = result.best()
-    warnings = _edges(best, result, p.grid, capped=p.capped)
+    ranked = result.ranked(require_stable=True)
+    tol = tolerance(ranked[0])
+    log.info("selection: best held-out score %.2f, tolerance %.2f points (one standard error "
+             "over %s blocks); orders within it: %s", ranked[0].score, tol,
+             "?" if best.errors is None else best.errors.shape[0],
+             sorted({r.order for r in close_to_best(ranked)}))
+    warnings = edge_warnings(best, ranked, p.grid, capped=p.capped)
+    unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val))
+    if unresolved is not None:
+        warnings.append(unresolved)
     final = p.ident if p.given_validation else p.everything
     try:
         model = method.identify(final, order=best.order, past=best.past, future=best.future,
@@ -277,7 +272,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
-                     warnings=tuple(warnings), grid=p.grid, memory=p.memory)
+                     warnings=tuple(warnings), grid=p.grid, memory=p.memory, tolerance=tol)
 
 
 def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,
@@ -326,18 +321,20 @@ def focus_order(default: str) -> list[str]:
     return [default, *(f for f in ("prediction", "simulation") if f != default)]
 
 
-def pick_focus(selections: Sequence[Selection], *, tol: float = 0.5) -> Selection:
+def pick_focus(selections: Sequence[Selection], *, tol: float | None = None) -> Selection:
     """The selection whose chosen model scores best on the held-out data; the first one (the
-    method's default focus) unless another beats it by more than ``tol`` points. The
-    reason is in :attr:`Selection.focus_note`."""
+    method's default focus) unless another is better by more than one standard error of its
+    score (at least 0.1 points: :func:`sysid.parsimony.significantly_better`; by more than
+    ``tol`` points when given). The reason is in :attr:`Selection.focus_note`."""
     first = selections[0]
     best = max(selections, key=lambda s: s.best.score)
-    chosen = first if best.best.score <= first.best.score + tol else best
+    better, margin = significantly_better(best.best, first.best, tol=tol)
+    chosen = best if better else first
     scores = ", ".join(f"{s.model.provenance.get('focus')} {s.best.score:.1f}"
                        for s in selections)
     note = (f"focus {chosen.model.provenance.get('focus')}: best held-out score per focus "
             f"{scores} (the method's default unless another is better by more than "
-            f"{tol:g} points)")
+            f"{margin:.2g} points{'' if tol is not None else ', one standard error'})")
     log.info("selection: %s", note)
     return dataclasses.replace(chosen, focus_note=note, focus_scores={
         str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
@@ -432,14 +429,17 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     return chosen if with_d is None else pick_feedthrough(chosen, with_d)
 
 
-def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float = 0.5) -> Selection:
-    """``with_d`` (a direct term) when its chosen model scores better on the held-out data than
-    ``without``'s by more than ``tol`` points, else ``without``; the reason in
-    :attr:`Selection.feedthrough_note`."""
-    better = with_d.best.score > without.best.score + tol
+def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float | None = None
+                     ) -> Selection:
+    """``with_d`` (a direct term) when its chosen model scores better on the held-out data
+    than ``without``'s by more than one standard error of its score
+    (:func:`sysid.parsimony.significantly_better`; by more than ``tol`` points when given),
+    else ``without``; the reason in :attr:`Selection.feedthrough_note`."""
+    better, margin = significantly_better(with_d.best, without.best, tol=tol)
     note = (f"direct term {'kept' if better else 'left out'}: best held-out score "
             f"{with_d.best.score:.1f} with, {without.best.score:.1f} without (kept only when "
-            f"better by more than {tol:g} points)")
+            f"better by more than {margin:.2g} points"
+            f"{'' if tol is not None else ', one standard error'})")
     log.info("selection: %s", note)
     chosen = dataclasses.replace(with_d, focus_note=without.focus_note,
                                  focus_scores=without.focus_scores) if better else without

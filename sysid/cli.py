@@ -155,9 +155,10 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     Without --past/--future/--order they are chosen by validation on held-out data (the
     last session when several are given, else the last 30 % of each experiment; see
     docs/sysid.md): the best candidates are listed with their fits, and a choice at the edge
-    of the grid is flagged. Then prints the poles, whether the model and its predictor
-    A - KC are stable, and the fit on the identification data (windowed simulation and
-    one-step prediction), and on each --validate session.
+    of the grid, or held-out data too few to rank the models, is flagged. Then prints the
+    poles, whether the model and its predictor A - KC are stable, and the fit on the
+    identification data (windowed simulation and one-step prediction), and on each --validate
+    session.
 
     \b
     Examples:
@@ -350,12 +351,13 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
     the same held-out split, default grid, score and rule, so on the same session both
     choose the same past, future, order and focus. The score is the mean of the per-channel
     fits floored at 0 % (one channel no model can predict cannot decide the ranking); the
-    smallest order within 0.5 points of the best stable score is chosen. Without --focus the
-    grid runs once per focus and the focus whose choice scores best is taken. The report
-    lists the best --top candidates with their fits, warns when the choice is at the edge of
-    the grid, and --out saves the chosen model identified again on all the data. Models that
-    cannot be identified are counted with their reasons; when none can, or none is stable,
-    the command exits with 2.
+    smallest order within one standard error of the best stable score (over blocks of the
+    held-out data, at least 0.1 points) is chosen. Without --focus the grid runs once per
+    focus and the focus whose choice scores best is taken. The report lists the best --top
+    candidates with their fits, warns when the choice is at the edge of the grid or when the
+    held-out data are too few to rank the models, and --out saves the chosen model identified
+    again on all the data. Models that cannot be identified are counted with their reasons;
+    when none can, or none is stable, the command exits with 2.
 
     \b
     Example:

@@ -17,8 +17,11 @@ floored at 0 %, :math:`S = \\frac1l \\sum_i \\max(F_i, 0)`. A channel no model c
 while the mean fit would be dominated by it.
 
 Selection (:meth:`SweepResult.best`) is parsimonious: among successful (by default stable)
-models, take the best score :math:`S^*`, keep those within ``tol`` percentage points,
-:math:`S \\ge S^* - \\text{tol}`, and return the one of smallest order (then best score).
+models, take the best score :math:`S^*`, keep those within one standard error of it,
+:math:`S \\ge S^* - \\max(\\widehat{\\mathrm{se}}(S^*),\\ 0.1)`, the standard error from the
+score's blocks of validation data (the one-standard-error rule, :mod:`sysid.parsimony`), and
+return the one of smallest order (then best score); ``best(tol=...)`` keeps those within a
+fixed ``tol`` points instead.
 Orders above the true one fit the same data about as well, so "highest fit" alone would pick
 an over-parameterised model at random. :func:`sysid.auto.select` (what ``sysid identify`` and
 ``sysid sweep`` run) adds the held-out split, the default grid, the choice of focus and the
@@ -47,6 +50,7 @@ from sysid.errors import DataError, ParameterError, SysIdError
 from sysid.grid import HorizonGrid, build_grid, grid_products
 from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
+from sysid.parsimony import block_errors, parsimonious
 from sysid.validate import compare
 
 __all__ = ["SweepResult", "SweepRow", "one_blas_thread", "quiet_models", "select_order",
@@ -63,7 +67,9 @@ class SweepRow:
 
     ``fit`` (l,) percent on the validation data (NaN when identification failed),
     ``poles`` (n,) complex, ``seconds`` wall time of identification + validation,
-    ``error`` the one-line reason when the model could not be identified.
+    ``error`` the one-line reason when the model could not be identified, ``errors`` (B, l)
+    the squared errors of the score per block of the validation data
+    (:func:`sysid.parsimony.block_errors`; None for failed and hand-made rows).
     """
 
     past: int
@@ -76,6 +82,7 @@ class SweepRow:
     seconds: float
     error: str | None = None
     model: StateSpaceModel | None = field(default=None, repr=False)
+    errors: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def mean_fit(self) -> float:
@@ -111,16 +118,16 @@ class SweepResult:
     horizon: int | None
     window: float | None
 
-    def best(self, *, tol: float = 0.5, require_stable: bool = True) -> SweepRow:
-        """The parsimonious best row (module docstring): smallest order within ``tol`` points."""
+    def best(self, *, tol: float | None = None, require_stable: bool = True) -> SweepRow:
+        """The parsimonious best row (module docstring): the smallest order within one standard
+        error of the best score (:func:`sysid.parsimony.parsimonious`), or within ``tol``
+        points of it when a fixed ``tol`` is given."""
         ok = self.ranked(require_stable=require_stable)
         if not ok:
             raise DataError("no model of the sweep succeeded" +
                             (" and is stable" if require_stable else "") +
                             "; widen the grid or pass require_stable=False")
-        top = ok[0].score
-        close = [r for r in ok if r.score >= top - tol]
-        return min(close, key=lambda r: (r.order, -r.score))
+        return parsimonious(ok, tol=tol)
 
     def ranked(self, *, require_stable: bool = False) -> list[SweepRow]:
         """Successful rows (and stable ones only, with ``require_stable``), best score first."""
@@ -240,7 +247,8 @@ def _past_rows(
             rows.append(SweepRow(
                 past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
                 stable=model.is_stable, predictor_stable=model.predictor_is_stable,
-                seconds=time.perf_counter() - t0, model=model if keep_models else None))
+                seconds=time.perf_counter() - t0, model=model if keep_models else None,
+                errors=block_errors(res)))
     return rows
 
 
@@ -383,7 +391,7 @@ def select_order(
     past: int,
     future: int,
     orders: Sequence[int],
-    tol: float = 0.5,
+    tol: float | None = None,
     **kwargs: Any,
 ) -> tuple[SweepRow, SweepResult]:
     """Order selection at fixed horizons: ``(best row, full sweep)`` (see :func:`sweep`)."""

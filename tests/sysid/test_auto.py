@@ -245,17 +245,17 @@ def test_an_edge_is_flagged_only_while_the_score_rises_towards_it() -> None:
     """A choice at the grid's edge with an inside row as good (a flat top, the demo flights:
     42.2 inside against 41.8 at the largest future) says nothing; a score that still rises
     towards the edge is flagged (largest future, smallest past)."""
-    from sysid.auto import _edges
+    from sysid.parsimony import edge_warnings
 
     grid = {"pasts": [4, 8, 16], "futures": [3, 6, 9], "orders": [2, 3, 4]}
     flat = SweepResult(rows=(_row(8, 9, 3, 41.8), _row(8, 6, 4, 42.2), _row(4, 3, 2, 30.0)),
                        method="iem", horizon=None, window=2.0)
     best = flat.best()
     assert (best.future, best.order) == (9, 3)
-    assert _edges(best, flat, grid, capped=False) == []
+    assert edge_warnings(best, flat.ranked(), grid, capped=False) == []
     rising = SweepResult(rows=(_row(4, 9, 3, 60.0), _row(8, 6, 3, 55.0), _row(16, 3, 3, 50.0)),
                          method="iem", horizon=None, window=2.0)
-    assert _edges(rising.best(), rising, grid, capped=True) == [
+    assert edge_warnings(rising.best(), rising.ranked(), grid, capped=True) == [
         "past 4 is the smallest tried: the best may lie below",
         "future 9 is the largest tried (the data allow no longer horizons): the best may lie "
         "beyond"]

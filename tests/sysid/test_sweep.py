@@ -77,6 +77,13 @@ def test_parallel_sweep_equals_serial_and_failures_are_rows(
     serial = sweep(ident, **grid)
     parallel = sweep(ident, workers=2, **grid)
     np.testing.assert_allclose(parallel.fits, serial.fits, equal_nan=True)
+    # every scored row carries its squared errors per block of the validation data (the
+    # one-standard-error rule, sysid.parsimony), the same blocks for every row
+    scored = [(a, b) for a, b in zip(serial.rows, parallel.rows, strict=True) if a.error is None]
+    assert {a.errors.shape for a, _ in scored} == {(10, 2)}
+    for a, b in scored:
+        np.testing.assert_allclose(b.errors, a.errors)
+        np.testing.assert_allclose(100 * (1 - np.sqrt(a.errors.sum(axis=0))), a.fit, atol=1e-9)
     # order 12 > future * outputs = 8 with future 4: recorded as a failed row, not raised.
     failed = [r for r in serial.rows if r.error is not None]
     assert [(r.future, r.order) for r in failed] == [(4, 12), (4, 12)]
