@@ -219,3 +219,22 @@ def test_default_simulation_window_is_2_s_with_a_floor_in_samples():
     assert simulation_window(dt=1.0, n_states=12, n_outputs=1) == 120
     assert simulation_window(dt=1.0, n_states=12, n_outputs=6) == 20
     assert simulation_window(dt=0.02, n_states=12, n_outputs=1) == pytest.approx(2.4)
+
+
+@pytest.mark.parametrize("mode", [{"window": 0.5}, {}, {"horizon": 3}])
+def test_fits_do_not_depend_on_the_units_of_a_channel(mode) -> None:
+    """The initial state is fitted with every channel weighted as the fit weights it: logging
+    one output in units 1000 times smaller (deg/s against a gyro's rad/s) changes no fit. An
+    unweighted fit let the large channel decide x0 and the small one drift (demo: -2254 %)."""
+    rng = np.random.default_rng(21)
+    system = random_stable_system(n_states=6, n_inputs=2, n_outputs=3, rng=rng,
+                                  radius=(0.9, 0.99))
+    u = rng.normal(size=(1500, 2))
+    y = system.simulate(u, x0=rng.normal(size=6) * 3) + 0.3 * rng.normal(size=(1500, 3))
+    wrong = system.replace(B=system.B * 1.1)  # a model that is not the system
+    units = np.array([1.0, 1e-3, 1e3])
+    scaled = wrong.replace(C=wrong.C * units[:, None], D=wrong.D * units[:, None])
+    base = compare(wrong, IOData(u=u, y=y, dt=system.dt), **mode)
+    again = compare(scaled, IOData(u=u, y=y * units, dt=system.dt), **mode)
+    np.testing.assert_allclose(again.fit, base.fit, atol=1e-6)
+    assert np.all(base.fit > 50.0), base.fit  # a useful comparison, not three failures alike
