@@ -1,9 +1,10 @@
-"""The cflib connection of a flight: drivers, connect, TOC checks, log blocks, metadata.
+"""The cflib connection of a flight: connect, TOC, log blocks started, setpoints, metadata.
 
 :func:`open_link` connects to a Crazyflie (``radio://``, ``usb://``, ``udp://`` or the simulator's
-``sim://``) with a timeout and returns a :class:`Link`. Everything cflib calls back from its own
-threads (log packets, console text, link quality and latency, link loss) is turned into a tuple and
-handed to ``post`` (the flight runner's queue), stamped with the flight clock:
+``sim://``; :mod:`groundstation.flight.uri`) with a timeout and returns a :class:`Link`. Everything
+cflib calls back from its own threads (log packets, console text, link quality and latency, link
+loss) is turned into a tuple and handed to ``post`` (the flight runner's queue), stamped with the
+flight clock:
 
 =====================================================  =========================================
 ``("log", block, t, fw_ms, values)``                   one log packet; ``values`` in block order
@@ -13,10 +14,8 @@ handed to ``post`` (the flight runner's queue), stamped with the flight clock:
 ``("log_error", t, message)``                          cflib refused or failed a log block
 =====================================================  =========================================
 
-``t`` is ``clock.now()`` in seconds. :func:`plan_blocks` checks the logged variables against the
-TOC before anything flies: each must exist, its type is taken from the TOC (``motor.m1`` is
-``uint16_t`` or ``uint32_t`` depending on the firmware) and each block must fit the firmware's
-26 data bytes per packet: :math:`\\sum_i \\text{size}(\\text{type}_i) \\le 26`.
+``t`` is ``clock.now()`` in seconds. The blocks logged and their checks against the TOC are
+:mod:`groundstation.flight.blocks` (re-exported here).
 """
 
 from __future__ import annotations
@@ -27,17 +26,26 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
-from cfsession.schema import CFLIB_TYPES, StreamSpec, log_block_spec
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
+from groundstation.flight.blocks import (
+    ATTITUDE_BLOCK,
+    BATTERY_BLOCK,
+    BLOCK_PERIOD_S,
+    FLIGHT_BLOCKS,
+    LOG_MAX_BYTES,
+    BlockPlan,
+    plan_blocks,
+)
 from groundstation.flight.clock import Clock
 from groundstation.flight.drivers import install_drivers, toc_cache_dir
 from groundstation.flight.params import typed_value
+from groundstation.flight.uri import DEFAULT_URI, URI_SCHEMES, check_uri, connect_advice
 
 __all__ = [
+    "ATTITUDE_BLOCK",
     "BATTERY_BLOCK",
     "BLOCK_PERIOD_S",
     "CONNECT_LIMIT_S",
@@ -57,27 +65,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DEFAULT_URI = "radio://0/80/2M/E7E7E7E7E7"
 CONNECT_LIMIT_S = 120.0
 """Longest a connection may take in all while the vehicle keeps answering (seconds)."""
-URI_SCHEMES = ("radio", "usb", "udp", "sim")
-"""The link URI schemes the ground station flies over (cflib's drivers plus the simulator's)."""
-_OTHER_SCHEMES = ("tcp", "prrt")  # cflib has drivers for these too; rarely used, not advertised
-LOG_MAX_BYTES = 26
-"""Data bytes in one log packet (firmware ``LOG_MAX_LEN``, cflib ``LogConfig.MAX_LEN``)."""
-BLOCK_PERIOD_S = 0.020
-FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
-    "motors": ("motor.m1", "motor.m2", "motor.m3", "motor.m4"),
-    "acc": ("acc.x", "acc.y", "acc.z"),
-    "gyro": ("gyro.x", "gyro.y", "gyro.z"),
-}
-"""The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
-BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
-"""A slow block (name, variables, period s) for the take-off check and the battery's sag."""
-ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
-"""The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
-the radio's budget stays with the thesis' three 50 Hz blocks)."""
-
 STOP_REPEATS = 5
 STOP_SPACING_S = 0.02
 """The stop setpoint is sent :data:`STOP_REPEATS` times this far apart (flight clock, s)."""
@@ -89,58 +78,9 @@ with the Crazyradio unplugged cflib's radio driver stops taking packets, blocks 
 and then deadlocks in its link-error path (the sender holds ``Crazyflie._send_lock`` while the
 error handler joins the ping thread, which waits for that lock), so these calls never return."""
 
-_WIRE_BYTES = {"uint8_t": 1, "int8_t": 1, "uint16_t": 2, "int16_t": 2, "FP16": 2,
-               "uint32_t": 4, "int32_t": 4, "float": 4}
 _PLATFORM_PORT, _VERSION_CHANNEL, _VERSION_GET_FIRMWARE = 13, 1, 1
 
 Post = Callable[[tuple], None]
-
-
-@dataclass(frozen=True)
-class BlockPlan:
-    """A log block as it will be created: ``variables`` are ``(group.name, TOC type)``."""
-
-    name: str
-    variables: tuple[tuple[str, str], ...]
-    period_s: float
-
-    @property
-    def n_bytes(self) -> int:
-        """Data bytes per packet: the sum of the variables' wire sizes."""
-        return sum(_WIRE_BYTES[t] for _, t in self.variables)
-
-    def spec(self) -> StreamSpec:
-        """The session stream this block is recorded to."""
-        return log_block_spec(name=self.name, variables=self.variables, period_s=self.period_s)
-
-
-def plan_blocks(
-    *, toc_type: Callable[[str], str | None], blocks: Mapping[str, Sequence[str]],
-    period_s: float,
-) -> list[BlockPlan]:
-    """Blocks with types from the TOC (``toc_type(name)``, ``None`` if absent), each checked.
-
-    Raises :class:`LinkError` naming the variable missing from the TOC, a type cflib cannot log,
-    or the block beyond :data:`LOG_MAX_BYTES`.
-    """
-    out = []
-    for name, variables in blocks.items():
-        typed = []
-        for var in variables:
-            ctype = toc_type(var)
-            if ctype is None:
-                raise LinkError(f"log variable {var} (block {name}) is not in the Crazyflie's "
-                                "log TOC; update the firmware or log another variable")
-            if ctype not in _WIRE_BYTES or ctype not in CFLIB_TYPES:
-                raise LinkError(f"log variable {var} has TOC type {ctype!r}, which cannot be "
-                                "logged; choose another variable")
-            typed.append((var, ctype))
-        block = BlockPlan(name=name, variables=tuple(typed), period_s=period_s)
-        if block.n_bytes > LOG_MAX_BYTES:
-            raise LinkError(f"log block {name} needs {block.n_bytes} bytes per packet, more than "
-                            f"the {LOG_MAX_BYTES} a log packet holds; split it into two blocks")
-        out.append(block)
-    return out
 
 
 class _Caller:
@@ -345,36 +285,6 @@ class Link:
             log.warning("the link to %s is stuck in cflib; left open", self.uri)
 
 
-def check_uri(uri: str) -> str:
-    """``uri`` if its scheme is one a link driver serves; one-line :class:`LinkError` naming the
-    supported schemes otherwise (checked before anything is created or connected)."""
-    scheme, sep, _ = uri.partition("://")
-    if not sep or scheme.lower() not in (*URI_SCHEMES, *_OTHER_SCHEMES):
-        supported = ", ".join(f"{s}://" for s in URI_SCHEMES)
-        raise LinkError(f"cannot connect to {uri}: unknown link URI scheme "
-                        f"{scheme + sep if sep else scheme!r}; use one of {supported} (e.g. "
-                        f"{DEFAULT_URI}; groundstation scan lists the Crazyflies in reach)")
-    return uri
-
-
-def _connect_advice(why: str) -> str:
-    """What to do about a failed connect, from cflib's reason."""
-    low = why.lower()
-    if "malformed uri" in low:
-        return (f"check the URI's form, e.g. {DEFAULT_URI}, usb://0, udp://127.0.0.1:19850 "
-                "or sim://0?speed=20")
-    if "crazyradio" in low or "dongle" in low:
-        return ("plug in the Crazyradio (groundstation scan lists radios; on Linux without "
-                "permission see the udev rule in docs/flying.md)")
-    if "too many packets lost" in low:  # the radio's acks never came: nobody on that channel
-        return ("no Crazyflie acknowledges on that channel, data rate and address: check it is "
-                "on, and run groundstation scan to find its URI")
-    if "access denied" in low or "permission" in low or "errno 13" in low:
-        return "no USB permission: install the udev rule in docs/flying.md and replug"
-    return ("check that the Crazyflie is on, the channel/address in the URI are right "
-            "(groundstation scan lists them) and nothing else is connected to it")
-
-
 def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
               limit_s: float = CONNECT_LIMIT_S, cancel: threading.Event | None = None) -> Link:
     """Connect to ``uri`` and wait until every parameter has been read (``fully_connected``).
@@ -429,7 +339,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
     if failure:
         link.close()  # bounded (Link.close)
         why = failure[0]
-        raise LinkError(f"cannot connect to {uri}: {why}; {_connect_advice(why)}")
+        raise LinkError(f"cannot connect to {uri}: {why}; {connect_advice(why)}")
     cf.connection_failed.remove_callback(failed)
     cf.connection_lost.remove_callback(failed)
     log.info("connected to %s in %.2f s", uri, time.monotonic() - t0)

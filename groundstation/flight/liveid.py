@@ -11,7 +11,8 @@ the recorder, and a request to end the excitation once converged) and, after the
 No identification code is imported here: the caller hands the engine in (:class:`Engine`,
 built by ``groundstation fly``), so flying without live identification loads none.
 
-**Data.** The window is the recorded excitation, from the first excitation phase marker to the
+**Data** (:class:`~groundstation.flight.liveid_data.ExcitationGrid`). The window is the
+recorded excitation, from the first excitation phase marker to the
 marker of the first phase after the last excitation phase (an abort ends it too): log rows
 whose host time falls inside it. The grid is :math:`g_j = g_0 + j\\,\\Delta t` on firmware
 time, :math:`g_0` the latest first firmware time of the selected streams in the window and
@@ -29,7 +30,8 @@ Hausdorff distance to the previous update's poles: every pole within that distan
 the other set, and back), and the one-step-ahead fit and normalised innovation variance on the
 last :data:`FIT_WINDOW_S` seconds. When the excitation ends, a final update uses every sample.
 
-**Converged** (:class:`Convergence`, ``--until-converged``): the current poles lie within
+**Converged** (:class:`Convergence`, ``--until-converged``;
+:mod:`~groundstation.flight.liveid_update`): the current poles lie within
 ``tolerance`` (Hausdorff distance) of those of every update of the last ``duration_s`` seconds,
 at least two of them older than the current one and one ``duration_s`` or more ago. The runner
 then ends the excitation at its next setpoint and flies the rest of the plan (its landing).
@@ -42,7 +44,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -51,10 +53,18 @@ import numpy as np
 from cfsession.schema import StreamSpec, live_id_spec
 from groundstation.flight.liveid_data import (
     Channel,
-    Feed,
+    ExcitationGrid,
     check_live_id,
     planned_streams,
     resolve_channels,
+)
+from groundstation.flight.liveid_update import (
+    Convergence,
+    Update,
+    converged,
+    finite_mean,
+    pole_move,
+    sorted_poles,
 )
 from groundstation.plan import LiveIdConfig
 
@@ -70,14 +80,6 @@ FINISH_TIMEOUT_S = 30.0
 
 
 @dataclass(frozen=True)
-class Convergence:
-    """Poles within ``tolerance`` (z-plane distance) over ``duration_s`` seconds of flight."""
-
-    tolerance: float = 0.01
-    duration_s: float = 3.0
-
-
-@dataclass(frozen=True)
 class Engine:
     """The identification the worker drives, handed in by a caller that may import ``sysid``
     (``groundstation.commands.fly.live_id_engine``): ``identifier`` builds a
@@ -88,45 +90,6 @@ class Engine:
     identifier: Callable[..., Any]
     zoh: Callable[..., np.ndarray]
     save_model: Callable[[Any, Path], Path]
-
-
-@dataclass(frozen=True)
-class Update:
-    """One update as the views see it (the recorded row plus the arrays behind it)."""
-
-    t: float
-    n_samples: int
-    span_s: float
-    order: int
-    poles: np.ndarray
-    singular_values: np.ndarray
-    fit_pct: float
-    innovation_nvar: float
-    pole_move: float
-    update_s: float
-    skipped: int
-    final: bool
-    fw_times: np.ndarray = field(repr=False)  # (k,) firmware s of the samples below
-    host_times: np.ndarray = field(repr=False)  # (k,) the same on the flight clock (estimated)
-    measured: np.ndarray = field(repr=False)  # (k, l) mean-removed outputs
-    predicted: np.ndarray = field(repr=False)  # (k, l) their one-step predictions
-
-
-def _hausdorff(a: np.ndarray, b: np.ndarray) -> float:
-    d = np.abs(a[:, None] - b[None, :])
-    return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
-
-
-def _finite_mean(x: np.ndarray) -> float:
-    x = np.asarray(x, dtype=float)
-    x = x[np.isfinite(x)]
-    return float(x.mean()) if x.size else float("nan")
-
-
-def _sorted_poles(p: np.ndarray) -> np.ndarray:
-    """Descending magnitude; a conjugate pair with the negative imaginary part first."""
-    p = np.asarray(p, dtype=complex)
-    return p[np.lexsort((np.round(p.imag, 12), -np.round(np.abs(p), 12)))]
 
 
 class LiveIdListener:
@@ -175,20 +138,11 @@ class LiveIdListener:
 
     def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
         self.inputs, self.outputs, self.dt = check_live_id(self.config, streams=streams)
-        chans = self.inputs + self.outputs
-        specs = {s.name: s for s in streams}
-        self._feeds: dict[str, Feed] = {}
-        self._where: list[tuple[str, int]] = []  # channel -> (stream, column in its feed)
-        for ch in chans:
-            names = [f.name for f in specs[ch.stream].fields]
-            feed = self._feeds.setdefault(ch.stream, Feed(columns=[]))
-            feed.columns.append(names.index(ch.field))
-            self._where.append((ch.stream, len(feed.columns) - 1))
-        for feed in self._feeds.values():
-            feed.values = np.empty((0, len(feed.columns)))
         table = metadata.get("phase_table") or []
         exc = [int(p["id"]) for p in table if p.get("kind") == "excitation"]
-        self._last_excitation = max(exc) if exc else None
+        self._grid = ExcitationGrid(channels=self.inputs + self.outputs, streams=streams,
+                                    last_excitation=max(exc) if exc else None, dt=self.dt,
+                                    zoh=self.engine.zoh)
         c = self.config
         self.ident = self.engine.identifier(
             n_inputs=len(self.inputs), n_outputs=len(self.outputs), order=c.order,
@@ -197,16 +151,13 @@ class LiveIdListener:
             output_names=tuple(x.label for x in self.outputs),
             input_units=tuple(x.unit for x in self.inputs),
             output_units=tuple(x.unit for x in self.outputs))
-        self._window: list[float | None] = [None, None]  # host time the excitation starts, ends
-        self._g0: float | None = None
-        self._latest = -np.inf
         self._next_due: float | None = None
         self._history: list[tuple[float, np.ndarray]] = []
         self._last_n = 0
-        self._wanted = {*self._feeds, "phases"}
+        self._wanted = {*self._grid.feeds, "phases"}
         for obs in list(self.observers):
             self._notify(obs, "begin", listener=self, streams=streams)
-        if self._last_excitation is None:
+        if self._grid.last_excitation is None:
             self.status = "live id: the plan has no excitation phase; nothing to identify"
         self._thread = threading.Thread(target=self._run, name="live-id", daemon=True)
         self._thread.start()
@@ -253,7 +204,7 @@ class LiveIdListener:
         if self.final_model is not None:
             target = path.with_name(f"{path.stem}.live-model.json")
             prov = {**self.final_model.provenance, "live_id": {
-                "session": path.name, "fw_start_s": self._g0, "dt": self.dt,
+                "session": path.name, "fw_start_s": self._grid.g0, "dt": self.dt,
                 "n_samples": self.final.n_samples, "flight_time_s": self.final.t,
                 "channels": {c.label: f"{c.stream}.{c.field}" for c in self.inputs + self.outputs}}}
             try:
@@ -311,80 +262,47 @@ class LiveIdListener:
 
     def _take(self) -> None:
         while self._inbox:
-            stream, rows = self._inbox.popleft()
-            if stream != "phases":
-                self._feeds[stream].add(rows)
-                self._latest = max(self._latest, float(rows[-1][0]))
-                continue
-            for t, pid, _, kind in rows:
-                start, stop = self._window
-                if start is None and kind == b"excitation":
-                    self._window[0] = float(t)
-                elif start is not None and stop is None and (
-                        pid < 0 or self._last_excitation is None or pid > self._last_excitation):
-                    self._window[1] = float(t)
+            self._grid.take(*self._inbox.popleft())
 
     def _advance(self, *, stopping: bool) -> bool:
         """Append the grid samples every stream now covers; True once the window has closed
         and every row inside it has arrived."""
-        start, stop = self._window
-        feeds = list(self._feeds.values())
-        if start is None:
-            for f in feeds:  # before the excitation: keep the last seconds only
-                f.keep(f.host >= self._latest - 5.0)
-            return False
-        for f in feeds:
-            f.keep((f.host >= start) & (f.host < (np.inf if stop is None else stop)))
-        complete = stop is not None and (stopping or all(f.max_host >= stop for f in feeds))
-        if any(f.fw.size == 0 for f in feeds):
-            return complete
-        if self._g0 is None:
-            self._g0 = max(float(f.fw[0]) for f in feeds)
-        ready = min(float(f.fw[-1]) for f in feeds)
-        j0 = self.ident.n_samples
-        j1 = int(np.floor((ready - self._g0) / self.dt + 1e-9)) + 1
-        if j1 > j0:
-            grid = self._g0 + self.dt * np.arange(j0, j1)
-            held = {name: self.engine.zoh(t=f.fw, values=f.values, grid=grid)
-                    for name, f in self._feeds.items()}
-            w = np.column_stack([held[s][:, i] for s, i in self._where])
+        held, complete = self._grid.advance(n_done=self.ident.n_samples, stopping=stopping)
+        if held is not None:
             m = len(self.inputs)
-            self.ident.append(u=w[:, :m], y=w[:, m:])
-            for f in feeds:  # keep the sample held at the last grid instant, and later ones
-                idx = max(int(np.searchsorted(f.fw, grid[-1] + 1e-9, side="right")) - 1, 0)
-                f.keep(np.arange(f.fw.size) >= idx)
+            self.ident.append(u=held[:, :m], y=held[:, m:])
         return complete
 
     def _count_missed(self) -> None:
         """Count the update times that came due before the final update and got none."""
-        start, stop = self._window
+        (start, stop), latest = self._grid.window, self._grid.latest
         if self._next_due is None or start is None:
             return
-        end = self._latest if stop is None else min(self._latest, stop)
+        end = latest if stop is None else min(latest, stop)
         if end > self._next_due:
             self.skipped += int((end - self._next_due) // self.config.update_period)
 
     def _maybe_update(self) -> None:
-        start, stop = self._window
+        (start, stop), latest = self._grid.window, self._grid.latest
         if start is None or stop is not None or self.ident.n_samples < self.ident.min_samples:
             return
         period = self.config.update_period
         if self._next_due is None:  # the first due time with enough samples
-            self._next_due = start + period * np.ceil((self._latest - start) / period)
-        if self._latest < self._next_due:
+            self._next_due = start + period * np.ceil((latest - start) / period)
+        if latest < self._next_due:
             return
-        missed = int((self._latest - self._next_due) // period)
+        missed = int((latest - self._next_due) // period)
         self.skipped += missed
         self._next_due += (missed + 1) * period
         self._update(final=False)
 
     def _update(self, *, final: bool) -> None:
-        t, t0 = self._latest, time.perf_counter()
+        t, t0 = self._grid.latest, time.perf_counter()
         try:
             k = max(2, round(self.fit_window_s / self.dt))
             upd = self.ident.update(fit_samples=k)
             yc, y_pred = upd.recent.measured, upd.recent.predicted
-            fit, nvar = _finite_mean(upd.recent.fit_pct), upd.recent.innovation_nvar
+            fit, nvar = finite_mean(upd.recent.fit_pct), upd.recent.innovation_nvar
         except Exception as exc:  # a constant channel, a numerical failure: counted
             self.failed += 1
             self.error = f"update failed ({type(exc).__name__}: {exc})"
@@ -392,16 +310,16 @@ class LiveIdListener:
             log.log(logging.WARNING if self.failed == 1 else logging.DEBUG, "live id %s",
                     self.error)
             return
-        poles = _sorted_poles(upd.poles)
-        move = _hausdorff(poles, self._history[-1][1]) if self._history else float("nan")
+        poles = sorted_poles(upd.poles)
+        move = pole_move(poles, self._history[-1][1]) if self._history else float("nan")
         self._history.append((t, poles))
         new = max(1, min(k, upd.n_samples - self._last_n))
         self._last_n = upd.n_samples
         elapsed = time.perf_counter() - t0
         n, c = upd.n_samples, self.config
-        fw_end = self._g0 + (n - 1) * self.dt
+        fw_end = self._grid.g0 + (n - 1) * self.dt
         fw_times = fw_end - self.dt * np.arange(new)[::-1]
-        offset = next(iter(self._feeds.values())).offset
+        offset = self._grid.offset
         self.updates += 1
         row = (t, fw_end, upd.span_s, n, c.order, c.past, c.future, fit, nvar, move,
                float(np.abs(poles).max()), elapsed, self.skipped, int(final))
@@ -417,21 +335,11 @@ class LiveIdListener:
         if final:
             self.final, self.final_model = info, upd.model
         elif self.convergence is not None and self.converged_at is None:
-            self._check_converged(t, poles)
+            reason = converged(self.convergence, self._history, t=t, poles=poles)
+            if reason:
+                self.converged_at, self._end_reason = round(t, 3), reason
         for obs in list(self.observers):
             self._notify(obs, "update", update=info)
-
-    def _check_converged(self, t: float, poles: np.ndarray) -> None:
-        conv = self.convergence
-        old = [i for i, (ti, _) in enumerate(self._history) if ti <= t - conv.duration_s]
-        if not old or len(self._history) - old[-1] < 3:
-            return
-        moved = max(_hausdorff(poles, p) for _, p in self._history[old[-1]:])
-        if moved < conv.tolerance:
-            self.converged_at = round(t, 3)
-            span = t - self._history[old[-1]][0]
-            self._end_reason = (f"live id converged: poles moved at most {moved:.1e} "
-                                f"(< {conv.tolerance:g}) over {span:.1f} s")
 
     def _notify(self, obs: Any, method: str, **kw: Any) -> None:
         try:

@@ -1,11 +1,13 @@
 """The data of live identification (:mod:`groundstation.flight.liveid`): which log variables
 it uses (``[live_id]`` inputs and outputs, checked against the log streams of a flight before
-connecting, :func:`planned_streams`, and at its start, the streams as recorded), and
-:class:`Feed`, one stream's rows on their way to the grid (firmware time unwrapped)."""
+connecting, :func:`planned_streams`, and at its start, the streams as recorded),
+:class:`Feed`, one stream's rows on their way to the grid (firmware time unwrapped), and
+:class:`ExcitationGrid`, the recorded excitation held onto the grid (the **Data** paragraph of
+:mod:`groundstation.flight.liveid`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Literal
 
 import numpy as np
@@ -13,26 +15,24 @@ import numpy as np
 from cfsession.channels import Channel
 from cfsession.channels import resolve_channels as _resolve
 from cfsession.errors import ChannelError
-from cfsession.schema import StreamSpec, log_block_spec
+from cfsession.schema import StreamSpec
 from groundstation.errors import PlanError
-from groundstation.flight.link import ATTITUDE_BLOCK, BATTERY_BLOCK, BLOCK_PERIOD_S, FLIGHT_BLOCKS
-from groundstation.flight.runner import ALTITUDE_BLOCK, altitude_block_period
+from groundstation.flight.blocks import flight_blocks
 from groundstation.plan import LiveIdConfig, Plan
 
-__all__ = ["Channel", "Feed", "check_live_id", "planned_streams", "resolve_channels"]
+__all__ = ["Channel", "ExcitationGrid", "Feed", "check_live_id", "planned_streams",
+           "resolve_channels"]
 
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 
 
 def planned_streams(plan: Plan) -> list[StreamSpec]:
-    """The log streams a flight of ``plan`` records (types as 'float': only names matter)."""
-    blocks = [(n, v, BLOCK_PERIOD_S) for n, v in FLIGHT_BLOCKS.items()]
-    blocks += [ATTITUDE_BLOCK, BATTERY_BLOCK]
-    if plan.altitude_hold is not None:
-        blocks.append((ALTITUDE_BLOCK, (plan.altitude_hold.variable,),
-                       altitude_block_period(1.0 / plan.setpoint_rate_hz)))
-    return [log_block_spec(name=n, variables=[(v, "float") for v in vs], period_s=p)
-            for n, vs, p in blocks]
+    """The log streams a flight of ``plan`` records (:func:`flight_blocks`; types as 'float':
+    only names matter)."""
+    hold = plan.altitude_hold
+    return [b.spec() for b in flight_blocks(
+        toc_type=lambda _: "float", altitude_variable=hold.variable if hold else None,
+        setpoint_period_s=1.0 / plan.setpoint_rate_hz)]
 
 
 def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
@@ -104,3 +104,79 @@ class Feed:
 
     def keep(self, mask: np.ndarray) -> None:
         self.host, self.fw, self.values = self.host[mask], self.fw[mask], self.values[mask]
+
+
+class ExcitationGrid:
+    """The rows of the selected streams inside the excitation window, held onto the grid
+    :math:`g_j = g_0 + j\\,\\Delta t` on firmware time (worker thread only).
+
+    The window opens at the first excitation phase marker and closes at the marker of the
+    first phase after the last excitation phase (``last_excitation``, a phase id; an abort
+    marker, id below 0, closes it too). ``zoh`` is ``sysid.preprocess.zoh_resample``, handed in
+    with the engine. :attr:`where` maps each channel, in order, to its stream and column."""
+
+    def __init__(self, *, channels: Sequence[Channel], streams: Sequence[StreamSpec],
+                 last_excitation: int | None, dt: float,
+                 zoh: Callable[..., np.ndarray]) -> None:
+        specs = {s.name: s for s in streams}
+        self.feeds: dict[str, Feed] = {}
+        self.where: list[tuple[str, int]] = []  # channel -> (stream, column in its feed)
+        for ch in channels:
+            names = [f.name for f in specs[ch.stream].fields]
+            feed = self.feeds.setdefault(ch.stream, Feed(columns=[]))
+            feed.columns.append(names.index(ch.field))
+            self.where.append((ch.stream, len(feed.columns) - 1))
+        for feed in self.feeds.values():
+            feed.values = np.empty((0, len(feed.columns)))
+        self.last_excitation, self.dt, self.zoh = last_excitation, dt, zoh
+        self.window: list[float | None] = [None, None]  # host time the excitation starts, ends
+        self.g0: float | None = None
+        self.latest = -np.inf  # host time of the newest log row taken
+
+    @property
+    def offset(self) -> float:
+        """Host minus firmware time of the newest rows (of the first selected stream)."""
+        return next(iter(self.feeds.values())).offset
+
+    def take(self, stream: str, rows: Sequence[tuple]) -> None:
+        """Rows of a selected stream, or phase markers (``"phases"``: the window)."""
+        if stream != "phases":
+            self.feeds[stream].add(rows)
+            self.latest = max(self.latest, float(rows[-1][0]))
+            return
+        for t, pid, _, kind in rows:
+            start, stop = self.window
+            if start is None and kind == b"excitation":
+                self.window[0] = float(t)
+            elif start is not None and stop is None and (
+                    pid < 0 or self.last_excitation is None or pid > self.last_excitation):
+                self.window[1] = float(t)
+
+    def advance(self, *, n_done: int, stopping: bool) -> tuple[np.ndarray | None, bool]:
+        """The held samples, (instants, channels), of the grid instants from ``n_done`` on
+        that every stream now covers (None if none), and whether the window has closed and
+        every row inside it has arrived."""
+        start, stop = self.window
+        feeds = list(self.feeds.values())
+        if start is None:
+            for f in feeds:  # before the excitation: keep the last seconds only
+                f.keep(f.host >= self.latest - 5.0)
+            return None, False
+        for f in feeds:
+            f.keep((f.host >= start) & (f.host < (np.inf if stop is None else stop)))
+        complete = stop is not None and (stopping or all(f.max_host >= stop for f in feeds))
+        if any(f.fw.size == 0 for f in feeds):
+            return None, complete
+        if self.g0 is None:
+            self.g0 = max(float(f.fw[0]) for f in feeds)
+        ready = min(float(f.fw[-1]) for f in feeds)
+        j1 = int(np.floor((ready - self.g0) / self.dt + 1e-9)) + 1
+        if j1 <= n_done:
+            return None, complete
+        grid = self.g0 + self.dt * np.arange(n_done, j1)
+        held = {name: self.zoh(t=f.fw, values=f.values, grid=grid)
+                for name, f in self.feeds.items()}
+        for f in feeds:  # keep the sample held at the last grid instant, and later ones
+            idx = max(int(np.searchsorted(f.fw, grid[-1] + 1e-9, side="right")) - 1, 0)
+            f.keep(np.arange(f.fw.size) >= idx)
+        return np.column_stack([held[s][:, i] for s, i in self.where]), complete

@@ -41,16 +41,14 @@ from groundstation.plan.schedule import (
 )
 from groundstation.plan.sections import (
     ExcitationSpec,
-    LiveIdConfig,
     PhaseSpec,
     check_thrust,
     read_altitude_hold,
-    read_live_id,
-    read_parameters,
     read_phase,
     read_safety,
     read_vehicle,
 )
+from groundstation.plan.settings import LiveIdConfig, read_live_id, read_parameters
 from groundstation.plan.toml import TomlSource, TomlTable
 
 __all__ = [

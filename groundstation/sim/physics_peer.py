@@ -38,6 +38,7 @@ import math
 import random
 import struct
 
+from groundstation.sim.crtp_wire import crtp_channel, crtp_header, crtp_port
 from groundstation.sim.firmware import battery_compensated_pwm
 from groundstation.sim.physics import (
     GRAVITY_M_S2,
@@ -65,13 +66,8 @@ BATTERY_EVERY = 100    # steps (ms) between battery packets: 10 Hz
 ACC_LSB_PER_G = 2048.0            # ±16 g range
 GYRO_LSB_PER_DPS = 65536.0 / 4000.0  # ±2000 deg/s range
 
-
-def crtp_header(*, port: int, channel: int) -> int:
-    """A CRTP header byte as the firmware and cflib write it (link bits set)."""
-    return ((port & 0x0F) << 4) | 0x0C | (channel & 0x03)
-
-
-SIM_HEADER = crtp_header(port=9, channel=0)
+_SIM_PORT, _SIM_CHANNEL = 9, 0
+SIM_HEADER = crtp_header(port=_SIM_PORT, channel=_SIM_CHANNEL)
 """Port 9 (``CRTP_PORT_SETPOINT_SIM``) channel 0: sensors in, motors out."""
 _POSE_HEADER = crtp_header(port=6, channel=1)
 _EXT_POSE_ID = 8
@@ -86,7 +82,8 @@ GYRO_BIAS_FOUND = bytes([SIM_HEADER, 1])
 
 def parse_motor_packet(data: bytes) -> tuple[int, int, int, int] | None:
     """m1..m4 PWM of a motor-command datagram, or ``None`` if ``data`` is something else."""
-    if len(data) != _MOTORS.size or (data[0] & 0xF3) != (SIM_HEADER & 0xF3):
+    if (len(data) != _MOTORS.size or crtp_port(data[0]) != _SIM_PORT
+            or crtp_channel(data[0]) != _SIM_CHANNEL):  # the link bits may be anything
         return None
     _, m1, m2, m3, m4 = _MOTORS.unpack(data)
     return (m1, m2, m3, m4)

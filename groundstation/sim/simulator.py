@@ -26,7 +26,9 @@ from collections.abc import Callable
 from typing import Any
 
 from groundstation.sim.clock import SimClock
-from groundstation.sim.crtp import P_COMMANDER, P_GENERIC, CrtpPeer, Packet, crtp_port
+from groundstation.sim.crtp import CrtpPeer
+from groundstation.sim.crtp_wire import P_COMMANDER, P_GENERIC, Packet, crtp_port
+from groundstation.sim.radio_phase import RadioPhase
 from groundstation.sim.uri import Faults
 
 __all__ = ["Simulator"]
@@ -38,12 +40,8 @@ _CLOCK_RESOLUTION_MS = 40  # ... and at most this much simulation time
 _CHUNK_MS = 10  # longest single vehicle.advance() so commands are applied promptly
 _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond this lag
 _PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
-_RADIO_PHASE_MS = 20  # lock-step: commander packets take effect a seeded per-flight delay in
-# [0, 20) ms (+-1 ms per packet) after they are handled, as over a radio link, whose packets land
-# at no fixed phase of the firmware's 50 Hz log clock. Without it every setpoint of a lock-step
-# flight lands at one phase (10-11 ms after a log sample), which flatters a strictly proper
-# motors -> gyro model identified from 50 Hz logs.
-_COMMANDER_PORTS = (P_COMMANDER, P_GENERIC)  # RPYT setpoints; stop and notify-stop
+_COMMANDER_PORTS = (P_COMMANDER, P_GENERIC)  # RPYT setpoints; stop and notify-stop: lock-step
+# delays them as a radio would (groundstation.sim.radio_phase)
 _PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler; the
 # hold ends at once when the link detaches, so only a scheduler that stops sleeping mid-link
 # (a stalled or crashed client) ever waits it out
@@ -76,9 +74,7 @@ class Simulator:
         self.clock = SimClock(source=self)
         self.dropped_packets = 0  # log packets lost to the drop fault
         self._rng = random.Random(seed * 7919 + 17)
-        self._radio_rng = random.Random(seed * 104729 + 3)
-        self._radio_ms = self._radio_rng.randrange(_RADIO_PHASE_MS)
-        self._delayed: deque[tuple[int, int, int, bytes]] = deque()  # (due ms, token, hdr, data)
+        self._radio = RadioPhase(seed=seed)  # lock-step: commander packets' radio delay
         self._sink, self._linger = sink, linger
         self._rx: deque[tuple[int, int, bytes]] = deque()
         self._out: deque[tuple[int, int, bytes]] = deque()  # (release ms, header, payload)
@@ -277,11 +273,8 @@ class Simulator:
             if self._cut or not self._from_link(token):
                 continue
             if self._lockstep and crtp_port(header) in _COMMANDER_PORTS:
-                due = self.vehicle.firmware_ms + max(
-                    0, self._radio_ms + self._radio_rng.choice((-1, 0, 1)))
-                if self._delayed:
-                    due = max(due, self._delayed[-1][0])  # packets keep their order
-                self._delayed.append((due, token, header, data))
+                self._radio.hold(now_ms=self.vehicle.firmware_ms, token=token, header=header,
+                                 data=data)
                 continue
             self._emit(peer.handle(header=header, data=data))
         self._apply_delayed()
@@ -289,9 +282,7 @@ class Simulator:
     def _apply_delayed(self, *, flush: bool = False) -> None:
         """Lock-step: the commander packets whose radio delay has passed (``flush``: all of
         them, the stop setpoint included) take effect."""
-        delayed, now = self._delayed, self.vehicle.firmware_ms
-        while delayed and (flush or delayed[0][0] <= now):
-            _, token, header, data = delayed.popleft()
+        for token, header, data in self._radio.due(now_ms=self.vehicle.firmware_ms, flush=flush):
             if self._from_link(token):  # handled before any cut: it is on board already
                 self._emit(self.peer.handle(header=header, data=data))
 
@@ -321,14 +312,15 @@ class Simulator:
             due = peer.next_due_ms()
             if due is not None and now < due < step_to:
                 step_to = due
-            if self._delayed and now < self._delayed[0][0] < step_to:
-                step_to = self._delayed[0][0]
+            radio_due = self._radio.next_due_ms()
+            if radio_due is not None and now < radio_due < step_to:
+                step_to = radio_due
             v.advance((step_to - now) / 1000.0)
             self._emit(peer.due_log_packets(), log=True)
             self._check_cut()
             if self._rx:
                 self._process_rx()
-            elif self._delayed:
+            elif self._radio.next_due_ms() is not None:
                 self._apply_delayed()
 
     def _flush_sink(self) -> None:

@@ -1,11 +1,12 @@
 """SimVehicle: a simulated Crazyflie 2.1 (physics at 1 kHz plus emulated firmware).
 
 This is the object the CRTP side (``groundstation/sim/crtp.py``) drives. Everything it exposes is
-what the real vehicle exposes on the wire: log variables, parameters, console text, commander
-input. Sign conventions are the firmware's (see docs/simulator.md): ``stabilizer.pitch`` is the
-legacy pitch, positive nose up; ``gyro`` is right-handed in the body frame (x forward, y left,
-z up); a wire pitch of ``-10`` (what ``cflib`` sends for ``send_setpoint(pitch=+10)``) tilts the
-nose down, so ``stabilizer.pitch`` settles at ``-10`` and ``gyro.y`` is positive while it tilts.
+what the real vehicle exposes on the wire: log variables, parameters (their tables and where each
+log value comes from: :mod:`groundstation.sim.vehicle_toc`), console text, commander input. Sign
+conventions are the firmware's (see docs/simulator.md): ``stabilizer.pitch`` is the legacy pitch,
+positive nose up; ``gyro`` is right-handed in the body frame (x forward, y left, z up); a wire
+pitch of ``-10`` (what ``cflib`` sends for ``send_setpoint(pitch=+10)``) tilts the nose down, so
+``stabilizer.pitch`` settles at ``-10`` and ``gyro.y`` is positive while it tilts.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import random
-from collections.abc import Callable
 from typing import ClassVar
 
 from groundstation.errors import GroundStationError
@@ -33,6 +33,14 @@ from groundstation.sim.physics import (
     motor_thrust_n,
 )
 from groundstation.sim.sensors import NoiseModel, Sensors
+from groundstation.sim.vehicle_toc import (
+    DECKS,
+    LOG_VARIABLES,
+    PARAMS,
+    PARAMS_READ_ONLY,
+    default_params,
+    log_getters,
+)
 
 __all__ = ["SimConfigError", "SimVehicle"]
 
@@ -42,7 +50,6 @@ _DT_S = 0.001          # physics / stabilizer tick
 _PID_DT_S = 0.002      # attitude and rate loops, 500 Hz
 _KALMAN_PERIOD_MS = 10  # estimator_kalman.c PREDICT_RATE 100 Hz
 _KALMAN = 2             # stabilizer.estimator: 1 complementary, 2 Kalman
-_FIRMWARE_REVISION0 = 0x2024_0A00   # arbitrary but stable identifier of the emulated build
 
 
 class SimConfigError(GroundStationError, ValueError):
@@ -78,50 +85,10 @@ class SimVehicle:
     samples at random: the aliasing ``groundstation.plan.aliasing`` detects (docs/simulator.md).
     """
 
-    LOG_VARIABLES: ClassVar[dict[str, str]] = {
-        "acc.x": "float", "acc.y": "float", "acc.z": "float",
-        "gyro.x": "float", "gyro.y": "float", "gyro.z": "float",
-        "stabilizer.roll": "float", "stabilizer.pitch": "float", "stabilizer.yaw": "float",
-        "stabilizer.thrust": "float",
-        "motor.m1": "uint16_t", "motor.m2": "uint16_t", "motor.m3": "uint16_t",
-        "motor.m4": "uint16_t",
-        "pwm.m1_pwm": "uint32_t", "pwm.m2_pwm": "uint32_t", "pwm.m3_pwm": "uint32_t",
-        "pwm.m4_pwm": "uint32_t",
-        "pm.vbat": "float", "pm.vbatMV": "uint16_t", "pm.batteryLevel": "uint8_t",
-        "controller.cmd_thrust": "float", "controller.cmd_roll": "float",
-        "controller.cmd_pitch": "float", "controller.cmd_yaw": "float",
-        "stateEstimate.x": "float", "stateEstimate.y": "float", "stateEstimate.z": "float",
-        # What the Crazyflie client reads (flight tab, battery bar, supervisor, tuning tab):
-        "stateEstimate.roll": "float", "stateEstimate.pitch": "float",
-        "stateEstimate.yaw": "float",
-        "controller.roll": "float", "controller.pitch": "float", "controller.yaw": "float",
-        "controller.rollRate": "float", "controller.pitchRate": "float",
-        "controller.yawRate": "float",
-        "controller.r_roll": "float", "controller.r_pitch": "float", "controller.r_yaw": "float",
-        "controller.accelz": "float", "controller.actuatorThrust": "float",
-        "pm.state": "int8_t", "supervisor.info": "uint16_t",
-        "sys.canfly": "uint8_t", "sys.isFlying": "uint8_t", "sys.isTumbled": "uint8_t",
-    }
-    DECKS = ("bcFlow", "bcFlow2", "bcLighthouse4", "bcLoco", "bcDWM1000", "bcZRanger2",
-             "bcMultiranger", "bcAI", "bcLedRing", "bcUSD")
-    """The ``deck`` parameter group (read-only, 1 = attached): no deck on the simulated vehicle."""
-
-    PARAMS: ClassVar[dict[str, str]] = {
-        **{f"{g}.{a}_{k}": "float" for g in ("pid_rate", "pid_attitude")
-           for a in ("roll", "pitch", "yaw") for k in ("kp", "ki", "kd")},
-        "stabilizer.estimator": "uint8_t",
-        "stabilizer.controller": "uint8_t",
-        "stabilizer.stop": "uint8_t",
-        "commander.enHighLevel": "uint8_t",
-        "pm.lowVoltage": "float",
-        "pm.criticalLowVoltage": "float",
-        "firmware.revision0": "uint32_t",
-        "firmware.revision1": "uint16_t",
-        "firmware.modified": "uint8_t",
-        **{f"deck.{d}": "uint8_t" for d in DECKS},
-    }
-    PARAMS_READ_ONLY = frozenset({"firmware.revision0", "firmware.revision1", "firmware.modified",
-                                  *(f"deck.{d}" for d in DECKS)})
+    LOG_VARIABLES: ClassVar[dict[str, str]] = LOG_VARIABLES
+    DECKS = DECKS  # the ``deck`` parameter group: no deck attached
+    PARAMS: ClassVar[dict[str, str]] = PARAMS
+    PARAMS_READ_ONLY = PARAMS_READ_ONLY
 
     def __init__(self, *, seed: int = 0, vbat_full: float = 4.15, **overrides: float) -> None:
         const_fields = {f.name for f in dataclasses.fields(VehicleConstants)}
@@ -168,13 +135,8 @@ class SimVehicle:
             b.z, b.on_ground = start_z_m, False
             b.f1 = b.f2 = b.f3 = b.f4 = self.const.mass_kg * GRAVITY_M_S2 / 4.0
             self._targets = (b.f1, b.f2, b.f3, b.f4)
-        self._params: dict[str, float] = {
-            "stabilizer.estimator": 1.0, "stabilizer.controller": 1.0, "stabilizer.stop": 0.0,
-            "commander.enHighLevel": 0.0, "pm.lowVoltage": 3.2, "pm.criticalLowVoltage": 3.0,
-            "firmware.revision0": float(_FIRMWARE_REVISION0), "firmware.revision1": 0.0,
-            "firmware.modified": 0.0, **{f"deck.{d}": 0.0 for d in self.DECKS},
-        }
-        self._log_getters = self._make_log_getters()
+        self._params: dict[str, float] = default_params()
+        self._log_getters = log_getters(self)
 
     # ----------------------------------------------------------------- time
     @property
@@ -282,44 +244,6 @@ class SimVehicle:
             self.supervisor.armed = bool(armed)
 
     # ----------------------------------------------------------------- log, params, console
-    def _make_log_getters(self) -> dict[str, Callable[[], float]]:
-        s, b = self.imu, self.body
-        g: dict[str, Callable[[], float]] = {
-            "acc.x": lambda: s.ax, "acc.y": lambda: s.ay, "acc.z": lambda: s.az,
-            "gyro.x": lambda: s.gx, "gyro.y": lambda: s.gy, "gyro.z": lambda: s.gz,
-            "stabilizer.roll": lambda: self._att[0], "stabilizer.pitch": lambda: self._att[1],
-            "stabilizer.yaw": lambda: self._att[2],
-            "stabilizer.thrust": lambda: self._control[0],
-            "pm.vbat": lambda: self.battery.voltage_v,
-            "pm.vbatMV": lambda: float(round(1000.0 * self.battery.voltage_v)),
-            "pm.batteryLevel": lambda: float(round(100.0 * self.battery.charge)),
-            "controller.cmd_thrust": lambda: self._control[0],
-            "controller.cmd_roll": lambda: self._control[1],
-            "controller.cmd_pitch": lambda: self._control[2],
-            "controller.cmd_yaw": lambda: self._control[3],
-            "stateEstimate.x": lambda: b.x, "stateEstimate.y": lambda: b.y,
-            "stateEstimate.z": lambda: b.z,
-        }
-        ctrl = self.controller
-        for i, axis in enumerate(("roll", "pitch", "yaw")):
-            g[f"stateEstimate.{axis}"] = lambda i=i: self._att[i] * (-1.0 if i == 1 else 1.0)
-            g[f"controller.{axis}"] = lambda i=i: ctrl.attitude_desired[i]
-            g[f"controller.{axis}Rate"] = lambda i=i: ctrl.rate_desired[i]
-        g["controller.r_roll"] = lambda: s.gx
-        g["controller.r_pitch"] = lambda: -s.gy
-        g["controller.r_yaw"] = lambda: s.gz
-        g["controller.accelz"] = lambda: s.az
-        g["controller.actuatorThrust"] = lambda: self._control[0]
-        g["pm.state"] = lambda: 3.0 if self._low_warned else 0.0   # 0 battery, 3 low power
-        g["supervisor.info"] = lambda: float(self._supervisor_info())
-        g["sys.canfly"] = lambda: float(self.supervisor.armed and not self.supervisor.locked)
-        g["sys.isFlying"] = lambda: float(self.supervisor.is_flying)
-        g["sys.isTumbled"] = lambda: 0.0
-        for i in range(4):
-            g[f"motor.m{i + 1}"] = lambda i=i: float(self._pwm[i])
-            g[f"pwm.m{i + 1}_pwm"] = lambda i=i: float(self._duty_pwm[i])
-        return g
-
     def _supervisor_info(self) -> int:
         """``supervisor.info``: bit 0 can be armed, 1 armed, 2 auto-arm, 3 can fly, 4 flying,
         6 locked (``supervisor.c``)."""

@@ -7,7 +7,7 @@ import pytest
 
 from groundstation.errors import LinkError
 from groundstation.flight import block_summary
-from groundstation.flight.link import FLIGHT_BLOCKS, LOG_MAX_BYTES, plan_blocks
+from groundstation.flight.blocks import FLIGHT_BLOCKS, LOG_MAX_BYTES, plan_blocks
 
 TOC_2025 = {**{f"motor.m{i}": "uint16_t" for i in range(1, 5)},
             **{f"acc.{a}": "float" for a in "xyz"}, **{f"gyro.{a}": "float" for a in "xyz"}}

@@ -20,7 +20,7 @@ import groundstation.sim as gsim
 from cfsession import open_session
 from groundstation.cli import main
 from groundstation.flight import fly_plan
-from groundstation.flight.runner import LINK_SILENCE_S
+from groundstation.flight.telemetry import LINK_SILENCE_S
 from groundstation.plan import Schedule, load_plan
 from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port

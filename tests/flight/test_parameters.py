@@ -128,7 +128,7 @@ HUGE = "1" + "0" * 400  # a JSON integer float() cannot hold (OverflowError)
                                   '{"a.b": {"value": ' + HUGE + ', "was": 1.0}}',
                                   '{"a.b": {"value": Infinity, "was": 1.0}}'])
 def test_info_reads_a_hostile_parameters_attribute_without_failing(tmp_path, meta):
-    from groundstation.commands.plan import _flown_firmware
+    from groundstation.commands.plan_design import _flown_firmware
     from tests.sysid.flights import known_system, write_flight
 
     flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=0, n=600,

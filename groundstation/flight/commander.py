@@ -1,0 +1,135 @@
+"""The setpoints a flight sends, each recorded as sent, and every way out of a flight: landing,
+the abort descent, the stop setpoint, the last resort.
+
+**Schedule.** Setpoint :math:`k` is due at :math:`t_k = t_0 + k / f_s` on the flight clock
+(:meth:`Commander.deadline`), never :math:`t_{k-1} + 1/f_s`, so lateness never accumulates.
+Every setpoint sent is a row of the ``setpoints`` stream (thrust as sent) and a send time for
+the jitter summary; a setpoint that is not finite (NaN or inf) is never sent.
+
+**Stop.** The stop setpoint is delivered (:meth:`~groundstation.flight.link.Link.deliver_stop`:
+repeated, the driver's send queue drained) and recorded as a thrust-0 row with tick -1 and an
+event, on every path: one period after the last setpoint (:meth:`Commander.land`), after an
+abort (:meth:`Commander.abort`: if the plan's ``on_abort`` is ``descend`` and the link is up,
+the :meth:`~groundstation.plan.schedule.Schedule.abort_schedule` descent streams first at the
+same rate, so there is never more than one period without a setpoint; never after a link loss:
+no telemetry, no descent), and when even that path failed (:meth:`Commander.last_stop`, the
+bare stop setpoint if recording it fails too).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from groundstation.flight.journal import Journal
+from groundstation.flight.telemetry import Telemetry
+from groundstation.plan import Schedule
+
+__all__ = ["Commander", "finite"]
+
+log = logging.getLogger("groundstation.flight.runner")  # the runner's way out: logged as its
+
+Setpoint = tuple[float, float, float, int]  # roll deg, pitch deg, yaw rate deg/s, thrust PWM
+
+
+def finite(sp: Sequence[float]) -> bool:
+    """Whether every value of a setpoint is a finite number (never send NaN or inf)."""
+    return all(math.isfinite(v) for v in sp)
+
+
+class Commander:
+    """Setpoints out over ``link`` on the schedule's grid, recorded in ``journal``."""
+
+    def __init__(self, *, link: Any, journal: Journal, telemetry: Telemetry,
+                 schedule: Schedule) -> None:
+        self.link, self.journal, self.telemetry, self.schedule = (link, journal, telemetry,
+                                                                  schedule)
+        self.t_first = math.nan  # flight clock time setpoint 0 is due
+        self.sent_t: list[float] = []
+        self.stopped = False  # the stop setpoint has been delivered
+
+    @property
+    def link_down(self) -> bool:
+        """The link was lost (cflib's report, a stuck call, or the silence watch)."""
+        return self.link.lost or self.telemetry.silent
+
+    def deadline(self, k: int) -> float:
+        return self.t_first + k * self.schedule.period
+
+    def send(self, sp: Setpoint, *, phase_id: int, tick: int) -> None:
+        roll, pitch, yaw_rate, thrust = sp
+        self.link.send_setpoint(roll=roll, pitch=pitch, yaw_rate=yaw_rate, thrust=thrust)
+        t = self.journal.now()
+        self.sent_t.append(t)
+        self.journal.pending["setpoints"].append((t, roll, pitch, yaw_rate, thrust, phase_id,
+                                                  tick))
+
+    def stop(self, why: str) -> None:
+        """The stop setpoint, delivered (:meth:`Link.deliver_stop`: repeated, the driver's
+        send queue drained) and recorded as a thrust-0 row with tick -1 and an event."""
+        journal = self.journal
+        t = journal.now()
+        self.telemetry.flying = False
+        self.link.deliver_stop()
+        self.stopped = True
+        journal.pending["setpoints"].append((t, 0.0, 0.0, 0.0, 0, -1, -1))
+        journal.event(f"stop setpoint sent ({why})",
+                      source="safety" if journal.causes else "runner")
+
+    def last_stop(self) -> None:
+        """On the way out of a flight when no stop has been delivered yet (the abort path
+        failed): the stop, recorded; if even that fails, the bare stop setpoint."""
+        causes = self.journal.causes
+        try:
+            self.stop(f"last resort: {causes[0] if causes else 'runner exit'}")
+        except Exception as exc:
+            log.exception("stop setpoint failed")
+            self.journal.event(f"stop setpoint failed ({type(exc).__name__}: {exc}); sending "
+                               "it bare", level="error", source="safety")
+            try:
+                self.link.send_stop()
+            except Exception:
+                log.exception("bare stop setpoint failed")
+
+    def land(self, k: int) -> None:
+        """The end of a plan flown through: the stop one period after setpoint ``k - 1``."""
+        self.telemetry.wait(self.deadline(k))
+        self.stop("landed")
+        self.journal.event("flight complete")
+
+    def abort(self, k: int) -> None:
+        """After a cause: the plan's descent if the link is up, then the stop setpoint."""
+        journal, telemetry = self.journal, self.telemetry
+        n_causes = len(journal.causes)
+        descent = (self.schedule.abort_schedule(k) if telemetry.flying and not self.link_down
+                   else None)
+        if descent is not None and len(descent):
+            journal.phase(phase_id=-1, name="abort", kind="abort", planned_s=descent.duration)
+            for j in range(len(descent)):
+                telemetry.wait(self.deadline(k + j))
+                if len(journal.causes) > n_causes or self.link_down:
+                    break
+                sp = descent.setpoint(j)
+                if not finite(sp):
+                    journal.cause(f"descent setpoint {j} is not finite; stopping at once")
+                    break
+                self.send(sp, phase_id=-1, tick=-1)
+                journal.dispatch()
+            else:
+                telemetry.wait(self.deadline(k + len(descent)))
+        if self.link_down:
+            journal.event("no link: the Crazyflie's watchdog levels out after 0.5 s and stops "
+                          "the motors after 2 s", level="warning", source="safety")
+        self.stop(f"abort: {journal.causes[0]}")
+
+    def tail(self, seconds: float = 0.5) -> None:
+        """Keep recording a moment after the stop so the file shows the motors at rest."""
+        if self.link_down:
+            return
+        t = self.journal.clock.now()
+        for _ in range(round(seconds / self.schedule.period)):
+            t += self.schedule.period
+            self.telemetry.wait(t)
+            self.journal.dispatch()

@@ -1,0 +1,72 @@
+"""What a flight records as it goes, between the runner's thread and its listeners.
+
+Rows are kept per stream in :attr:`Journal.pending` (setpoints, phases, events, log rows, link
+rows: appending is all the runner does while a setpoint is due) until :meth:`Journal.dispatch`
+polls the sources and hands every pending row to the listeners (:class:`Listeners`, the recorder
+first). Times are flight time: seconds on the flight clock since the journal began.
+
+**Causes.** The first cause recorded (:meth:`Journal.cause`) is the flight's abort cause; later
+ones are recorded as events "during the abort". A listener that raises is dropped with an event
+and the flight goes on; the recorder raising is a cause (a flight that is not recorded aborts).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import defaultdict
+from collections.abc import Sequence
+
+from cfsession.writer import event_rows
+from groundstation.flight.clock import Clock
+from groundstation.flight.listeners import FlightListener, Listeners
+
+__all__ = ["Journal"]
+
+log = logging.getLogger("groundstation.flight.runner")  # events are the runner's: logged as its
+
+
+class Journal:
+    """Pending rows, events and causes of one flight (module docstring)."""
+
+    def __init__(self, *, clock: Clock, recorder: FlightListener,
+                 listeners: Sequence[FlightListener]) -> None:
+        self.clock = clock
+        self.origin = clock.now()
+        self.pending: dict[str, list[tuple]] = defaultdict(list)
+        self.causes: list[str] = []
+        self.end_excitation = ""  # a source's request to end the excitation
+        self.listeners = Listeners(recorder=recorder, others=listeners,
+                                   on_error=self._listener_failed)
+
+    def now(self) -> float:
+        """Flight time, s."""
+        return self.clock.now() - self.origin
+
+    def event(self, text: str, *, level: str = "info", source: str = "runner") -> None:
+        log.log(logging.ERROR if level == "error" else logging.INFO, "%s: %s", source, text)
+        self.pending["events"].extend(event_rows(t=self.now(), text=text, level=level,
+                                                 source=source))
+
+    def cause(self, text: str, *, level: str = "error") -> None:
+        """A reason to abort: the first is the flight's cause, all are events (``safety``)."""
+        self.causes.append(text)
+        self.event(text if len(self.causes) == 1 else f"during the abort: {text}",
+                   level=level, source="safety")
+
+    def phase(self, *, phase_id: int, name: str, kind: str, planned_s: float) -> None:
+        self.pending["phases"].append((self.now(), phase_id, name.encode()[:32],
+                                       kind.encode()[:16]))
+        self.event(f"phase {name} ({kind}) starts, {planned_s:g} s planned")
+
+    def _listener_failed(self, what: str, recorder: bool) -> None:
+        if recorder:
+            self.cause(f"recording failed: {what}")
+        else:
+            self.event(f"{what}; listener dropped, flight continues", level="error")
+
+    def dispatch(self) -> None:
+        """The sources polled, then every pending row (events of a failed poll included)."""
+        reason = self.listeners.poll()  # always polled: the sources' rows are recorded
+        self.end_excitation = self.end_excitation or reason
+        pending, self.pending = self.pending, defaultdict(list)
+        self.listeners.deliver(pending)
