@@ -63,6 +63,7 @@ __all__ = [
     "predict",
     "simulate_windows",
     "simulation_window",
+    "split_windows",
     "stable_predictor",
 ]
 
@@ -173,7 +174,7 @@ def _run_states_modal(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.nd
         return (z @ vec.T).real
 
 
-def _split_windows(n_samples: int, window: int) -> list[slice]:
+def split_windows(n_samples: int, window: int) -> list[slice]:
     """Consecutive windows of ``window`` samples; the remainder joins the last window."""
     if window >= n_samples:
         return [slice(0, n_samples)]
@@ -240,7 +241,7 @@ def simulate_windows(
     """
     A, B, C, D = _matrices(model)
     n_samples, n = u.shape[0], A.shape[0]
-    slices = _split_windows(n_samples, window or n_samples)
+    slices = split_windows(n_samples, window or n_samples)
     weights = channel_weights(y)
     y_sim = np.empty((n_samples, C.shape[0]))
     x0s = np.zeros((len(slices), n))

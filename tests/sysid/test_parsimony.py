@@ -16,6 +16,7 @@ from sysid.parsimony import (
     MAX_BLOCKS,
     MIN_BLOCKS,
     block_errors,
+    ranking_warning,
     score_se,
     scores,
     significantly_better,
@@ -93,6 +94,27 @@ def test_a_noisy_score_prefers_the_smaller_order() -> None:
     assert 1.5 < se < 5.0
     assert result.best().order == 3
     assert result.best(tol=0.5).order == 4
+
+
+def test_the_warning_says_what_the_held_out_data_cannot_tell() -> None:
+    """A standard error over a point: flagged when several orders score within it, not when
+    one order ranks clearly first (the demo flights: 1.1 points, order 12 alone within it);
+    a standard error of several points is flagged whichever order ranks first."""
+    def ranked(spread: float, second: float) -> list[SweepRow]:
+        rows = (_row(5, _blocks(80.0, spread=spread)),
+                _row(3, _blocks(second, spread=spread, seed=1)))
+        return SweepResult(rows=rows, method="iem", horizon=None,
+                           window=1.0).ranked(require_stable=True)
+
+    several = ranked(0.5, 79.5)
+    assert 1.0 <= score_se(several[0]) < 3.0
+    assert "orders 3 to 5" in ranking_warning(several, n_samples=400)
+    clear = ranked(0.5, 70.0)  # order 3 far below: the data rank the orders
+    assert 1.0 <= score_se(clear[0]) < 3.0
+    assert ranking_warning(clear, n_samples=400) is None
+    vague = ranked(1.0, 60.0)  # one order first, but the score is known to several points
+    assert score_se(vague[0]) >= 3.0
+    assert "order 5 ranks first" in ranking_warning(vague, n_samples=400)
 
 
 def test_focus_and_direct_term_need_to_be_better_by_one_standard_error() -> None:
