@@ -9,22 +9,14 @@ sample time: the lag of the best VARX model by AICc (:func:`sysid.memory.predict
 as MATLAB's ``n4sid`` chooses its horizons) is how many past samples the one-step predictor
 needs. Pasts from a third of it to three times it, futures from a sixth of it to one and a
 half times it, about evenly spaced on a log scale (the quadrotor flights of ``groundstation
-demo`` have a memory of 13-18 samples at 50 Hz: pasts 4-6 to 39-51, futures 2-3 to 20-26,
-where the thesis used 60 and 17); both capped so that the identification data have at least
+demo --speed inf`` have a memory of 6 samples at 50 Hz: pasts 2 to 18, futures 2 to 9, where
+the thesis used 60 and 17); both capped so that the identification data have at least
 three Hankel columns per row of the largest pair. Orders 2 to 12, capped by the rank the
 horizons allow.
 
-**Focus** (:func:`pick_focus`): when the caller does not fix it, the grid runs with both
-focus choices and the one whose chosen model scores best on the held-out data wins; the
-method's default (IEM: prediction) unless the other is better by more than one standard error
-of its held-out score (:mod:`sysid.parsimony`).
-
-**Direct term** (``choose_feedthrough``, for open-loop data): a method without one (IEM's
-default) runs the grid once more with ``feedthrough=True`` (the chosen focus) and keeps that
-choice only when it scores better on the held-out data by more than one standard error of its
-score. Off by default:
-on closed-loop data (every flight) a direct term fitted on the logged inputs is biased by the
-feedback, and held-out data from the same loop would reward the bias.
+**Focus and direct term** (:mod:`sysid.variants`): when the caller does not fix the focus, the
+grid runs with both and the method's default wins unless the other scores better by more than
+one standard error; for open-loop data (``choose_feedthrough``) once more with a direct term.
 
 **Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
 scored by simulation over windows of :data:`SCORE_WINDOW_X` times the data's memory (in
@@ -37,7 +29,9 @@ at the edge of the grid (largest or smallest past, future or order tried, when m
 was) is flagged when no row inside the grid in that parameter scores within that tolerance of
 the best (the score still rises towards the edge; on a flat top the edge says nothing), and a
 warning says when that standard error is a point or more (held-out data too few to rank the
-models).
+models). Where the caller did not fix the grid, an edge that binds is followed: the grid grows
+past it and is swept again with the chosen focus and direct term (:mod:`sysid.growth`, at
+most twice); the warning stays only for an edge still binding after that.
 The chosen horizons and order are then identified again on all the data. ``sysid identify``
 (without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
 same data and grid they choose the same past, future, order and focus.
@@ -56,6 +50,7 @@ import numpy as np
 from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.grid import pair_flights
+from sysid.growth import follow_edges
 from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
@@ -63,11 +58,11 @@ from sysid.parsimony import (
     close_to_best,
     edge_warnings,
     ranking_warning,
-    significantly_better,
     tolerance,
 )
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
+from sysid.variants import focus_order, n_runs, pick_feedthrough, pick_focus, tries_feedthrough
 
 __all__ = ["HOLDOUT_FRACTION", "SCORE_WINDOW_X", "NoStableModel", "Plan", "Selection",
            "default_grid", "finish", "focus_order", "holdout", "max_blocks", "n_runs",
@@ -206,6 +201,7 @@ class Plan:
     capped: bool
     given_validation: bool
     memory: int | None = None
+    fixed: tuple[str, ...] = ()  # "pasts", "futures", "orders" the caller gave: never grown
 
     @property
     def n_models(self) -> int:
@@ -238,7 +234,9 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
                                           n_states=grid["orders"][-1],
                                           n_outputs=ident[0].n_outputs), capped=capped,
                 given_validation=bool(validation),
-                memory=None if pasts and futures else memory)
+                memory=None if pasts and futures else memory,
+                fixed=tuple(k for k, v in (("pasts", pasts), ("futures", futures),
+                                           ("orders", orders)) if v))
 
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
@@ -316,30 +314,6 @@ def _share(p: Plan) -> str:
     return f"identified on {n_ident} of the {n_all} samples"
 
 
-def focus_order(default: str) -> list[str]:
-    """Both focus choices, the method's default first (it wins ties, :func:`pick_focus`)."""
-    return [default, *(f for f in ("prediction", "simulation") if f != default)]
-
-
-def pick_focus(selections: Sequence[Selection], *, tol: float | None = None) -> Selection:
-    """The selection whose chosen model scores best on the held-out data; the first one (the
-    method's default focus) unless another is better by more than one standard error of its
-    score (at least 0.1 points: :func:`sysid.parsimony.significantly_better`; by more than
-    ``tol`` points when given). The reason is in :attr:`Selection.focus_note`."""
-    first = selections[0]
-    best = max(selections, key=lambda s: s.best.score)
-    better, margin = significantly_better(best.best, first.best, tol=tol)
-    chosen = best if better else first
-    scores = ", ".join(f"{s.model.provenance.get('focus')} {s.best.score:.1f}"
-                       for s in selections)
-    note = (f"focus {chosen.model.provenance.get('focus')}: best held-out score per focus "
-            f"{scores} (the method's default unless another is better by more than "
-            f"{margin:.2g} points{'' if tol is not None else ', one standard error'})")
-    log.info("selection: %s", note)
-    return dataclasses.replace(chosen, focus_note=note, focus_scores={
-        str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
-
-
 class NoStableModel(DataError):
     """:func:`select` found no stable model (with either focus); ``results`` holds the sweep
     of each focus run (the method's default focus first) and ``plan`` the data and grid, so
@@ -349,17 +323,6 @@ class NoStableModel(DataError):
         super().__init__(message)
         self.plan = plan
         self.results = tuple(results)
-
-
-def n_runs(options: Options, *, choose_focus: bool, choose_feedthrough: bool = False) -> int:
-    """How many times :func:`select_plan` runs the grid: once per focus it tries, and once
-    more when it tries a direct term."""
-    return ((len(focus_order(options.focus)) if choose_focus else 1)
-            + int(_tries_feedthrough(options, choose_feedthrough)))
-
-
-def _tries_feedthrough(options: Options, choose: bool) -> bool:
-    return choose and getattr(options, "feedthrough", True) is False
 
 
 def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
@@ -394,53 +357,59 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     model of the grid is stable."""
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
-    per_run = p.n_models
-    total = per_run * n_runs(options, choose_focus=choose_focus,
-                             choose_feedthrough=choose_feedthrough)
-    score_window = None if horizon is not None else p.window_s if window is None else window
+    count = {"done": 0, "total": p.n_models * n_runs(options, choose_focus=choose_focus,
+                                                      choose_feedthrough=choose_feedthrough)}
 
-    def run(i: int, opts: Options) -> tuple[SweepResult, Selection | None]:
-        """The ``i``-th run of the grid (for the progress count): sweep, then finish."""
+    def run(q: Plan, opts: Options, *, finishing: bool = True
+            ) -> tuple[SweepResult, Selection | None]:
+        """One run of the grid of ``q``: sweep, then finish; progress counts on."""
+        start = count["done"]
         report = None if progress is None else (
-            lambda done, _n: progress(i * per_run + done, total))
-        result = sweep(p.ident, **p.grid, method=method, options=opts, validation=p.val,
+            lambda done, _n: progress(start + done, count["total"]))
+        score_window = None if horizon is not None else q.window_s if window is None else window
+        result = sweep(q.ident, **q.grid, method=method, options=opts, validation=q.val,
                        horizon=horizon, window=score_window, workers=workers, progress=report,
                        keep_models=keep_models, client=client)
+        count["done"] = start + q.n_models
+        if not finishing:
+            return result, None
         try:
-            return result, finish(p, result, method=method, options=opts)
+            return result, finish(q, result, method=method, options=opts)
         except DataError as exc:
             log.info("selection: focus %s, direct term %s: %s", opts.focus,
                      getattr(opts, "feedthrough", "-"), exc)
             return result, None
 
-    runs = [run(i, opts) for i, opts in enumerate(variants)]
+    def again(q: Plan, swept: dict[str, list[int]], sel: Selection) -> Selection | None:
+        """``swept`` with the focus and direct term ``sel`` chose, chosen among its rows and
+        those of ``sel`` on ``q`` (:func:`sysid.growth.follow_edges`)."""
+        prov = sel.model.provenance
+        opts = dataclasses.replace(options, focus=prov.get("focus", options.focus))
+        if hasattr(opts, "feedthrough"):
+            opts = dataclasses.replace(opts, feedthrough=bool(prov.get("feedthrough", False)))
+        part = dataclasses.replace(q, grid=swept, window_s=sel.result.window or q.window_s)
+        count["total"] += part.n_models
+        result, _ = run(part, opts, finishing=False)
+        seen = {(r.past, r.future, r.order) for r in sel.result.rows}
+        merged = dataclasses.replace(sel.result, rows=sel.result.rows + tuple(
+            r for r in result.rows if (r.past, r.future, r.order) not in seen))
+        try:
+            return finish(q, merged, method=method, options=opts)
+        except DataError:
+            return None
+
+    runs = [run(p, opts) for opts in variants]
     selections = [sel for _, sel in runs if sel is not None]
     if not selections:
-        raise NoStableModel(f"none of the {per_run * len(variants)} models of the grid is stable"
-                            + (", with either focus" if choose_focus else "")
+        raise NoStableModel(f"none of the {p.n_models * len(variants)} models of the grid is "
+                            "stable" + (", with either focus" if choose_focus else "")
                             + "; give horizons and an order (--past/--future/--order), other "
                               "channels or a longer window", plan=p,
                             results=[result for result, _ in runs])
     chosen = pick_focus(selections) if choose_focus else selections[0]
-    if not _tries_feedthrough(options, choose_feedthrough):
-        return chosen
-    _, with_d = run(len(variants), dataclasses.replace(
-        options, focus=chosen.model.provenance.get("focus", options.focus), feedthrough=True))
-    return chosen if with_d is None else pick_feedthrough(chosen, with_d)
-
-
-def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float | None = None
-                     ) -> Selection:
-    """``with_d`` (a direct term) when its chosen model scores better on the held-out data
-    than ``without``'s by more than one standard error of its score
-    (:func:`sysid.parsimony.significantly_better`; by more than ``tol`` points when given),
-    else ``without``; the reason in :attr:`Selection.feedthrough_note`."""
-    better, margin = significantly_better(with_d.best, without.best, tol=tol)
-    note = (f"direct term {'kept' if better else 'left out'}: best held-out score "
-            f"{with_d.best.score:.1f} with, {without.best.score:.1f} without (kept only when "
-            f"better by more than {margin:.2g} points"
-            f"{'' if tol is not None else ', one standard error'})")
-    log.info("selection: %s", note)
-    chosen = dataclasses.replace(with_d, focus_note=without.focus_note,
-                                 focus_scores=without.focus_scores) if better else without
-    return dataclasses.replace(chosen, feedthrough_note=note)
+    if tries_feedthrough(options, choose_feedthrough):
+        _, with_d = run(p, dataclasses.replace(
+            options, focus=chosen.model.provenance.get("focus", options.focus),
+            feedthrough=True))
+        chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
+    return follow_edges(p, chosen, room=max_blocks(p.ident), run=again)

@@ -424,7 +424,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
             rows = run_batch(groups, out_dir=out_dir, rows=bad,
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
-                             client=client, progress=lambda done, _total: update(done),
+                             client=client, progress=update,
                              choose_focus=focus is None)
     except KeyboardInterrupt:
         n = len(json.loads(summary.read_text())) if summary.exists() else 0

@@ -30,23 +30,27 @@ STEP = 0.1
 
 @contextmanager
 def progress(label: str, *, total: int, quiet: bool = False,
-             stream: TextIO | None = None) -> Iterator[Callable[[int], None]]:
-    """Yield ``update(done)``; a bar on a TTY, plain periodic lines otherwise."""
+             stream: TextIO | None = None) -> Iterator[Callable[..., None]]:
+    """Yield ``update(done, total=None)``; a bar on a TTY, plain periodic lines otherwise. A
+    ``total`` given to ``update`` replaces the first one (work that grew: a selection whose
+    grid grows, :mod:`sysid.growth`)."""
     out = stream if stream is not None else sys.stderr
     if quiet:
-        yield lambda _done: None
+        yield lambda _done, _total=None: None
         return
     if out.isatty():
         with Progress(label, BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                       "eta", TimeRemainingColumn(), console=Console(file=out)) as bar:
             task = bar.add_task(label, total=total)
-            yield lambda done: bar.update(task, completed=done)
+            yield lambda done, total=None: bar.update(task, completed=done, total=total)
         return
     t0 = time.monotonic()
     shown, ended = 0, False
 
-    def update(done: int) -> None:
-        nonlocal shown, ended
+    def update(done: int, new_total: int | None = None) -> None:
+        nonlocal shown, ended, total
+        if new_total is not None and new_total != total:
+            total, ended = new_total, False
         step = int(done / max(total, 1) / STEP + 1e-9)
         if done >= total:
             if ended:

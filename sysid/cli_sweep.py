@@ -78,7 +78,7 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
             progress(label, total=total, quiet=quiet) as update:
         return select_plan(p, method=method, options=options, workers=workers,
                            choose_focus=choose_focus, horizon=horizon, window=window,
-                           client=client, progress=lambda done, _total: update(done))
+                           client=client, progress=update)
 
 
 def _candidates(con: Console, rows: Sequence[SweepRow], *, names: Sequence[str], title: str,

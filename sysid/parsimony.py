@@ -64,8 +64,9 @@ from sysid.comparison import CompareResult
 from sysid.validate import split_windows
 
 __all__ = ["FIXED_TOL", "FLOOR_POINTS", "IMPRECISE_POINTS", "MAX_BLOCKS", "MIN_BLOCKS",
-           "UNRESOLVED_POINTS", "block_errors", "close_to_best", "edge_warnings", "parsimonious",
-           "ranking_warning", "score_se", "scores", "significantly_better", "tolerance"]
+           "UNRESOLVED_POINTS", "binding_edges", "block_errors", "close_to_best", "edge_warnings",
+           "parsimonious", "ranking_warning", "score_se", "scores", "significantly_better",
+           "tolerance"]
 
 #: Fewest blocks the errors are accounted in: windows are cut into pieces below this count.
 MIN_BLOCKS = 10
@@ -211,17 +212,17 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
     return None
 
 
-def edge_warnings(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]], *,
-                  capped: bool, tol: float | None = None) -> list[str]:
-    """Warnings for a choice at the edge of the grid that the scores say may be binding.
+def binding_edges(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]], *,
+                  tol: float | None = None) -> list[tuple[str, str]]:
+    """The edges of the grid the scores say may be binding, as ``(parameter, side)`` with
+    parameter ``"past"``, ``"future"`` or ``"order"`` and side ``"above"`` or ``"below"``.
 
     The choice sits at the largest (smallest) past, future or order tried, and no stable row
     with another value of that parameter scores as well as the best one (within one standard
     error of its score, :func:`close_to_best`, or a fixed ``tol`` points): the score is still
     rising towards the edge. When rows inside the grid score as well (a flat top: the held-out
-    score cannot tell them apart), the edge is not flagged. ``ranked``: the stable rows, best
-    score first, ``best`` among them; ``capped``: the data cut the horizons short of the
-    default grid's range (:func:`sysid.auto.plan`)."""
+    score cannot tell them apart), the edge is not binding. ``ranked``: the stable rows, best
+    score first, ``best`` among them."""
     close = close_to_best(ranked, tol=tol)
     out = []
     for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
@@ -230,7 +231,18 @@ def edge_warnings(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[i
             continue
         if any(getattr(r, name) != value for r in close):
             continue
-        if value == max(values):
+        out.append((name, "above" if value == max(values) else "below"))
+    return out
+
+
+def edge_warnings(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]], *,
+                  capped: bool, tol: float | None = None) -> list[str]:
+    """A warning for each of :func:`binding_edges`; ``capped``: the data cut the horizons
+    short of the default grid's range (:func:`sysid.auto.plan`)."""
+    out = []
+    for name, side in binding_edges(best, ranked, grid, tol=tol):
+        value = getattr(best, name)
+        if side == "above":
             why = " (the data allow no longer horizons)" if capped and name != "order" else ""
             out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
         else:

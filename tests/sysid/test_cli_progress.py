@@ -34,3 +34,23 @@ def test_a_bar_with_eta_on_a_terminal_and_nothing_when_quiet() -> None:
     with progress("batch", total=4, stream=quiet, quiet=True) as update:
         update(4)
     assert quiet.getvalue() == ""
+
+
+def test_work_that_grows_counts_against_the_new_total() -> None:
+    """A selection whose grid grows (sysid.growth) reports a larger total: the plain lines
+    follow it, and the end is the new total, not the first."""
+    out = io.StringIO()
+    with progress("sweep", total=100, stream=out) as update:
+        for done in range(1, 101):
+            update(done, 100)
+        for done in range(101, 151):
+            update(done, 150)
+    lines = out.getvalue().splitlines()
+    assert lines[-1].startswith("sweep: 150/150 (100 %)") and lines[-1].endswith("done")
+    assert not any(line.startswith("sweep: 150/100") for line in lines)
+    bar = _Tty()
+    with progress("sweep", total=10, stream=bar) as update:
+        update(12, 20)
+    assert "12/20" in bar.getvalue()
+    with progress("sweep", total=4, stream=io.StringIO(), quiet=True) as update:
+        update(5, 8)  # quiet takes the same arguments

@@ -1,0 +1,84 @@
+"""Choosing the focus and the direct term of a selection on the held-out scores.
+
+**Focus** (:func:`pick_focus`): when the caller does not fix it, :func:`sysid.auto.select_plan`
+runs the grid with both focus choices and the one whose chosen model scores best on the
+held-out data wins: the method's default (IEM: prediction) unless the other is better by more
+than one standard error of its score (:func:`sysid.parsimony.significantly_better`).
+
+**Direct term** (:func:`pick_feedthrough`, for open-loop data): a method without one (IEM's
+default) runs the grid once more with ``feedthrough=True`` (the chosen focus), kept only when
+it scores better by more than one standard error. Off by default: on closed-loop data (every
+flight) a direct term fitted on the logged inputs is biased by the feedback, and held-out data
+from the same loop would reward the bias.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from sysid.methods import Options
+from sysid.parsimony import significantly_better
+
+if TYPE_CHECKING:  # sysid.auto imports this module
+    from sysid.auto import Selection
+
+__all__ = ["focus_order", "n_runs", "pick_feedthrough", "pick_focus", "tries_feedthrough"]
+
+log = logging.getLogger("sysid.auto")  # part of the selection's report
+
+
+def focus_order(default: str) -> list[str]:
+    """Both focus choices, the method's default first (it wins ties, :func:`pick_focus`)."""
+    return [default, *(f for f in ("prediction", "simulation") if f != default)]
+
+
+def pick_focus(selections: Sequence[Selection], *, tol: float | None = None) -> Selection:
+    """The selection whose chosen model scores best on the held-out data; the first one (the
+    method's default focus) unless another is better by more than one standard error of its
+    score (at least 0.1 points: :func:`sysid.parsimony.significantly_better`; by more than
+    ``tol`` points when given). The reason is in :attr:`Selection.focus_note`."""
+    first = selections[0]
+    best = max(selections, key=lambda s: s.best.score)
+    better, margin = significantly_better(best.best, first.best, tol=tol)
+    chosen = best if better else first
+    scores = ", ".join(f"{s.model.provenance.get('focus')} {s.best.score:.1f}"
+                       for s in selections)
+    note = (f"focus {chosen.model.provenance.get('focus')}: best held-out score per focus "
+            f"{scores} (the method's default unless another is better by more than "
+            f"{margin:.2g} points{'' if tol is not None else ', one standard error'})")
+    log.info("selection: %s", note)
+    return dataclasses.replace(chosen, focus_note=note, focus_scores={
+        str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
+
+
+def n_runs(options: Options, *, choose_focus: bool, choose_feedthrough: bool = False) -> int:
+    """How many times :func:`select_plan` runs the grid: once per focus it tries, and once
+    more when it tries a direct term."""
+    return ((len(focus_order(options.focus)) if choose_focus else 1)
+            + int(tries_feedthrough(options, choose_feedthrough)))
+
+
+def tries_feedthrough(options: Options, choose: bool) -> bool:
+    """Whether a selection tries a direct term: asked for, and the method has none by
+    default."""
+    return choose and getattr(options, "feedthrough", True) is False
+
+
+def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float | None = None
+                     ) -> Selection:
+    """``with_d`` (a direct term) when its chosen model scores better on the held-out data
+    than ``without``'s by more than one standard error of its score
+    (:func:`sysid.parsimony.significantly_better`; by more than ``tol`` points when given),
+    else ``without``; the reason in :attr:`Selection.feedthrough_note`."""
+    better, margin = significantly_better(with_d.best, without.best, tol=tol)
+    note = (f"direct term {'kept' if better else 'left out'}: best held-out score "
+            f"{with_d.best.score:.1f} with, {without.best.score:.1f} without (kept only when "
+            f"better by more than {margin:.2g} points"
+            f"{'' if tol is not None else ', one standard error'})")
+    log.info("selection: %s", note)
+    chosen = dataclasses.replace(with_d, focus_note=without.focus_note,
+                                 focus_scores=without.focus_scores) if better else without
+    return dataclasses.replace(chosen, feedthrough_note=note)
