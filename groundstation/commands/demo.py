@@ -151,9 +151,11 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
                       "integrates the rates), so estimated poles sit at |z| ~ 1 and may land just "
                       "outside; this is why a quadrotor model is validated over short windows "
                       "and by k-step prediction, not by simulating a whole flight.")
-    console.print("note: acc.x/acc.y are body-frame specific force, mostly rotor drag and "
-                  "vibration at these tilts; the thesis (section 5.2.1) also found them "
-                  "predicted poorly while the rates were captured.")
+    console.print("note: acc.x/acc.y are body-frame specific force (rotor drag at these "
+                  "tilts); the thesis (section 5.2.1) found them predicted poorly on its "
+                  "vehicle while the rates were captured. Each window's initial state is "
+                  "fitted with every channel weighted by its spread, so no channel's units "
+                  "decide it.")
     summary = {
         "sessions": [str(p) for p in paths], "model": str(model_path),
         "order": order, "past": past, "future": future, "samples": ident.n_samples,
