@@ -8,8 +8,9 @@ sweep again; :func:`grown_grid` does that step, for the parameters the caller di
 
 * a binding largest past or future: two more values, :data:`STEPS` times the largest (1.4x,
   2x), within the data's room (``past + future`` at most the largest pair the identification
-  data hold with enough Hankel columns, :func:`sysid.auto.max_blocks`; a future at most a
-  third of it, as the default grid);
+  data hold with enough Hankel columns, :func:`sysid.auto.max_blocks`, and at most
+  :data:`ROOM_X` times the first grid's; a future at most a third of the room, as the
+  default grid);
 * a binding smallest past or future: half of it (at least 1 and 2);
 * a binding largest order: orders up to ``max(top + 4, 1.5 top)``, within the rank the
   largest future allows (``(f - 1) l``) and :data:`MAX_ORDER`; a binding smallest order: 1.
@@ -31,7 +32,7 @@ from sysid.parsimony import binding_edges
 if TYPE_CHECKING:  # the selection's types; sysid.auto imports this module
     from sysid.auto import Plan, Selection
 
-__all__ = ["MAX_ORDER", "MAX_ROUNDS", "STEPS", "describe", "follow_edges", "grown_grid"]
+__all__ = ["MAX_ORDER", "MAX_ROUNDS", "ROOM_X", "STEPS", "describe", "follow_edges", "grown_grid"]
 
 #: Sweeps of a grown grid at most, after the first.
 MAX_ROUNDS = 2
@@ -39,6 +40,9 @@ MAX_ROUNDS = 2
 STEPS = (1.4, 2.0)
 #: Orders never grow beyond this (``sysid identify --order`` allows up to 40).
 MAX_ORDER = 40
+#: The largest ``past + future`` never grows beyond this many times the first grid's, so the
+#: Hankel matrix at most doubles its rows (its Gram matrix, the cost, at most quadruples).
+ROOM_X = 2
 
 
 def _beyond(values: list[int], *, side: str, limit: int, floor: int) -> list[int]:
@@ -104,6 +108,7 @@ def follow_edges(p: Plan, chosen: Selection, *, room: int,
     The score's window stays that of the first sweep, so every row is scored alike.
     ``room``: the largest ``past + future`` of the identification data."""
     first = p.grid
+    room = min(room, ROOM_X * (first["pasts"][-1] + first["futures"][-1]))
     for _ in range(MAX_ROUNDS):
         edges = binding_edges(chosen.best, chosen.result.ranked(require_stable=True), p.grid)
         grid = grown_grid(p.grid, edges, room=room, n_outputs=p.ident[0].n_outputs,
