@@ -59,6 +59,7 @@ from sysid.parsimony import (
     edge_warnings,
     ranking_warning,
     tolerance,
+    tolerance_basis,
 )
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
@@ -100,6 +101,7 @@ class Selection:
     focus_scores: dict[str, float] | None = None
     feedthrough_note: str = ""
     tolerance: float | None = None
+    tolerance_basis: str = "one standard error"
 
     def top(self, count: int = 8) -> list[SweepRow]:
         """The best ``count`` models by score, and the chosen one after them when it is not
@@ -202,6 +204,7 @@ class Plan:
     given_validation: bool
     memory: int | None = None
     fixed: tuple[str, ...] = ()  # "pasts", "futures", "orders" the caller gave: never grown
+    scored_grid: dict[str, list[int]] | None = None  # the first grid, once the grid grew
 
     @property
     def n_models(self) -> int:
@@ -250,10 +253,10 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     warning says so."""
     best = result.best()
     ranked = result.ranked(require_stable=True)
-    tol = tolerance(ranked[0])
-    log.info("selection: best held-out score %.2f, tolerance %.2f points (one standard error "
-             "over %s blocks); orders within it: %s", ranked[0].score, tol,
-             "?" if best.errors is None else best.errors.shape[0],
+    tol, basis = tolerance(ranked[0]), tolerance_basis(ranked[0])
+    log.info("selection: best held-out score %.2f, tolerance %.2f points (%s, %s blocks); "
+             "orders within it: %s", ranked[0].score, tol, basis,
+             "?" if ranked[0].errors is None else ranked[0].errors.shape[0],
              sorted({r.order for r in close_to_best(ranked)}))
     warnings = edge_warnings(best, ranked, p.grid, capped=p.capped)
     unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val))
@@ -270,7 +273,8 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
-                     warnings=tuple(warnings), grid=p.grid, memory=p.memory, tolerance=tol)
+                     warnings=tuple(warnings), grid=p.grid, memory=p.memory, tolerance=tol,
+                     tolerance_basis=basis)
 
 
 def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,
@@ -299,8 +303,9 @@ def _scored_model(p: Plan, best: SweepRow, *, method: Method, options: Options
     them (:func:`sysid.grid.pair_flights`)."""
     if best.model is not None:
         return best.model
+    grid = p.scored_grid or p.grid  # rows of a grown grid's sweeps keep their models
     trimmed = pair_flights(p.ident, past=best.past, future=best.future,
-                           past_max=p.grid["pasts"][-1], future_max=p.grid["futures"][-1])
+                           past_max=grid["pasts"][-1], future_max=grid["futures"][-1])
     return method.identify(list(trimmed), order=best.order, past=best.past,
                            future=best.future, options=options)
 
@@ -351,16 +356,16 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     :func:`pick_focus` decides; with ``choose_feedthrough`` (open-loop data only: module
     docstring) once more with a direct term, kept when it scores better.
     ``progress(done, total)`` counts models over every run (``total`` is
-    ``p.n_models * n_runs(...)``). ``horizon`` (k-step prediction) or ``window``
-    (simulation windows, s) replace the score's default (simulation over ``p.window_s``);
-    ``client`` (Dask) runs the sweeps on a cluster. Raises :class:`NoStableModel` when no
-    model of the grid is stable."""
+    ``p.n_models * n_runs(...)``, more once the grid grows). ``horizon`` (k-step prediction)
+    or ``window`` (simulation windows, s) replace the score's default (simulation over
+    ``p.window_s``); ``client`` (Dask) runs the sweeps on a cluster. Raises
+    :class:`NoStableModel` when no model of the grid is stable."""
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
     count = {"done": 0, "total": p.n_models * n_runs(options, choose_focus=choose_focus,
                                                       choose_feedthrough=choose_feedthrough)}
 
-    def run(q: Plan, opts: Options, *, finishing: bool = True
+    def run(q: Plan, opts: Options, *, finishing: bool = True, keep: bool = False
             ) -> tuple[SweepResult, Selection | None]:
         """One run of the grid of ``q``: sweep, then finish; progress counts on."""
         start = count["done"]
@@ -369,7 +374,7 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
         score_window = None if horizon is not None else q.window_s if window is None else window
         result = sweep(q.ident, **q.grid, method=method, options=opts, validation=q.val,
                        horizon=horizon, window=score_window, workers=workers, progress=report,
-                       keep_models=keep_models, client=client)
+                       keep_models=keep_models or keep, client=client)
         count["done"] = start + q.n_models
         if not finishing:
             return result, None
@@ -389,10 +394,12 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
             opts = dataclasses.replace(opts, feedthrough=bool(prov.get("feedthrough", False)))
         part = dataclasses.replace(q, grid=swept, window_s=sel.result.window or q.window_s)
         count["total"] += part.n_models
-        result, _ = run(part, opts, finishing=False)
+        result, _ = run(part, opts, finishing=False, keep=True)
         seen = {(r.past, r.future, r.order) for r in sel.result.rows}
-        merged = dataclasses.replace(sel.result, rows=sel.result.rows + tuple(
-            r for r in result.rows if (r.past, r.future, r.order) not in seen))
+        rows = [*sel.result.rows, *(r for r in result.rows
+                                    if (r.past, r.future, r.order) not in seen)]
+        merged = dataclasses.replace(sel.result, rows=tuple(
+            sorted(rows, key=lambda r: (r.past, r.future, r.order))))
         try:
             return finish(q, merged, method=method, options=opts)
         except DataError:

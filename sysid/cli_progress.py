@@ -49,8 +49,9 @@ def progress(label: str, *, total: int, quiet: bool = False,
 
     def update(done: int, new_total: int | None = None) -> None:
         nonlocal shown, ended, total
-        if new_total is not None and new_total != total:
+        if new_total is not None and new_total != total:  # count on against the new total
             total, ended = new_total, False
+            shown = min(shown, int(done / max(total, 1) / STEP + 1e-9) - 1)
         step = int(done / max(total, 1) / STEP + 1e-9)
         if done >= total:
             if ended:

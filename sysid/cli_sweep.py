@@ -114,7 +114,7 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
               f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}, "
               f"focus {sel.model.provenance.get('focus')}: the smallest order within "
               + ("0.5 points" if sel.tolerance is None else
-                 f"{sel.tolerance:.2f} points (one standard error)")
+                 f"{sel.tolerance:.2f} points ({sel.tolerance_basis})")
               + " of the best stable score (score = mean fit with each channel floored at 0 %)")
     if sel.focus_note:
         con.print(sel.focus_note)
@@ -131,7 +131,7 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
     return {"rule": sel.rule, "score": "mean of per-channel fits floored at 0 %, "
             f"{sel.scoring} of the validation data",
             "grid": sel.grid, "memory_samples": sel.memory,
-            "tolerance_points": sel.tolerance,
+            "tolerance_points": sel.tolerance, "tolerance_basis": sel.tolerance_basis,
             "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
             "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
             "focus_scores": sel.focus_scores,

@@ -118,8 +118,13 @@ def follow_edges(p: Plan, chosen: Selection, *, room: int,
         swept = {f"{name}s": sorted({getattr(chosen.best, name), *grid[f"{name}s"]}
                                     - set(p.grid[f"{name}s"]) | {getattr(chosen.best, name)})
                  for name in ("past", "future")}
+        # orders the swept pairs can hold: (f - 1) l for their largest future
+        rank = (swept["futures"][-1] - 1) * p.ident[0].n_outputs
+        grid["orders"] = sorted({*p.grid["orders"], *(n for n in grid["orders"] if n <= rank)})
+        if grid == p.grid:  # only orders the swept pairs cannot hold
+            break
         swept["orders"] = grid["orders"]
-        p = dataclasses.replace(p, grid=grid)
+        p = dataclasses.replace(p, grid=grid, scored_grid=p.scored_grid or first)
         grown = run(p, swept, chosen)
         if grown is None:
             break

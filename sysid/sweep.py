@@ -50,7 +50,7 @@ from sysid.errors import DataError, ParameterError, SysIdError
 from sysid.grid import HorizonGrid, build_grid, grid_products
 from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
-from sysid.parsimony import block_errors, parsimonious
+from sysid.parsimony import block_errors, block_shares, parsimonious
 from sysid.validate import compare
 
 __all__ = ["SweepResult", "SweepRow", "one_blas_thread", "quiet_models", "select_order",
@@ -69,7 +69,8 @@ class SweepRow:
     ``poles`` (n,) complex, ``seconds`` wall time of identification + validation,
     ``error`` the one-line reason when the model could not be identified, ``errors`` (B, l)
     the squared errors of the score per block of the validation data
-    (:func:`sysid.parsimony.block_errors`; None for failed and hand-made rows).
+    (:func:`sysid.parsimony.block_errors`; None for failed and hand-made rows), ``shares``
+    (B, l) each block's share of the channels' spread (:func:`sysid.parsimony.block_shares`).
     """
 
     past: int
@@ -83,6 +84,7 @@ class SweepRow:
     error: str | None = None
     model: StateSpaceModel | None = field(default=None, repr=False)
     errors: np.ndarray | None = field(default=None, repr=False)
+    shares: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def mean_fit(self) -> float:
@@ -248,7 +250,7 @@ def _past_rows(
                 past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
                 stable=model.is_stable, predictor_stable=model.predictor_is_stable,
                 seconds=time.perf_counter() - t0, model=model if keep_models else None,
-                errors=block_errors(res)))
+                errors=block_errors(res), shares=block_shares(res)))
     return rows
 
 

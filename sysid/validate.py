@@ -41,6 +41,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -187,7 +188,8 @@ def channel_weights(y: np.ndarray) -> np.ndarray:
     """``(l,)`` weights of the initial-state fit for the record ``y`` (N, l): one over each
     channel's standard deviation (module docstring). A constant or non-finite channel gets the
     weight of the most spread one, so it neither dominates nor vanishes."""
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN channel: no spread
         spread = np.nanstd(np.asarray(y, dtype=float), axis=0)
     ok = np.isfinite(spread) & (spread > 0)
     if not ok.any():
@@ -230,19 +232,20 @@ def estimate_x0(
 
 def simulate_windows(
     model: StateSpaceModel, *, u: np.ndarray, y: np.ndarray, window: int | None = None,
-    x0: str | np.ndarray = "estimate",
+    x0: str | np.ndarray = "estimate", weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulate ``model`` over ``u`` (N, m), whole or in windows of ``window`` samples.
 
     Each window starts from its own least-squares initial state fitted to ``y`` (N, l), its
-    channels weighted by :func:`channel_weights` of the whole record (``x0="estimate"``), from
-    zero (``"zero"``), or, without windows, from a given (n,) state.
+    channels weighted by ``weights`` (l,) (default: :func:`channel_weights` of the whole
+    record; :func:`compare` passes those of all its records) (``x0="estimate"``), from zero
+    (``"zero"``), or, without windows, from a given (n,) state.
     Returns ``(y_sim (N, l), x0s (W, n))``.
     """
     A, B, C, D = _matrices(model)
     n_samples, n = u.shape[0], A.shape[0]
     slices = split_windows(n_samples, window or n_samples)
-    weights = channel_weights(y)
+    weights = channel_weights(y) if weights is None else weights
     y_sim = np.empty((n_samples, C.shape[0]))
     x0s = np.zeros((len(slices), n))
     if not isinstance(x0, str):
@@ -267,12 +270,13 @@ def simulate_windows(
 
 def predict(
     model: StateSpaceModel, *, u: np.ndarray, y: np.ndarray, horizon: int,
-    x0: str | np.ndarray = "estimate",
+    x0: str | np.ndarray = "estimate", weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``horizon``-step-ahead prediction of ``y`` (N, l) from ``u`` (N, m) (module docstring).
 
     Returns ``(y_pred (N, l), x0 (n,))``; ``x0="estimate"`` fits the predictor's initial state
-    by least squares on the one-step prediction errors.
+    by least squares on the one-step prediction errors, channels weighted by ``weights`` (l,)
+    (default :func:`channel_weights` of ``y``).
     """
     A, B, C, D = _matrices(model)
     K = model.K
@@ -284,7 +288,7 @@ def predict(
     if isinstance(x0, str):
         if x0 == "estimate":
             x0v = estimate_x0(A=ak, C=C, residual=y - forced @ C.T - u @ D.T,
-                              weights=channel_weights(y))
+                              weights=channel_weights(y) if weights is None else weights)
         else:
             x0v = np.zeros(n)
     else:
@@ -370,12 +374,15 @@ def compare(
         log.warning("predictor A - KC is unstable (max |eig| >= 1); "
                     "predictions may diverge: use sysid.stable_predictor(model)")
     outs, x0s = [], []
+    weights = channel_weights(np.vstack([d.y for d in flights]))  # as the fit counts them
     for d in flights:
         with np.errstate(over="ignore", invalid="ignore"):
             if horizon is None:
-                yh, xs = simulate_windows(model, u=d.u, y=d.y, window=win, x0=x0)
+                yh, xs = simulate_windows(model, u=d.u, y=d.y, window=win, x0=x0,
+                                          weights=weights)
             else:
-                yh, xv = predict(model, u=d.u, y=d.y, horizon=int(horizon), x0=x0)
+                yh, xv = predict(model, u=d.u, y=d.y, horizon=int(horizon), x0=x0,
+                                 weights=weights)
                 xs = xv[None]
         outs.append(yh)
         x0s.append(xs)

@@ -12,24 +12,29 @@ from sysid.auto import pick_feedthrough, select
 from sysid.cli_sweep import selection_json
 from sysid.methods import get_method
 from sysid.parsimony import (
+    FIXED_TOL,
     FLOOR_POINTS,
     MAX_BLOCKS,
     MIN_BLOCKS,
     block_errors,
+    block_shares,
     ranking_warning,
     score_se,
     scores,
     significantly_better,
+    tolerance,
+    tolerance_basis,
 )
 from sysid.sweep import SweepResult, SweepRow
 from tests.sysid.systems import open_loop, random_stable_system
 
 
-def _row(order: int, errors: np.ndarray) -> SweepRow:
+def _row(order: int, errors: np.ndarray, *, shares: np.ndarray | None = None) -> SweepRow:
     """A row whose fits follow from its (B, l) block errors, as the sweep's do."""
     fit = 100.0 * (1.0 - np.sqrt(errors.sum(axis=0)))
     return SweepRow(past=4, future=4, order=order, fit=fit, poles=np.zeros(order, complex),
-                    stable=True, predictor_stable=True, seconds=0.0, errors=errors)
+                    stable=True, predictor_stable=True, seconds=0.0, errors=errors,
+                    shares=shares)
 
 
 def _blocks(score: float, *, spread: float, n_blocks: int = 12, seed: int = 0) -> np.ndarray:
@@ -94,6 +99,38 @@ def test_a_noisy_score_prefers_the_smaller_order() -> None:
     assert 1.5 < se < 5.0
     assert result.best().order == 3
     assert result.best(tol=0.5).order == 4
+
+
+def test_a_short_extra_record_does_not_inflate_the_standard_error() -> None:
+    """Blocks of unequal size (a 137-sample record beside 1000 samples, scored whole: each cut
+    into ten pieces) leave with their share of the spread: the standard error stays that of
+    the data (0.68 against 0.56 without the short record), where scaling the rest by B/(B-1)
+    read 2.25 and took the short record's pieces for the model's shortcoming."""
+    rng = np.random.default_rng(1)
+    system = random_stable_system(n_states=4, n_inputs=1, n_outputs=2, rng=rng)
+    long, short = (open_loop(system, n_samples=n, rng=rng).data for n in (1000, 137))
+
+    def se(data: list) -> float:
+        res = sysid.compare(system, data, horizon=3, warn=False)
+        return score_se(_row(4, block_errors(res), shares=block_shares(res)))
+
+    alone, both = se([long]), se([long, short])
+    assert 0.2 < alone < 1.5 and both < 1.5 * alone
+
+
+def test_held_out_data_too_short_for_a_standard_error_say_so() -> None:
+    """One or a few blocks (under 100 held-out samples): the tolerance falls back to the fixed
+    0.5 points, the report names that basis instead of "one standard error", and a warning
+    says the held-out data cannot measure the score's precision."""
+    one = [_row(3, _blocks(90.0, spread=0.3, n_blocks=1))]
+    assert not np.isfinite(score_se(one[0])) and tolerance(one[0]) == FIXED_TOL
+    assert tolerance_basis(one[0]).startswith("fixed")
+    assert "too few to measure" in ranking_warning(one, n_samples=15)
+    few = [_row(3, _blocks(90.0, spread=0.05, n_blocks=4))]
+    assert tolerance_basis(few[0]) == "one standard error"
+    assert "4 piece(s)" in ranking_warning(few, n_samples=45)
+    many = [_row(3, _blocks(90.0, spread=0.05, n_blocks=12))]
+    assert ranking_warning(many, n_samples=1200) is None
 
 
 def test_the_warning_says_what_the_held_out_data_cannot_tell() -> None:
