@@ -17,12 +17,17 @@ blocks (blocks of a residual series as batches; Kuensch 1989),
           S^{(-b)} = S\\Big(\\frac{E - \\varepsilon_{b}}{1 - \\delta_{b}}\\Big),
 
 the score recomputed without block :math:`b`, the floor included (a channel floored in every
-replicate adds nothing): its errors and its share :math:`\\delta_{bi}` of the channel's
-squared spread (:func:`block_shares`, about :math:`1/B` for equal blocks; deviations from the
-mean of all the data) both leave. Blocks of unequal length (records of different lengths, a
-longer last window, merged pieces) are then weighed by what they hold; scaling the rest by
-:math:`B/(B-1)` instead took a 150-sample validation flight beside 2000 samples for a
-shortcoming of the model (SE 0.23 -> 2.9 points, order 3 for a true 4).
+replicate adds nothing), its remaining errors scaled to the whole record by the share
+:math:`\\delta_b` of the held-out samples the block holds (:func:`block_shares`; :math:`1/B`
+for equal blocks), the spread in the denominator held fixed: every model is scored on the same
+data, so the spread's own sampling error moves all scores alike and does not bear on their
+ranking. Blocks of unequal length (records of different lengths, a longer last window,
+merged pieces) then weigh what they hold; scaling the rest by :math:`B/(B-1)` took a
+150-sample validation flight beside 2000 samples for a shortcoming of the model (SE 0.23 ->
+2.9 points, order 3 for a true 4). Removing each block's share of the spread as well (a
+ratio jackknife) measured the spread's own variation: on CrazyPAD's short hover segments SE
+1.9 -> 6.1 points, and other choices there and on DaISy robot_arm and exchanger, 1-2 points
+worse under the protocol.
 
 **Rule** (:func:`tolerance`, :func:`parsimonious`): the one-standard-error rule (Breiman et
 al. 1984; Hastie, Tibshirani and Friedman, *The Elements of Statistical Learning*, 7.10).
@@ -156,11 +161,11 @@ def block_errors(res: CompareResult) -> np.ndarray:
 
 
 def block_shares(res: CompareResult) -> np.ndarray:
-    """Each block's share of each channel's squared spread, (B, l), summing to 1 over the
-    blocks: what the score's denominator loses without that block (:func:`score_se`)."""
-    y_all = np.vstack(res.y_measured)
-    mean = y_all.mean(axis=0)
-    return _per_block(res, [(y - mean) ** 2 for y in res.y_measured])
+    """Each block's share of the held-out samples, (B, l) (alike for every channel), summing
+    to 1 over the blocks: how much of the record leaves with the block (:func:`score_se`)."""
+    counts = np.array([sum(b - a for _, a, b in block) for block in _blocks(res)], dtype=float)
+    n_outputs = res.y_measured[0].shape[1]
+    return np.repeat((counts / counts.sum())[:, None], n_outputs, axis=1)
 
 
 def scores(errors: np.ndarray) -> np.ndarray:

@@ -103,9 +103,9 @@ def test_a_noisy_score_prefers_the_smaller_order() -> None:
 
 def test_a_short_extra_record_does_not_inflate_the_standard_error() -> None:
     """Blocks of unequal size (a 137-sample record beside 1000 samples, scored whole: each cut
-    into ten pieces) leave with their share of the spread: the standard error stays that of
-    the data (0.68 against 0.56 without the short record), where scaling the rest by B/(B-1)
-    read 2.25 and took the short record's pieces for the model's shortcoming."""
+    into ten pieces) leave with their share of the samples: the standard error stays about
+    that of the long record alone, where scaling the rest by B/(B-1) read 2.25 and took the
+    short record's pieces for the model's shortcoming."""
     rng = np.random.default_rng(1)
     system = random_stable_system(n_states=4, n_inputs=1, n_outputs=2, rng=rng)
     long, short = (open_loop(system, n_samples=n, rng=rng).data for n in (1000, 137))
