@@ -18,6 +18,7 @@ from sysid.errors import (
     SysIdError,
 )
 from sysid.iem import iem
+from sysid.kalman import stable_predictor
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
 from sysid.order import InformationCriteria, information_criteria, singular_values
@@ -25,7 +26,7 @@ from sysid.parsim import parsim_k
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
 from sysid.residuals import ResidualResult, residuals
 from sysid.sweep import SweepResult, select_order, sweep
-from sysid.validate import compare, fit_percent, stable_predictor
+from sysid.validate import compare, fit_percent
 
 __all__ = [
     "CompareResult",

@@ -13,9 +13,10 @@ import numpy as np
 from sysid.data import IOData, as_flights
 from sysid.errors import ParameterError
 from sysid.factor import build_products
+from sysid.kalman import stable_predictor
 from sysid.methods import DEFAULT_METHOD, Method, get_method
 from sysid.sweep import quiet_models
-from sysid.validate import predict, stable_predictor
+from sysid.validate import predict
 
 __all__ = ["GAP_MIN_DECADES", "InformationCriteria", "OrderSuggestion", "information_criteria",
            "singular_values", "suggest_order"]

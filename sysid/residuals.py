@@ -52,8 +52,9 @@ import numpy as np
 
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, DimensionError, ParameterError
+from sysid.kalman import stable_predictor
 from sysid.model import StateSpaceModel
-from sysid.validate import predict, stable_predictor
+from sysid.validate import predict
 
 __all__ = ["ResidualResult", "residuals"]
 

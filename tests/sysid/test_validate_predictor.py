@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
+from sysid.kalman import stable_predictor
 from sysid.model import StateSpaceModel
-from sysid.validate import compare, fit_percent, stable_predictor
+from sysid.validate import compare, fit_percent
 from tests.sysid.systems import closed_loop, random_stable_system
 
 # SISO noise model H(z) = 1 + C (zI - A)^-1 K with A = 0.9, C = 1: zero at A - K.
