@@ -256,9 +256,9 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
                     f"says little of how the model will validate; {remedy}")
     blocks = ranked[0].errors
     if blocks is not None and blocks.shape[0] < MIN_BLOCKS:
-        return (f"the {n_samples} held-out samples are too few to measure how precise the "
-                f"score is ({blocks.shape[0]} piece(s) of at least {MIN_PIECE_SAMPLES} "
-                f"samples; {MIN_BLOCKS} are needed): the choice used "
+        return (f"the {n_samples} held-out samples are too few to measure reliably how "
+                f"precise the score is ({blocks.shape[0]} piece(s) of at least "
+                f"{MIN_PIECE_SAMPLES} samples; {MIN_BLOCKS} are needed): the choice used "
                 f"{tolerance(ranked[0]):.2g} points as its tolerance; {remedy}")
     return None
 

@@ -125,7 +125,7 @@ def test_held_out_data_too_short_for_a_standard_error_say_so() -> None:
     one = [_row(3, _blocks(90.0, spread=0.3, n_blocks=1))]
     assert not np.isfinite(score_se(one[0])) and tolerance(one[0]) == FIXED_TOL
     assert tolerance_basis(one[0]).startswith("fixed")
-    assert "too few to measure" in ranking_warning(one, n_samples=15)
+    assert "too few to measure reliably" in ranking_warning(one, n_samples=15)
     few = [_row(3, _blocks(90.0, spread=0.05, n_blocks=4))]
     assert tolerance_basis(few[0]) == "one standard error"
     assert "4 piece(s)" in ranking_warning(few, n_samples=45)
