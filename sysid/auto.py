@@ -258,7 +258,8 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
              "orders within it: %s", ranked[0].score, tol, basis,
              "?" if ranked[0].errors is None else ranked[0].errors.shape[0],
              sorted({r.order for r in close_to_best(ranked)}))
-    warnings = edge_warnings(best, ranked, p.grid, capped=p.capped)
+    warnings = edge_warnings(best, ranked, p.grid, capped=p.capped,
+                             n_outputs=p.ident[0].n_outputs)
     unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val))
     if unresolved is not None:
         warnings.append(unresolved)

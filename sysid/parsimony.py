@@ -287,14 +287,18 @@ def binding_edges(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[i
 
 
 def edge_warnings(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]], *,
-                  capped: bool, tol: float | None = None) -> list[str]:
+                  capped: bool, tol: float | None = None, n_outputs: int | None = None
+                  ) -> list[str]:
     """A warning for each of :func:`binding_edges`; ``capped``: the data cut the horizons
-    short of the default grid's range (:func:`sysid.auto.plan`)."""
+    short of the default grid's range (:func:`sysid.auto.plan`); ``n_outputs``: says when an
+    order is the most the largest future's rank allows, ``(f - 1) l``."""
     out = []
     for name, side in binding_edges(best, ranked, grid, tol=tol):
         value = getattr(best, name)
         if side == "above":
             why = " (the data allow no longer horizons)" if capped and name != "order" else ""
+            if name == "order" and n_outputs and value >= (grid["futures"][-1] - 1) * n_outputs:
+                why = f" (the most a future of {grid['futures'][-1]} allows)"
             out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
         else:
             out.append(f"{name} {value} is the smallest tried: the best may lie below")

@@ -215,3 +215,18 @@ def test_pick_feedthrough_keeps_the_default_within_the_noise() -> None:
     assert left.feedthrough_note.startswith("direct term left out")
     assert pick_feedthrough(without, sel(_row(4, _blocks(90.8, spread=1.0))),
                             tol=0.5).feedthrough_note.startswith("direct term kept")
+
+
+def test_an_order_at_the_rank_of_the_largest_future_says_so() -> None:
+    """Scores rising to order 4 where a largest future of 3 on two outputs allows no more
+    ((3 - 1) 2 = 4): the edge warning names the future as the bound, not the grid."""
+    from sysid.parsimony import edge_warnings
+
+    rows = [_row(n, _blocks(80.0 + 3 * n, spread=0.05, seed=n)) for n in (2, 3, 4)]
+    ranked = SweepResult(rows=tuple(rows), method="iem", horizon=None,
+                         window=1.0).ranked(require_stable=True)
+    grid = {"pasts": [4], "futures": [2, 3], "orders": [2, 3, 4]}
+    assert edge_warnings(ranked[0], ranked, grid, capped=False, n_outputs=2) == [
+        "order 4 is the largest tried (the most a future of 3 allows): the best may lie beyond"]
+    assert edge_warnings(ranked[0], ranked, grid, capped=False, n_outputs=3) == [
+        "order 4 is the largest tried: the best may lie beyond"]
