@@ -98,3 +98,26 @@ def check_closed_with_stop(result: FlightResult) -> Session:
     assert last["thrust"] == 0 and last["tick"] == -1
     assert any("stop setpoint sent" in e.text for e in s.events())
     return s
+
+
+def safety_events(s: Session) -> list:
+    """The safety errors and warnings of a session, in order."""
+    return [e for e in s.events() if e.source == "safety" and e.level in ("error", "warning")]
+
+
+def check_descent(s: Session, *, thrust_ceiling: int, n: int, slack_s: float = 0.0) -> None:
+    sp = s["setpoints"].data
+    abort = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
+    assert len(abort) == n
+    assert (abort["thrust"] <= thrust_ceiling).all()
+    assert (abort["roll"] == 0).all() and (abort["pitch"] == 0).all()
+    kinds = [k.decode() for k in s["phases"].data["kind"]]
+    assert kinds[-1] == "abort"
+    # One setpoint per 0.1 s deadline from the thrust unlock through the flight and the descent
+    # to the stop: never more than one period without a setpoint (the simulation is paced by
+    # the runner's clock, so this holds on a busy host too; 20 ms margin for the 10 ms steps).
+    t = sp["host_time"]
+    assert np.diff(t).max() <= 0.1 + 0.02 + slack_s, np.diff(t).max()  # slack: real time, SITL
+    late = t[1:] - np.arange(len(t) - 1) * 0.1
+    late -= late.min()
+    assert late[-1] < 0.05 + slack_s

@@ -1,0 +1,99 @@
+"""Signals during a flight: SIGINT/SIGTERM mid-excitation descend then stop, a second Ctrl-C
+during the descent stops at once, Ctrl-C while connecting gives up at once (split from
+``test_safety.py`` so the two halves of the real-time SITL flights run on both workers)."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import pytest
+
+from groundstation.errors import FlightAborted
+from groundstation.flight import fly_plan
+from groundstation.plan import load_plan
+
+from .checks import check_closed_with_stop, check_descent, check_setpoints, safety_events
+from .conftest import one_variant_on_sitl, wait_for_stop, wall_slack_s
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
+    one_variant_on_sitl(request, first=sig == signal.SIGINT,
+                        why="SIGTERM and SIGINT take one path, in the ground station")
+    plan, uri = load_plan("pitch-only"), flight_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    before = signal.getsignal(sig)
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), sig)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
+    assert signal.getsignal(sig) is before  # handlers restored
+    assert result.aborted and signal.Signals(sig).name in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    events = safety_events(s)
+    assert events and signal.Signals(sig).name in events[0].text
+    rows = check_setpoints(s, plan, complete=False, slack_s=wall_slack_s(uri))
+    assert excitation.start_tick + 20 <= rows["tick"][-1] <= excitation.start_tick + 22
+    check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
+    with pytest.raises(FlightAborted, match=r"flight aborted: SIG.*session saved to"):
+        result.raise_if_aborted()
+
+
+def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
+    """A silent peer would hold the connect for its whole timeout; SIGINT ends it now."""
+    import os
+    import socket
+    import threading
+    import time
+
+    from groundstation.errors import LinkError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))  # a port that exists but never answers
+        port = s.getsockname()[1]
+        threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)).start()
+        t0 = time.monotonic()
+        with pytest.raises(LinkError, match="cancelled"):
+            fly_plan(plan="hover-check", out=tmp_path, uri=f"udp://127.0.0.1:{port}",
+                     connect_timeout_s=20.0)
+    assert time.monotonic() - t0 < 5.0
+    assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
+
+
+def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
+    plan, uri = load_plan("pitch-only"), flight_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    class SecondCtrlC:
+        """Presses Ctrl-C again once the descent has streamed a few setpoints."""
+
+        descent, pressed = 0, False
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints":
+                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+                if self.descent >= 5 and not self.pressed:
+                    self.pressed = True
+                    os.kill(os.getpid(), signal.SIGINT)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook,
+                      listeners=[SecondCtrlC()])
+    assert result.aborted
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    sp = s["setpoints"].data
+    descent = sp[(sp["tick"] == -1) & (sp["thrust"] > 0)]
+    assert 5 <= len(descent) <= 7  # of the 20 planned: stopped at the next deadline
+    texts = [e.text for e in safety_events(s)]
+    assert sum("during the abort" in t for t in texts) == 1, texts
