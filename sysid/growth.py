@@ -13,7 +13,7 @@ sweep again; :func:`grown_grid` does that step, for the parameters the caller di
   default grid);
 * a binding smallest past or future: half of it (at least 1 and 2);
 * a binding largest order: orders up to ``max(top + 4, 1.5 top)``, within the rank the
-  largest future allows (``(f - 1) l``) and :data:`MAX_ORDER`; a binding smallest order: 1.
+  longest future swept allows (``(f - 1) l``) and :data:`MAX_ORDER`; a binding smallest order: 1.
 
 :func:`sysid.auto.select_plan` sweeps the grown grid again with the chosen focus and direct
 term, at most :data:`MAX_ROUNDS` times; the edge warnings of the last round remain. On the
@@ -56,17 +56,21 @@ def _beyond(values: list[int], *, side: str, limit: int, floor: int) -> list[int
 
 
 def grown_grid(grid: dict[str, list[int]], edges: Sequence[tuple[str, str]], *, room: int,
-               n_outputs: int, fixed: Collection[str] = ()) -> dict[str, list[int]] | None:
+               n_outputs: int, fixed: Collection[str] = (), future: int | None = None
+               ) -> dict[str, list[int]] | None:
     """``grid`` grown past its binding ``edges`` (``(parameter, side)``, module docstring), or
     None when nothing can grow: the edges are fixed by the caller (``fixed`` holds
-    ``"pasts"``, ``"futures"`` or ``"orders"``) or the data hold no longer horizons (``room``:
-    the largest ``past + future``)."""
+    ``"pasts"``, ``"futures"`` or ``"orders"``), the data hold no longer horizons (``room``:
+    the largest ``past + future``), or larger orders need a longer future than will be swept
+    (``future``: the chosen one, which the new futures join; default the grid's largest)."""
     new = {k: sorted(v) for k, v in grid.items()}
     sides = {name: side for name, side in edges if f"{name}s" not in fixed}
+    reach = new["futures"][-1] if future is None else future  # the longest future swept
     if "future" in sides:
         more = _beyond(new["futures"], side=sides["future"], floor=2,
                        limit=min(room // 3, room - new["pasts"][-1]))
         new["futures"] = sorted({*new["futures"], *more})
+        reach = max([reach, *more])
     if "past" in sides:
         more = _beyond(new["pasts"], side=sides["past"], floor=1,
                        limit=room - new["futures"][-1])
@@ -75,7 +79,7 @@ def grown_grid(grid: dict[str, list[int]], edges: Sequence[tuple[str, str]], *, 
         orders = new["orders"]
         if sides["order"] == "above":
             top = orders[-1]
-            cap = min((new["futures"][-1] - 1) * n_outputs, MAX_ORDER)
+            cap = min((reach - 1) * n_outputs, MAX_ORDER)
             grown = min(max(top + 4, round(1.5 * top)), cap)
             new["orders"] = sorted({*orders, *range(top + 1, grown + 1)})
         elif orders[0] > 1:
@@ -112,17 +116,12 @@ def follow_edges(p: Plan, chosen: Selection, *, room: int,
     for _ in range(MAX_ROUNDS):
         edges = binding_edges(chosen.best, chosen.result.ranked(require_stable=True), p.grid)
         grid = grown_grid(p.grid, edges, room=room, n_outputs=p.ident[0].n_outputs,
-                          fixed=p.fixed)
+                          fixed=p.fixed, future=chosen.best.future)
         if grid is None:
             break
-        swept = {f"{name}s": sorted({getattr(chosen.best, name), *grid[f"{name}s"]}
-                                    - set(p.grid[f"{name}s"]) | {getattr(chosen.best, name)})
+        swept = {f"{name}s": sorted(set(grid[f"{name}s"]) - set(p.grid[f"{name}s"])
+                                    | {getattr(chosen.best, name)})
                  for name in ("past", "future")}
-        # orders the swept pairs can hold: (f - 1) l for their largest future
-        rank = (swept["futures"][-1] - 1) * p.ident[0].n_outputs
-        grid["orders"] = sorted({*p.grid["orders"], *(n for n in grid["orders"] if n <= rank)})
-        if grid == p.grid:  # only orders the swept pairs cannot hold
-            break
         swept["orders"] = grid["orders"]
         p = dataclasses.replace(p, grid=grid, scored_grid=p.scored_grid or first)
         grown = run(p, swept, chosen)

@@ -137,35 +137,26 @@ def _blocks(res: CompareResult) -> list[list[tuple[int, int, int]]]:
     return [[pieces[i] for i in g] for g in np.array_split(np.arange(len(pieces)), MAX_BLOCKS)]
 
 
-def _per_block(res: CompareResult, squares: list[np.ndarray]) -> np.ndarray:
-    """``squares`` (one (N_e, l) array per record) summed over each block, divided by the
-    channels' squared spread over all the data: (B, l); NaN for a constant channel."""
+def block_errors(res: CompareResult) -> np.ndarray:
+    """Squared errors of ``res`` per block and channel, (B, l), each divided by the channel's
+    squared spread over all the data: ``100 * (1 - sqrt(errors.sum(0)))`` is ``res.fit``
+    (module docstring; blocks: :func:`_blocks`); NaN for a constant channel."""
     y_all = np.vstack(res.y_measured)
     spread = np.sum((y_all - y_all.mean(axis=0)) ** 2, axis=0)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        sums = np.array([sum(np.sum(squares[e][a:b], axis=0) for e, a, b in block)
-                         for block in _blocks(res)])
-        sums[~np.isfinite(sums)] = np.inf
-        out = sums / spread
+        sse = np.array([sum(np.sum((res.y_measured[e][a:b] - res.y_model[e][a:b]) ** 2, axis=0)
+                            for e, a, b in block) for block in _blocks(res)])
+        sse[~np.isfinite(sse)] = np.inf
+        out = sse / spread
     out[:, spread == 0] = np.nan
     return out
 
 
-def block_errors(res: CompareResult) -> np.ndarray:
-    """Squared errors of ``res`` per block and channel, (B, l), each divided by the channel's
-    squared spread over all the data: ``100 * (1 - sqrt(errors.sum(0)))`` is ``res.fit``
-    (module docstring; blocks: :func:`_blocks`)."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        return _per_block(res, [(y - ym) ** 2 for y, ym in zip(res.y_measured, res.y_model,
-                                                                 strict=True)])
-
-
 def block_shares(res: CompareResult) -> np.ndarray:
-    """Each block's share of the held-out samples, (B, l) (alike for every channel), summing
-    to 1 over the blocks: how much of the record leaves with the block (:func:`score_se`)."""
+    """Each block's share of the held-out samples, (B,), summing to 1: how much of the data
+    leaves with the block (:func:`score_se`)."""
     counts = np.array([sum(b - a for _, a, b in block) for block in _blocks(res)], dtype=float)
-    n_outputs = res.y_measured[0].shape[1]
-    return np.repeat((counts / counts.sum())[:, None], n_outputs, axis=1)
+    return counts / counts.sum()
 
 
 def scores(errors: np.ndarray) -> np.ndarray:
@@ -183,7 +174,7 @@ def score_se(row: Scored) -> float:
         return float("nan")
     n_blocks = e.shape[0]
     shares = getattr(row, "shares", None)  # hand-made rows: equal blocks
-    rest = 1.0 - (np.full(e.shape, 1.0 / n_blocks) if shares is None else shares)
+    rest = 1.0 - (np.full(n_blocks, 1.0 / n_blocks) if shares is None else shares)[:, None]
     total = e.sum(axis=0)  # a diverged channel (inf) stays diverged without any one block
     with np.errstate(invalid="ignore", divide="ignore"):
         left = np.where(rest > 1e-12, (total - e) / rest, total)

@@ -70,7 +70,7 @@ class SweepRow:
     ``error`` the one-line reason when the model could not be identified, ``errors`` (B, l)
     the squared errors of the score per block of the validation data
     (:func:`sysid.parsimony.block_errors`; None for failed and hand-made rows), ``shares``
-    (B, l) each block's share of the channels' spread (:func:`sysid.parsimony.block_shares`).
+    (B,) each block's share of the validation samples (:func:`sysid.parsimony.block_shares`).
     """
 
     past: int

@@ -29,6 +29,11 @@ def test_grown_grid_steps_past_the_binding_edges_within_the_data() -> None:
                       fixed=("orders",)) is None
     assert grown_grid(GRID, [("order", "above")], room=40, n_outputs=1) is None  # 5 = (6-1) 1
     assert grown_grid(GRID, [], room=40, n_outputs=2) is None
+    # Orders grow only as far as the future that will be swept allows: a chosen future of 3
+    # holds (3 - 1) 2 = 4 states, below the top order 5 already tried.
+    assert grown_grid(GRID, [("order", "above")], room=40, n_outputs=2, future=3) is None
+    assert grown_grid(GRID, [("order", "above"), ("future", "above")], room=40, n_outputs=2,
+                      future=3)["orders"][-1] == 9  # the new futures 8 and 12 hold 14
 
 
 def test_a_system_beyond_the_default_orders_is_followed(monkeypatch) -> None:
