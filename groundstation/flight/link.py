@@ -12,6 +12,7 @@ flight clock:
 ``("link", t, quality_pct, latency_ms)``               one of the two is NaN
 ``("lost", t, message)``                               the link was lost (cflib connection_lost)
 ``("log_error", t, message)``                          cflib refused or failed a log block
+``("late_close", t, message)``                         cflib did not close within CLOSE_TIMEOUT_S
 =====================================================  =========================================
 
 ``t`` is ``clock.now()`` in seconds. The blocks logged and their checks against the TOC are
@@ -26,7 +27,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, Literal
 
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
@@ -48,6 +49,7 @@ __all__ = [
     "ATTITUDE_BLOCK",
     "BATTERY_BLOCK",
     "BLOCK_PERIOD_S",
+    "CLOSE_TIMEOUT_S",
     "CONNECT_LIMIT_S",
     "DEFAULT_URI",
     "FLIGHT_BLOCKS",
@@ -77,6 +79,11 @@ SEND_TIMEOUT_S = 1.5
 with the Crazyradio unplugged cflib's radio driver stops taking packets, blocks the sender for 2 s
 and then deadlocks in its link-error path (the sender holds ``Crazyflie._send_lock`` while the
 error handler joins the ping thread, which waits for that lock), so these calls never return."""
+CLOSE_TIMEOUT_S = 10.0
+"""Longest wait (wall s) for cflib to close the link. Closing joins cflib's threads (the UDP
+driver's receiver polls its socket once a second, the packet handler is joined for up to 1 s),
+so it takes 1-2 s on an idle host and longer on a busy one; it comes after the stop setpoint was
+delivered, so one that does not return is a warning in the session, not a lost flight."""
 
 _PLATFORM_PORT, _VERSION_CHANNEL, _VERSION_GET_FIRMWARE = 13, 1, 1
 
@@ -218,11 +225,13 @@ class Link:
             self._configs.append(conf)
 
     # ------------------------------------------------------------------ commander
-    def _bounded(self, fn: Callable[[], Any], *, what: str, always: bool = False) -> None:
+    def _bounded(self, fn: Callable[[], Any], *, what: str, always: bool = False,
+                 timeout_s: float = SEND_TIMEOUT_S,
+                 late: Literal["lost", "late_close"] = "lost") -> None:
         """``fn()`` (a cflib call) unless the link is stuck; one that does not return within
-        :data:`SEND_TIMEOUT_S` makes the link lost and stuck (posted as ``"lost"``). Sends are
-        bounded on the radio only (the only driver whose send can block); ``always`` bounds
-        ``fn`` on every driver."""
+        ``timeout_s`` makes the link stuck and is posted as ``late`` (``"lost"`` also marks the
+        link lost). Sends are bounded on the radio only (the only driver whose send can block);
+        ``always`` bounds ``fn`` on every driver."""
         if self.stuck:
             return
         if not always and not hasattr(self.cf.link, "out_queue"):
@@ -230,13 +239,17 @@ class Link:
             return
         if self._caller is None:
             self._caller = _Caller(f"cflib-calls {self.uri}")
-        if not self._caller.call(fn, timeout_s=SEND_TIMEOUT_S):
-            self.stuck = True
-            log.error("cflib did not take the %s within %g s", what, SEND_TIMEOUT_S)
-            if not self.lost:
-                self.lost = True
-                self._post(("lost", self.clock.now(), f"cflib did not take the {what} within "
-                            f"{SEND_TIMEOUT_S:g} s: the radio stopped answering (unplugged?)"))
+        if self._caller.call(fn, timeout_s=timeout_s):
+            return
+        self.stuck = True
+        log.error("cflib did not take the %s within %g s", what, timeout_s)
+        if late == "lost" and self.lost:
+            return
+        self.lost = self.lost or late == "lost"
+        why = " (the stop setpoint was delivered before)" if late == "late_close" else (
+            ": the radio stopped answering (unplugged?)")
+        self._post((late, self.clock.now(),
+                    f"cflib did not take the {what} within {timeout_s:g} s{why}"))
 
     def send_setpoint(self, *, roll: float, pitch: float, yaw_rate: float, thrust: int) -> None:
         """``Commander.send_setpoint`` (deg, deg, deg/s, PWM); cflib negates pitch on the wire."""
@@ -278,7 +291,8 @@ class Link:
         try:
             # on every driver: cflib can deadlock closing a link while one of its resend
             # timers sends (the send lock is not released when the link vanishes under it)
-            self._bounded(close, what="link close", always=True)
+            self._bounded(close, what="link close", always=True,
+                          timeout_s=CLOSE_TIMEOUT_S, late="late_close")
         except Exception:  # closing must not hide the flight's own outcome
             log.exception("closing the link to %s failed", self.uri)
         if self.stuck:

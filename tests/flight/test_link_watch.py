@@ -16,6 +16,7 @@ import cflib.crtp
 import pytest
 from click.testing import CliRunner
 
+import groundstation.flight.link as link_mod
 import groundstation.sim as gsim
 from cfsession import open_session
 from groundstation.cli import main
@@ -184,3 +185,46 @@ def test_udp_failing_abort_path_still_delivers_the_stop(udp, tmp_path, monkeypat
     assert _stopped_by_the_ground_station(sim)
     s = check_closed_with_stop(result)
     assert any("descent broken" in t for t in _safety(s))
+
+
+def _slow_close(monkeypatch, *, release: threading.Event, after_s: float) -> list[float]:
+    """cflib's ``close_link`` held until ``release`` is set or ``after_s`` of wall time passed
+    (a busy host joining cflib's threads, or a close that deadlocks); returns how long it took."""
+    original, took = cflib.crazyflie.Crazyflie.close_link, []
+
+    def close_link(cf) -> None:
+        t0 = time.monotonic()
+        release.wait(after_s)
+        original(cf)
+        took.append(time.monotonic() - t0)
+
+    monkeypatch.setattr(cflib.crazyflie.Crazyflie, "close_link", close_link)
+    return took
+
+
+def test_a_close_slower_than_a_send_is_not_link_loss(sim_uri, tmp_path, monkeypatch):
+    # the UDP driver's close joins a receiver that polls once a second: 1-2 s idle, more when
+    # the host is busy; it once read "link lost: cflib did not take the link close within 1.5 s"
+    took = _slow_close(monkeypatch, release=threading.Event(),
+                       after_s=link_mod.SEND_TIMEOUT_S + 0.5)
+    result = fly_plan(plan=load_plan("hover-check"), out=tmp_path, uri=sim_uri())
+    assert took and took[0] > link_mod.SEND_TIMEOUT_S
+    assert not result.aborted and result.cause == "", result.cause
+    s = check_closed_with_stop(result)
+    assert not [e for e in s.events() if e.source == "link" and e.level != "info"]
+
+
+def test_a_close_that_never_returns_is_a_warning_after_the_stop(sim_uri, tmp_path, monkeypatch):
+    release, uri = threading.Event(), sim_uri()
+    _slow_close(monkeypatch, release=release, after_s=60.0)
+    monkeypatch.setattr(link_mod, "CLOSE_TIMEOUT_S", 0.3)
+    try:
+        result = fly_plan(plan=load_plan("hover-check"), out=tmp_path, uri=uri)
+    finally:
+        release.set()
+    assert not result.aborted and result.cause == "", result.cause  # the flight was complete
+    s = check_closed_with_stop(result)  # the stop was delivered and recorded before the close
+    late = [e for e in s.events() if e.source == "link" and e.level == "warning"]
+    assert [e.text for e in late] == [
+        "cflib did not take the link close within 0.3 s (the stop setpoint was delivered before)"]
+    wait_for_stop(uri)  # and it reached the vehicle
