@@ -31,8 +31,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
-from cflib.crtp.udpdriver import UdpDriver
-
 from groundstation.dongle import check_dongle, radio_metadata
 from groundstation.errors import LinkError
 from groundstation.flight.blocks import (
@@ -315,6 +313,8 @@ def _unblock_close(cf: Any) -> None:
     if incoming is not None and hasattr(incoming, "stop") and in_queue is not None:
         incoming.stop()
         in_queue.put(None)
+    from cflib.crtp.udpdriver import UdpDriver  # cflib loads on connecting (tests/test_boundaries)
+
     thread, sock = getattr(driver, "_thread", None), getattr(driver, "socket", None)
     if isinstance(driver, UdpDriver) and sock is not None and hasattr(thread, "_sp"):
         thread._sp = True
