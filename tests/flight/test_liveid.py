@@ -11,6 +11,7 @@ the model. The runner must fly every setpoint whatever the listener does (slow, 
 from __future__ import annotations
 
 import json
+import re
 import time
 from pathlib import Path
 
@@ -43,9 +44,15 @@ from .conftest import wait_for_stop
 SMALL = "order = 4\npast = 15\nfuture = 8\n"
 
 
-def _plan(excitation_s: float = 30.0, live_id: str | None = "") -> object:
-    """prbs-3axis with a shorter excitation and, unless None, a [live_id] table."""
+def _plan(excitation_s: float = 30.0, live_id: str | None = "", *, hover_s: float | None = None
+          ) -> object:
+    """prbs-3axis with a shorter excitation, ``hover_s`` for its settle and recover phases
+    (3 and 2 s; shorter for the flights in real time) and, unless None, a [live_id] table."""
     text = load_plan("prbs-3axis").text.replace("duration = 102.3", f"duration = {excitation_s}")
+    if hover_s is not None:
+        text, n = re.subn(r'(name = "(?:settle|recover)"\nkind = "hover"[^\n]*\nduration = )'
+                          r'[\d.]+', rf"\g<1>{hover_s}", text)
+        assert n == 2, "prbs-3axis changed: its settle and recover phases"
     if live_id is not None:
         text += f"\n[live_id]\n{live_id}\n"
     return parse_plan(text=text, source="prbs-short", name="prbs-3axis")
@@ -379,7 +386,7 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     the final update of what was recorded up to the loss, and what this test checks holds for
     it all the same, so such a flight is accepted; only one that lost the link before the first
     update is flown again (once). Any other abort fails."""
-    plan = _plan(8.0, SMALL)
+    plan = _plan(8.0, SMALL, hover_s=1.0)
     for attempt in range(2):
         lid = live_id_listener(plan)
         uri = flight_uri()
@@ -408,7 +415,7 @@ def test_live_id_over_the_udp_simulator(tmp_path):
     """``groundstation sim``'s UDP server (cflib's UDP driver, real time): the same checks. A
     link loss (a host stall on the wall clock) is accepted once updates came, as on SITL."""
     install_drivers()
-    plan = _plan(6.0, SMALL)
+    plan = _plan(6.0, SMALL, hover_s=1.0)
     with UdpServer(port=free_udp_port(), seed=4) as server:
         lid = live_id_listener(plan)
         result = fly_plan(plan=plan, out=tmp_path, uri=server.uris[0], listeners=[lid])
