@@ -39,9 +39,10 @@ same data and grid they choose the same past, future, order and focus.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -265,17 +266,38 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
         warnings.append(unresolved)
     final = p.ident if p.given_validation else p.everything
     try:
-        model = method.identify(final, order=best.order, past=best.past, future=best.future,
-                                options=options)
+        with _held_back("sysid.stability") as held:  # said only of the model kept
+            model = method.identify(final, order=best.order, past=best.past,
+                                    future=best.future, options=options)
     except DataError:  # the full data cannot hold what the grid's common columns could
         model = _scored_model(p, best, method=method, options=options)
     else:
+        refit = model
         model = _stable_choice(p, best, model, warnings, method=method, options=options)
+        for record in held if model is refit else ():
+            logging.getLogger(record.name).handle(record)
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
                      warnings=tuple(warnings), grid=p.grid, memory=p.memory, tolerance=tol,
                      tolerance_basis=basis)
+
+
+@contextlib.contextmanager
+def _held_back(name: str) -> Iterator[list[logging.LogRecord]]:
+    """The records logger ``name`` gets inside the block, held back from its handlers."""
+    held: list[logging.LogRecord] = []
+
+    def hold(record: logging.LogRecord) -> bool:
+        held.append(record)
+        return False
+
+    logger = logging.getLogger(name)
+    logger.addFilter(hold)
+    try:
+        yield held
+    finally:
+        logger.removeFilter(hold)
 
 
 def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,
