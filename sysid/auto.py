@@ -39,10 +39,9 @@ same data and grid they choose the same past, future, order and focus.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import logging
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -50,7 +49,6 @@ import numpy as np
 
 from sysid.data import IOData
 from sysid.errors import DataError
-from sysid.grid import pair_flights
 from sysid.growth import follow_edges
 from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
@@ -62,6 +60,7 @@ from sysid.parsimony import (
     tolerance,
     tolerance_basis,
 )
+from sysid.refit import final_model
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
 from sysid.variants import focus_order, n_runs, pick_feedthrough, pick_focus, tries_feedthrough
@@ -245,13 +244,8 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
     """The parsimonious best stable model of ``result``, flagged at the grid's edges, and
-    identified again on all the data (on the identification data when validation was given).
-
-    The model returned is stable whenever the chosen row was: when the identification on all
-    the data keeps a pole outside the unit circle (a near-integrating plant whose extra 30 % of
-    data tips one estimated mode out; seen on simulated flights at |z| = 1.1-1.4), the model
-    the sweep scored, identified on the identification part, is returned instead, and a
-    warning says so."""
+    identified again on all the data (on the identification data when validation was given;
+    stable whenever the chosen row was: :func:`sysid.refit.final_model`)."""
     best = result.best()
     ranked = result.ranked(require_stable=True)
     tol, basis = tolerance(ranked[0]), tolerance_basis(ranked[0])
@@ -264,82 +258,12 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
     unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val))
     if unresolved is not None:
         warnings.append(unresolved)
-    final = p.ident if p.given_validation else p.everything
-    try:
-        with _held_back("sysid.stability") as held:  # said only of the model kept
-            model = method.identify(final, order=best.order, past=best.past,
-                                    future=best.future, options=options)
-    except DataError:  # the full data cannot hold what the grid's common columns could
-        model = _scored_model(p, best, method=method, options=options)
-    else:
-        refit = model
-        model = _stable_choice(p, best, model, warnings, method=method, options=options)
-        for record in held if model is refit else ():
-            logging.getLogger(record.name).handle(record)
+    model = final_model(p, best, warnings, method=method, options=options)
     for w in warnings:
         log.info("selection: %s", w)
     return Selection(best=best, result=result, model=model, rule=p.rule, window_s=result.window,
                      warnings=tuple(warnings), grid=p.grid, memory=p.memory, tolerance=tol,
                      tolerance_basis=basis)
-
-
-@contextlib.contextmanager
-def _held_back(name: str) -> Iterator[list[logging.LogRecord]]:
-    """The records logger ``name`` gets inside the block, held back from its handlers."""
-    held: list[logging.LogRecord] = []
-
-    def hold(record: logging.LogRecord) -> bool:
-        held.append(record)
-        return False
-
-    logger = logging.getLogger(name)
-    logger.addFilter(hold)
-    try:
-        yield held
-    finally:
-        logger.removeFilter(hold)
-
-
-def _stable_choice(p: Plan, best: SweepRow, model: StateSpaceModel, warnings: list[str], *,
-                   method: Method, options: Options) -> StateSpaceModel:
-    """``model`` (identified on all the data), or the scored model when ``model`` has a pole
-    outside the unit circle where the scored one had none; a warning in ``warnings`` says
-    which."""
-    if best.stable and not model.is_stable:
-        scored = _scored_model(p, best, method=method, options=options)
-        pole = f"{np.abs(model.poles()).max():.3f}"
-        if scored.is_stable:
-            warnings.append(f"identified again on all the data the model had a pole at |z| = "
-                            f"{pole}: kept the stable model the sweep scored on the held-out "
-                            f"data ({_share(p)})")
-            model = scored
-        else:  # rounding moved a pole of the scored model across: nothing better to offer
-            warnings.append(f"identified again on all the data the model has a pole at "
-                            f"|z| = {pole}")
-    return model
-
-
-def _scored_model(p: Plan, best: SweepRow, *, method: Method, options: Options
-                  ) -> StateSpaceModel:
-    """The model the sweep scored for ``best`` (kept with ``keep_models``, else identified
-    again): its horizons on the identification data as the grid's common Hankel columns see
-    them (:func:`sysid.grid.pair_flights`)."""
-    if best.model is not None:
-        return best.model
-    grid = p.scored_grid or p.grid  # rows of a grown grid's sweeps keep their models
-    trimmed = pair_flights(p.ident, past=best.past, future=best.future,
-                           past_max=grid["pasts"][-1], future_max=grid["futures"][-1])
-    return method.identify(list(trimmed), order=best.order, past=best.past,
-                           future=best.future, options=options)
-
-
-def _share(p: Plan) -> str:
-    """How much data the scored model was identified on, for a message."""
-    if p.given_validation:
-        return "identified on the identification sessions, as the grid's common columns see them"
-    n_ident = sum(d.n_samples for d in p.ident)
-    n_all = sum(d.n_samples for d in p.everything)
-    return f"identified on {n_ident} of the {n_all} samples"
 
 
 class NoStableModel(DataError):
