@@ -10,7 +10,8 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
 
 * :class:`OneLineErrorGroup`: the click group both CLIs use. A user error (a usage error, one
   of the group's ``user_errors``, a missing or unreadable file) prints ``error: ...`` on one
-  line and exits with 2, never a traceback; ``-h`` still shows the usage.
+  line and exits with 2, never a traceback; ``-h`` still shows the usage. Ctrl-C prints one
+  line and exits with 130 (click would print "Aborted!" and exit 1).
 
 * :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
   terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
@@ -151,6 +152,9 @@ class OneLineErrorGroup(click.Group):
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
+        except KeyboardInterrupt:  # Ctrl-C: one line and the shell's code for SIGINT
+            click.echo("error: interrupted (Ctrl-C)", err=True)
+            sys.exit(130)
         except Exception as exc:  # click's Exit and Abort are not user errors: they propagate
             msg = self.user_error_message(exc, ctx=ctx)
             if msg is None:

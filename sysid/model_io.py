@@ -79,7 +79,9 @@ def _units(model: StateSpaceModel) -> dict[str, tuple[list[str], list[str]]]:
 
 def save(model: StateSpaceModel, path: Path) -> Path:
     """Write ``model`` to ``path`` in the format its suffix names (one-line
-    :class:`ModelFileError` when it cannot be written)."""
+    :class:`ModelFileError` when it cannot be written). It is written beside ``path`` and
+    renamed onto it when complete: a model file is whole or absent (Ctrl-C, a full disk), and
+    one it replaces stays as it was until then."""
     suffix = path.suffix.lower()
     writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat, ".json": _save_json}
     if suffix not in writers:
@@ -92,11 +94,15 @@ def save(model: StateSpaceModel, path: Path) -> Path:
         if count > MAX_DIMENSION:
             raise ModelFileError(f"cannot write model file {str(path)!r}: {count} {what}, more "
                                  f"than the {MAX_DIMENSION} that load reads (MAX_DIMENSION)")
+    part = path.with_name(f".{path.name}.{os.getpid()}.part")  # whole or not at all
     try:
-        writers[suffix](model, path)
+        writers[suffix](model, path, into=part)
+        os.replace(part, path)
     except OSError as exc:
         raise ModelFileError(f"cannot write model file {str(path)!r}: "
                              f"{_os_reason(exc)}") from None
+    finally:
+        part.unlink(missing_ok=True)
     log.info("saved %d-state model to %s", model.n_states, path)
     return path
 
@@ -327,13 +333,13 @@ def _within(path: Path, what: str, size: int, limit: tuple[int, str], instead: s
                              f"save the model as {instead}")
 
 
-def _save_json(model: StateSpaceModel, path: Path) -> None:
+def _save_json(model: StateSpaceModel, path: Path, *, into: Path) -> None:
     data = model.to_json().encode()
     _within(path, "the JSON file", len(data), (MAX_FILE_BYTES, "MAX_FILE_BYTES"), ".h5")
-    path.write_bytes(data)
+    into.write_bytes(data)
 
 
-def _save_h5(model: StateSpaceModel, path: Path) -> None:
+def _save_h5(model: StateSpaceModel, path: Path, *, into: Path) -> None:
     import h5py
 
     d = model.to_dict()
@@ -343,7 +349,7 @@ def _save_h5(model: StateSpaceModel, path: Path) -> None:
     for attr, text in texts.items():
         _within(path, f"its {attr} text", len(text.encode()),
                  (MAX_TEXT_BYTES, "MAX_TEXT_BYTES"), ".json")
-    with h5py.File(path, "w") as f:
+    with h5py.File(into, "w") as f:
         f.attrs["format"] = d["format"]
         f.attrs["version"] = d["version"]
         f.attrs["dt"] = model.dt
@@ -360,7 +366,7 @@ def _save_h5(model: StateSpaceModel, path: Path) -> None:
 
 
 
-def _save_mat(model: StateSpaceModel, path: Path) -> None:
+def _save_mat(model: StateSpaceModel, path: Path, *, into: Path) -> None:
     from scipy.io import savemat
 
     d = model.to_dict()
@@ -378,7 +384,7 @@ def _save_mat(model: StateSpaceModel, path: Path) -> None:
     buf = io.BytesIO()
     savemat(buf, mdict)
     _within(path, "the .mat file", buf.tell(), (MAX_FILE_BYTES, "MAX_FILE_BYTES"), ".h5")
-    with open(path, "wb") as fh:  # opened here so an OS error keeps its errno
+    with open(into, "wb") as fh:  # opened here so an OS error keeps its errno
         fh.write(buf.getbuffer())
 
 
