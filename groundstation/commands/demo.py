@@ -12,6 +12,7 @@ k-step-ahead prediction through the innovation form (see ``docs/sysid.md``).
 from __future__ import annotations
 
 import json
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -22,16 +23,28 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cfcommon.cli import FiniteFloat, output_console, output_table
+from groundstation.commands.fly import PlainProgress
 from groundstation.flight import FlightResult, fly_plan
 from groundstation.plan import Plan, load_plan
 from groundstation.plan.variants import advance_prbs
 from groundstation.recorder import check_folder
 
-__all__ = ["command"]
+__all__ = ["RESULTS", "command"]
+
+RESULTS = ("iem-model.h5", "demo-summary.json")
+"""The files a demo writes besides its two sessions."""
 
 
 def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> FlightResult:
-    """Fly with a progress bar driven by the runner's tick hook (runs in the runner's thread)."""
+    """Fly with a progress bar driven by the runner's tick hook (runs in the runner's thread);
+    not on a terminal, ``fly``'s plain ``[fly]`` lines on stderr instead."""
+    if not console.is_terminal:
+        click.echo(f"{label}: {uri}", err=True)
+        result = fly_plan(plan=plan, out=out, uri=uri,
+                          listeners=[PlainProgress(duration_s=plan.duration,
+                                                   every_s=max(5.0, plan.duration / 10))])
+        result.raise_if_aborted()
+        return result
     n = plan.n_setpoints
     columns = (TextColumn(f"[bold]{label}[/]"), BarColumn(), TextColumn("{task.description}"),
                TimeRemainingColumn())
@@ -46,6 +59,17 @@ def _fly(plan: Plan, *, uri: str, out: Path, label: str, console: Console) -> Fl
         result = fly_plan(plan=plan, out=out, uri=uri, tick_hook=tick)
     result.raise_if_aborted()
     return result
+
+
+def _check_out(folder: Path, *, force: bool) -> None:
+    """The recorder's rule for ``folder``; a former demo's model and summary are replaced only
+    with ``force`` (the sessions are new files: named by their start time)."""
+    check_folder(folder)  # created if missing, must be writable
+    former = [name for name in RESULTS if (folder / name).exists()]
+    if former and not force:
+        raise click.BadParameter(f"{folder} already holds a demo's results ({', '.join(former)}"
+                                 "); pass --force to replace them or choose another folder",
+                                 param_hint="--out")
 
 
 class _Speed(FiniteFloat):
@@ -76,8 +100,10 @@ class _Speed(FiniteFloat):
               help="Future horizon, samples (default: chosen by validation; the thesis used 17).")
 @click.option("--advance", type=click.IntRange(1, 1_000_000), default=500, show_default=True,
               help="Chips the validation flight's PRBS is advanced in its m-sequence.")
+@click.option("--force", is_flag=True,
+              help="Replace a former demo's model and summary in --out.")
 def command(out: Path | None, speed: float, order: int | None, past: int | None,
-            future: int | None, advance: int) -> None:
+            future: int | None, advance: int, force: bool) -> None:
     """Fly two PRBS flights on the simulator, identify a model from one, validate on the other.
 
     \b
@@ -95,13 +121,13 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
       groundstation replay demo-out/prbs-3axis-*.h5 --rrd flight.rrd
     """
     from sysid import compare
-    from sysid.auto import select
     from sysid.cli_support import poles_rich_table
+    from sysid.cli_sweep import choose
     from sysid.methods import get_method
     from sysid.session_io import load_session
 
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
-    check_folder(folder)  # the recorder's rule: created if missing, must be writable
+    _check_out(folder, force=force)
     console = output_console()  # piped (CI logs): plain tables, never wrapped
     base = load_plan("prbs-3axis")
     flights = [
@@ -116,17 +142,24 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
         console.print(f"  recorded {result.path} ({s.get('duration_s', float('nan')):.1f} s)")
         paths.append(result.path)
 
-    with console.status("identifying with IEM (choosing past, future and order) ..."):
-        t0 = time.perf_counter()
-        ident = load_session(paths[0], window="excitation")
-        iem = get_method("iem")
-        given = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
-                 if v is not None}
-        chosen = select([[ident]], method=iem, options=iem.options(), **given)
-        model = chosen.model
-        order, past, future = chosen.best.order, chosen.best.past, chosen.best.future
-        seconds = time.perf_counter() - t0
-    console.print(f"chosen: {chosen.rule}; " + (", ".join(chosen.warnings) or "inside the grid"))
+    t0 = time.perf_counter()
+    ident = load_session(paths[0], window="excitation")
+    iem = get_method("iem")
+    given = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
+             if v is not None}
+    try:  # progress on stderr: a bar on a terminal, plain lines otherwise
+        chosen = choose([[ident]], method=iem, options=iem.options(), grid=given,
+                        label="identifying with IEM (choosing past, future and order)")
+    except KeyboardInterrupt:
+        click.echo(f"error: interrupted (Ctrl-C) while identifying; the sessions are kept: "
+                   f"{paths[0]} {paths[1]}", err=True)
+        sys.exit(130)
+    model = chosen.model
+    order, past, future = chosen.best.order, chosen.best.past, chosen.best.future
+    seconds = time.perf_counter() - t0
+    console.print(f"chosen: {chosen.rule}")
+    for w in chosen.warnings:
+        console.print(f"[yellow]warning: {w}[/]")
     console.print(f"IEM: order {order}, past {past}, future {future}, "
                   f"{ident.n_samples} samples, {seconds:.2f} s; stable: {model.is_stable}, "
                   f"predictor stable: {model.predictor_is_stable}")

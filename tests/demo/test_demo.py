@@ -53,6 +53,14 @@ def test_demo_flies_identifies_and_validates(tmp_path):
     assert min(gyro_1step) > 50.0, gyro_1step
     assert min(gyro_sim) > 0.0, gyro_sim
     assert summary["predictor_stable"]
+    # not on a terminal: progress as plain lines on stderr, the flights' and the choice's
+    assert re.search(r"^\[fly\] t +\d+\.\d/112\.3 s  phase prbs", res.stderr, re.M), res.stderr
+    assert re.search(r"^identifying with IEM .*\(100 %\).*done$", res.stderr, re.M), res.stderr
+    # a second demo into the same folder does not replace the first one's results unasked
+    again = CliRunner().invoke(main, ["demo", "--out", str(tmp_path)])
+    assert again.exit_code == 2 and "already holds a demo's results" in again.stderr
+    assert "--force" in again.stderr and len(again.stderr.strip().splitlines()) == 1
+    assert json.loads((tmp_path / "demo-summary.json").read_text()) == summary
 
 
 @pytest.mark.parametrize(("speed", "ok"), [("inf", True), ("INF", True), ("nan", False),
