@@ -329,7 +329,8 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
                    "experiment, identified on the rest).")
 @click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
 @click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
-              help="Score by simulation over windows of this many seconds (default: 2 s).")
+              help="Score by simulation over windows of this many seconds (default: 12 "
+                   "times the data's memory, at least 20 samples; see docs/sysid.md).")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
               help="Candidates listed (and in --json).")
 @FOCUS_OPTION

@@ -73,10 +73,15 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                     outputs=model.output_names)
     modes: list[tuple[str, dict[str, Any]]] = []
+    longest = max(d.n_samples for d in flights)  # beyond it: the whole record is simulated
     if window_s is not None:
-        modes.append((f"simulation, {window_s:g} s windows", {"window": window_s}))
+        whole = " (longer than the records: each simulated whole)" if (
+            round(window_s / model.dt) >= longest) else ""
+        modes.append((f"simulation, {window_s:g} s windows{whole}", {"window": window_s}))
     if horizon is not None:
-        modes.append((f"{horizon}-step prediction", {"horizon": horizon}))
+        whole = (f" (beyond the {longest}-sample records: simulation)"
+                 if horizon >= longest else "")
+        modes.append((f"{horizon}-step prediction{whole}", {"horizon": horizon}))
     if not modes:
         modes = [default_compare_mode(model)]
         if "windows" in modes[0][0]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -63,8 +64,12 @@ def test_compare_simulates_integrating_models_over_windows_and_json_has_null(fli
     assert res.exit_code == 0, res.output
     fits = json.loads(res.stdout)["modes"][0]["overall"]
     assert all(v is None for v in fits.values()), fits
-    res = run("compare", path2, flight.path, "--window-s", "1000")
+    res = run("compare", path2, flight.path, "--window-s", "1000", "--horizon", "100000")
     assert "diverged" in res.stdout
+    # what a window or horizon beyond the record means is said where the mode is named
+    assert "1000 s windows (longer than the records: each simulated whole)" in res.stdout
+    assert re.search(r"100000-step prediction \(beyond the \d+-sample records: simulation\)",
+                     res.stdout), res.stdout
 
 
 def _identified(flight, tmp_path):
