@@ -109,22 +109,27 @@ class ResidualResult:
     stabilised: bool
 
     def summary(self) -> str:
-        """Plain-text table: one line per output channel."""
-        lines = [f"residual analysis: {self.n_samples} samples, lags 0..{self.max_lag}, "
-                 f"{100 * self.confidence:g}% bounds (auto ±{self.auto_bound:.3f})"]
+        """Plain-text table: one line per output channel, columns aligned."""
+        lines = [f"residual analysis: {self.n_samples} samples; whiteness over lags "
+                 f"1..{self.max_lag}, independence of the inputs over lags "
+                 f"{self.first_lag}..{self.max_lag}; {100 * self.confidence:g}% bounds "
+                 f"(auto ±{self.auto_bound:.3f})"]
         if self.stabilised:
             lines.append("(predictor A - KC unstable: steady-state Kalman gain used)")
-        width = max(len(n) for n in self.output_names)
-        lines.append(f"{'output':<{width}}  white  outside  Q       p      "
-                     "indep.  outside  worst input (p)")
+        rows = [("output", "white", "outside", "Q", "p", "indep.", "outside",
+                 "worst input (p)")]
         for c, name in enumerate(self.output_names):
             worst = int(np.argmin(self.cross_p[c]))
-            lines.append(
-                f"{name:<{width}}  {'yes' if self.white[c] else 'NO':<5}  "
-                f"{100 * self.auto_outside[c]:5.1f}%  {self.q_stat[c]:<7.4g} "
-                f"{self.p_value[c]:<6.3g} {'yes' if self.independent[c] else 'NO':<6}  "
-                f"{100 * self.cross_outside[c].max():5.1f}%  "
-                f"{self.input_names[worst]} ({self.cross_p[c, worst]:.3g})")
+            rows.append((name, "yes" if self.white[c] else "NO",
+                         f"{100 * self.auto_outside[c]:.1f}%", f"{self.q_stat[c]:.4g}",
+                         f"{self.p_value[c]:.3g}", "yes" if self.independent[c] else "NO",
+                         f"{100 * self.cross_outside[c].max():.1f}%",
+                         f"{self.input_names[worst]} ({self.cross_p[c, worst]:.3g})"))
+        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        right = {2, 3, 6}  # numbers right-aligned
+        lines += ["  ".join(cell.rjust(w) if i in right else cell.ljust(w)
+                            for i, (cell, w) in enumerate(zip(r, widths, strict=True))).rstrip()
+                  for r in rows]
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, object]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -47,6 +48,14 @@ def test_compare_residuals_prints_the_summary(setup) -> None:
     res = run("compare", model_path, *(f.path for f in flights), "--residuals")
     assert res.exit_code == 0, res.output
     assert "residual analysis" in res.stdout and "white" in res.stdout
+    # the table's columns line up whatever the numbers' lengths (p down to 1e-200 and 0)
+    lines = res.stdout[res.stdout.index("output  white"):].splitlines()
+    table = lines[:1 + len(sysid.load_model(model_path).output_names)]
+    cells = [[m.span() for m in re.finditer(r"\S+(?: \S+)*", line)] for line in table]
+    assert all(len(c) == len(cells[0]) for c in cells), table
+    for col in range(len(cells[0])):  # every column starts alike (text) or ends alike (numbers)
+        assert len({c[col][0] for c in cells}) == 1 or len({c[col][1] for c in cells}) == 1, (
+            col, table)
 
 
 def test_resid_writes_residual_panels(setup, tmp_path) -> None:
