@@ -28,7 +28,7 @@ from cfcommon.cli import (
 )
 from sysid.comparison import CompareResult
 from sysid.data import IOData
-from sysid.errors import MissingDependencyError, ParameterError, SysIdError
+from sysid.errors import DataError, MissingDependencyError, ParameterError, SysIdError
 from sysid.model import StateSpaceModel
 from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
 from sysid.session_io import AUTO, SessionFileError, Window, load_sessions, parse_window
@@ -163,10 +163,16 @@ def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
                 outputs: Sequence[str] | None = None) -> list[list[IOData]]:
     """The experiments of each session, as the session options select them."""
     common, own = parse_windows(opts["windows"])
-    return load_sessions(
-        list(paths), inputs=inputs or split_names(opts["inputs"]),
-        outputs=outputs or split_names(opts["outputs"]), window=common, windows=own,
-        dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+    try:
+        return load_sessions(
+            list(paths), inputs=inputs or split_names(opts["inputs"]),
+            outputs=outputs or split_names(opts["outputs"]), window=common, windows=own,
+            dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+    except DataError as exc:  # a channel the session lacks: say which option chooses them
+        role = next((r for r in ("inputs", "outputs") if f"for the {r}" in str(exc)), None)
+        if role is None or (role == "inputs" and inputs) or (role == "outputs" and outputs):
+            raise  # the model's channels (compare, resid): no option chooses them
+        raise DataError(f"{exc}; choose the {role} with --{role}") from None
 
 
 def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],

@@ -98,6 +98,18 @@ def test_an_unknown_name_names_itself_the_role_and_the_log_streams(name):
     assert isinstance(exc, SessionError) and isinstance(exc, ValueError)  # printed as one line
 
 
+@pytest.mark.parametrize(("name", "meant"), [("Motors", "'motors'"), ("GYRO.X", "'gyro.x'"),
+                                              ("motrs", "'motors'"), ("baro", None)])
+def test_a_misspelt_name_gets_the_names_it_was_close_to(name, meant):
+    with pytest.raises(ChannelError) as err:
+        resolve_channels([name], streams=SPECS, role="input")
+    msg = str(err.value)
+    if meant is None:
+        assert "did you mean" not in msg, msg
+    else:
+        assert f"for the inputs (did you mean {meant}?)" in msg, msg
+
+
 def test_no_names_select_nothing_and_are_refused():
     with pytest.raises(ChannelError, match="no input channels selected") as err:
         resolve_channels([], streams=SPECS, role="input")
