@@ -201,7 +201,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                            inputs=model.input_names, outputs=model.output_names)
         v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
                                   n_states=model.n_states, n_outputs=model.n_outputs)
-        checks = [(f"validation: simulation, {v_win:g} s windows",
+        checks = [(f"validation: simulation, {v_win:.3g} s windows",
                    compare(model, val, window=v_win, warn=False)),
                   ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]
     if out is not None:
@@ -244,7 +244,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                      else f"{-cost:+.2f} points"))
     con.print(fit_table(console=con, title="fit on the identification data [%]",
                         names=model.output_names,
-                        rows=[(f"simulation, {window_s:g} s windows", sim.fit),
+                        rows=[(f"simulation, {window_s:.3g} s windows", sim.fit),
                               ("1-step prediction", pred.fit)]))
     if checks:
         con.print(fit_table(console=con,

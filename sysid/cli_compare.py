@@ -14,9 +14,8 @@ from typing import Any
 
 import click
 import numpy as np
-from rich.console import Console
 
-from cfcommon.cli import FiniteFloat
+from cfcommon.cli import FiniteFloat, output_console
 from sysid.cli_support import (
     JSON_OPTION,
     RRD_OPTION,
@@ -86,7 +85,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
         modes = [default_compare_mode(model)]
         if "windows" in modes[0][0]:
             radius = float(np.max(np.abs(model.poles())))
-            Console(stderr=True).print(
+            output_console(stderr=True).print(
                 f"model has a pole at |z| = {radius:.4f} (integrating or nearly): "
                 f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
                 "another mode", style="dim")

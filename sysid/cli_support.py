@@ -300,5 +300,5 @@ def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
     if radius >= INTEGRATING_RADIUS:
         window = simulation_window(dt=model.dt, n_states=model.n_states,
                                    n_outputs=model.n_outputs)
-        return (f"simulation, {window:g} s windows", {"window": window})
+        return (f"simulation, {window:.3g} s windows", {"window": window})
     return ("simulation", {})

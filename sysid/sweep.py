@@ -156,7 +156,7 @@ class SweepResult:
         if self.horizon is not None:
             return f"{self.horizon}-step prediction"
         if self.window is not None:
-            return f"simulation over {self.window:g} s windows"
+            return f"simulation over {self.window:.3g} s windows"
         return "simulation of each whole record"
 
     @property
