@@ -214,6 +214,16 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def _speed_in_uri() -> None:
+    """``--speed`` (demo's option, and a guess at the simulator's) is refused with the place
+    the speed goes; click would suggest ``--seed``, which changes the flight, not the speed."""
+    if click.get_current_context().get_parameter_source("speed") is not (
+            click.core.ParameterSource.DEFAULT):
+        raise click.BadParameter("the simulator's speed is part of its URI: --uri "
+                                 "'sim://0?speed=20' (or --emulated-radio-speed)",
+                                 param_hint="--speed")
+
+
 @click.command("fly")
 @click.argument("plan")
 @click.option("--uri", default=DEFAULT_URI, show_default=True,
@@ -259,6 +269,7 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
                    "[default: 0.01].")
 @click.option("--converged-for", type=FiniteFloat(min=0.1), default=None, metavar="SECONDS",
               help="Flight time the poles must stay within --converged-tol [default: 3].")
+@click.option("--speed", hidden=True, expose_value=False, callback=lambda *_: _speed_in_uri())
 def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed: int | None,
             view: str, web_port: int, max_rate: float | None, timeout_s: float,
             as_json: bool, emulated_radio: bool, emulated_radio_speed: float, live_id: bool,

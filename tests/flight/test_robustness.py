@@ -55,6 +55,16 @@ def test_fly_refuses_non_finite_options(args, sim_uri, tmp_path):
     assert never_connected(uri) and not (tmp_path / "s").exists()
 
 
+def test_fly_speed_says_where_the_speed_goes(sim_uri, tmp_path):
+    # click suggested --seed, which changes the PRBS, not the simulation's speed
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--speed", "10",
+                                    "--out", str(tmp_path / "s")])
+    line = one_line_error(res)
+    assert "sim://0?speed=20" in line and "--seed" not in line
+    assert never_connected(uri) and not (tmp_path / "s").exists()
+
+
 @pytest.mark.parametrize("cmd", [["demo", "--speed", "nan"], ["demo", "--speed", "-inf"],
                                  ["sim", "--duration", "nan"], ["sim", "--duration", "inf"]])
 def test_other_float_options_refuse_non_finite(cmd):
