@@ -81,6 +81,14 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
                            client=client, progress=update)
 
 
+def _span(values: Sequence[int]) -> str:
+    """``2..12`` for a run of whole numbers, else the list: ``[6, 8]``."""
+    values = list(values)
+    if len(values) > 2 and values == list(range(values[0], values[-1] + 1)):
+        return f"{values[0]}..{values[-1]}"
+    return str(values)
+
+
 def _candidates(con: Console, rows: Sequence[SweepRow], *, names: Sequence[str], title: str,
                 chosen: SweepRow | None = None) -> None:
     table = output_table("past", "future", "order", "score [%]", *names, "max |pole|", "stable",
@@ -106,7 +114,7 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
                       + f" (fit [%], {sel.scoring} of held-out data)")
     dt = sel.model.dt
     con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
-              f"orders {sel.grid['orders'][0]}..{sel.grid['orders'][-1]}"
+              f"orders {_span(sel.grid['orders'])}"
               + ("" if sel.memory is None else
                  f" (horizons from the data's memory of {sel.memory} samples, the lag of the "
                  "best ARX model by AICc)"))

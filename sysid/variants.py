@@ -48,7 +48,7 @@ def pick_focus(selections: Sequence[Selection], *, tol: float | None = None) -> 
                        for s in selections)
     note = (f"focus {chosen.model.provenance.get('focus')}: best held-out score per focus "
             f"{scores} (the method's default unless another is better by more than "
-            f"{margin:.2g} points{'' if tol is not None else ', one standard error'})")
+            f"{_points(margin)}{'' if tol is not None else ', one standard error'})")
     log.info("selection: %s", note)
     return dataclasses.replace(chosen, focus_note=note, focus_scores={
         str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
@@ -67,6 +67,12 @@ def tries_feedthrough(options: Options, choose: bool) -> bool:
     return choose and getattr(options, "feedthrough", True) is False
 
 
+def _points(margin: float) -> str:
+    """``"1 point"``, ``"0.99 points"``."""
+    text = f"{margin:.2g}"
+    return f"{text} point" if text == "1" else f"{text} points"
+
+
 def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float | None = None
                      ) -> Selection:
     """``with_d`` (a direct term) when its chosen model scores better on the held-out data
@@ -76,7 +82,7 @@ def pick_feedthrough(without: Selection, with_d: Selection, *, tol: float | None
     better, margin = significantly_better(with_d.best, without.best, tol=tol)
     note = (f"direct term {'kept' if better else 'left out'}: best held-out score "
             f"{with_d.best.score:.1f} with, {without.best.score:.1f} without (kept only when "
-            f"better by more than {margin:.2g} points"
+            f"better by more than {_points(margin)}"
             f"{'' if tol is not None else ', one standard error'})")
     log.info("selection: %s", note)
     chosen = dataclasses.replace(with_d, focus_note=without.focus_note,

@@ -284,10 +284,10 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
     \b
     Examples:
       groundstation fly hover-check
-      groundstation fly prbs-3axis --uri sim://0?speed=20 --out sessions --view rerun
+      groundstation fly prbs-3axis --uri 'sim://0?speed=20' --out sessions --view rerun
       groundstation fly prbs-3axis --advance 500 --name validation   # validation flight
       groundstation fly hover-check --emulated-radio --emulated-radio-speed 10
-      groundstation fly prbs-3axis --uri sim://0?speed=20 --live-id --until-converged
+      groundstation fly prbs-3axis --uri 'sim://0?speed=20' --live-id --until-converged
     """
     if advance is not None and seed is not None:
         raise click.UsageError("--advance and --seed both choose the PRBS; pass only one")

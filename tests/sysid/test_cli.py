@@ -165,6 +165,7 @@ def test_sweep_reports_the_best_candidates_and_the_grid_edge(flights) -> None:
     assert "best 3 candidates of 4" in text and "acc.z" in text and "gyro.x" in text
     assert "chosen: past" in text and "order 3, focus prediction" in text
     assert "warning: order 3 is the largest tried: the best may lie beyond" in text
+    assert "futures [10], orders [2, 3]" in text  # the orders swept, not a range of them
 
 
 def test_export_round_trip(flights, tmp_path) -> None:
