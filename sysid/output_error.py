@@ -27,7 +27,6 @@ import logging
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.signal
 
 __all__ = ["output_error_bd"]
 
@@ -41,6 +40,8 @@ def _modal_responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
     """``(resp (N, l, n, m), free (N, l, n))``: output regressors of ``B[i, j]`` and of
     ``x0[i]`` by modal filtering; raises ``LinAlgError`` when A is not diagonalisable."""
+    import scipy.signal  # where used: scipy.signal takes 0.5 s to import
+
     lam, vec = np.linalg.eig(a)
     if not np.isfinite(vec).all() or np.linalg.cond(vec) > _COND_MODAL:
         raise np.linalg.LinAlgError("A is not safely diagonalisable")

@@ -46,7 +46,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import scipy.signal
 
 from cfsession import Session, open_session
 from cfsession.channels import Channel, session_specs
@@ -205,6 +204,8 @@ def _stream_period(session: Session, name: str) -> float:
 
 def _anti_alias(stream: Stream, *, period: float, dt: float) -> Stream:
     """``stream`` low-passed by scipy.signal.decimate's IIR filter for a ``dt / period`` step."""
+    import scipy.signal  # where used: scipy.signal takes 0.5 s to import
+
     sos = scipy.signal.cheby1(8, 0.05, 0.8 * period / dt, output="sos")
     if stream.values.shape[0] <= 3 * (2 * sos.shape[0] + 1):
         log.warning("stream %s: %d samples are too few for the anti-alias filter; held as is",

@@ -45,7 +45,6 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.signal
 
 from sysid.comparison import CompareResult
 from sysid.data import IOData, as_flights
@@ -160,6 +159,8 @@ def _run_states_modal(*, A: np.ndarray, Bu: np.ndarray, x0: np.ndarray) -> np.nd
     """:func:`_run_states` in the modal basis ``A = V diag(lambda) V^{-1}``: each mode is a
     first-order recursion ``z(k+1) = lambda z(k) + b(k)``, run by ``scipy.signal.lfilter``
     over the whole batch at once. None when ``cond(V) > 1e8`` (defective or nearly so)."""
+    import scipy.signal  # where used: scipy.signal takes 0.5 s to import
+
     lam, vec = np.linalg.eig(A)
     if not np.all(np.isfinite(lam)) or np.linalg.cond(vec) > 1e8:
         return None
