@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import stat
 import tempfile
 import threading
 import time
@@ -278,14 +279,18 @@ def _repack(path: Path) -> None:
     """Rewrite ``path`` with gzip-compressed chunks, atomically: into a file created exclusively
     (``O_EXCL``, random name) in the same folder and written through that descriptor, so no
     name planted beforehand (a symlink) is ever followed; then renamed over ``path``, unless
-    ``path`` has become a symlink meanwhile."""
+    ``path`` has become a symlink meanwhile. The rewrite keeps ``path``'s permission bits (the
+    umask's, from when it was created): ``mkstemp`` makes its file owner-only."""
+    st = os.lstat(path)
+    mode = stat.S_IMODE(st.st_mode) & 0o777 if stat.S_ISREG(st.st_mode) else 0o600
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
                                     suffix=".repack")
     tmp = Path(tmp_name)
     try:
-        with os.fdopen(fd, "w+b") as fh, h5py.File(path, "r") as src, \
-                h5py.File(fh, "w", libver="latest") as dst:
-            _copy_compressed(src, dst)
+        with os.fdopen(fd, "w+b") as fh:
+            os.fchmod(fh.fileno(), mode)
+            with h5py.File(path, "r") as src, h5py.File(fh, "w", libver="latest") as dst:
+                _copy_compressed(src, dst)
         if path.is_symlink():
             raise SessionError(f"{path}: became a symbolic link while closing; left as it is "
                                f"(the data are in {tmp})")

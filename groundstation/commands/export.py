@@ -24,6 +24,7 @@ from __future__ import annotations
 import csv
 import importlib
 import json
+import os
 import re
 from pathlib import Path
 from typing import Any, Literal
@@ -182,12 +183,28 @@ def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
     if not folder.parent.is_dir():
         raise click.BadParameter(f"folder {str(folder.parent)!r} does not exist; create it "
                                  "first", param_hint="--out")
+    made = folder if folder.is_dir() else folder.parent  # where the files or the folder go
+    if not os.access(made, os.W_OK | os.X_OK):
+        raise _not_writable(made)
     return folder
+
+
+def _not_writable(folder: Path) -> click.BadParameter:
+    return click.BadParameter(f"folder {str(folder)!r} is not writable", param_hint="--out")
+
+
+class _Choice(click.Choice):
+    """click's choice, whose "missing" message lists the choices on one line (click's own puts
+    each on a tab-indented line of its own)."""
+
+    def get_missing_message(self, param: click.Parameter, ctx: click.Context | None) -> str:
+        *rest, last = map(str, self.choices)
+        return f"Choose {', '.join(rest)} or {last}" if rest else f"Choose {last}"
 
 
 @click.command("export", short_help="Write a session as CSV files, a MATLAB .mat or Parquet.")
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--to", "to", type=click.Choice(["csv", "mat", "parquet"]), required=True,
+@click.option("--to", "to", type=_Choice(["csv", "mat", "parquet"]), required=True,
               help="csv: one file per stream; mat: one file for MATLAB's iddata and every "
                    "stream; parquet: one file per stream (needs pyarrow).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
@@ -226,5 +243,10 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
         export_mat(s, target, inputs=names[0], outputs=names[1], window=win, dt=dt)
         click.echo(f"wrote {target}")
         return
-    files = export_csv(s, target) if to == "csv" else export_parquet(s, target)
+    try:
+        files = export_csv(s, target) if to == "csv" else export_parquet(s, target)
+    except PermissionError as exc:  # a file in the folder, or the folder, refused to us
+        where = Path(exc.filename) if exc.filename else target
+        raise _not_writable(where if where == target or where.is_dir() else where.parent) \
+            from None
     click.echo(f"wrote {len(files)} files to {target}")

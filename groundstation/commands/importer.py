@@ -11,7 +11,8 @@ import click
 
 from cfsession import open_session
 from groundstation.errors import SessionError
-from groundstation.importers.to_session import csv_to_session, usd_to_session
+from groundstation.importers.to_session import OutputFolderError, csv_to_session, usd_to_session
+from groundstation.recorder import check_folder
 
 __all__ = ["ImportJob", "command", "plan_imports"]
 
@@ -149,6 +150,7 @@ def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: 
     jobs, skipped = plan_imports(list(paths))
     if out_dir.exists() and not out_dir.is_dir():
         raise SessionError(f"{out_dir}: not a folder; --out takes a folder")
+    check_folder(out_dir)  # created, and writable: else one line, before any work
     if not force:
         for job in jobs:
             if (target := out_dir / f"{job.stem}.h5").exists() or target.is_symlink():
@@ -162,6 +164,9 @@ def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: 
                                force=force)
             else:
                 csv_to_session(sources=list(job.files), out=out, force=force)
+        except OutputFolderError as exc:  # the next ones would fail the same way: say it once
+            failed.append(str(exc))
+            break
         except SessionError as exc:
             failed.append(str(exc))
             continue

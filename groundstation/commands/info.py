@@ -10,11 +10,16 @@ from typing import Any
 import click
 import numpy as np
 from rich.markup import escape
+from rich.measure import Measurement
+from rich.table import Table
 
 from cfcommon.cli import output_console, output_table
 from cfsession import Session, open_session
 
 __all__ = ["command", "describe", "live_id"]
+
+_FIELDS_MIN_WIDTH = 24
+"""Columns the "fields [unit]" column needs to be readable beside the others."""
 
 
 def describe(session: Session) -> dict[str, Any]:
@@ -40,6 +45,9 @@ def describe(session: Session) -> dict[str, Any]:
             entry["dropped"] = sum(g.missing for g in s.gaps())
             entry["gaps"] = len(s.gaps())
         streams[name] = entry
+    imported = str(session.meta.get("time_base", "")).startswith("imported")
+    first = min((float(np.nanmin(st.time)) for st in session.streams.values() if len(st)),
+                default=0.0)
     return {
         "path": str(session.path),
         "schema_version": session.schema_version,
@@ -49,7 +57,11 @@ def describe(session: Session) -> dict[str, Any]:
         "plan": session.meta.get("plan_name", ""),
         "tag": session.meta.get("tag", ""),
         "software": session.meta.get("software_version", ""),
-        "duration_s": session.duration,
+        # an imported log's time is the firmware's (it starts when the Crazyflie did): its
+        # duration is the data's span; a flight's time starts at 0 when it does
+        "duration_s": session.duration - first if imported else session.duration,
+        "time_s": [first, session.duration],
+        "imported": imported,
         "closed_cleanly": session.closed_cleanly,
         "problems": session.problems,
         "streams": streams,
@@ -140,6 +152,19 @@ def _fields_text(fields: dict[str, str]) -> str:
     return ", ".join(f"{k} [{u}]" if u else k for k, u in fields.items())
 
 
+def _keep_names_whole(table: Table, names: list[str], width: int) -> None:
+    """Names in the first column are what the user types (``--inputs``): never cut. The other
+    columns give way (a long word in them folds onto the next line rather than ending in
+    ``…``); a name too long even for that (beside the narrowest other columns) folds too."""
+    for column in table.columns:
+        column.overflow = "fold"
+    table.columns[0].no_wrap = max(map(len, names), default=0) <= width // 2
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'' if n == 1 else 's'}"
+
+
 def _fmt(x: float | None, spec: str = ".2f") -> str:
     return "-" if x is None or (isinstance(x, float) and np.isnan(x)) else format(x, spec)
 
@@ -166,30 +191,47 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
     out = output_console(width=width)
     state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
     out.print(f"[bold]{d['path']}[/] schema {d['schema_version']}, {state}")
+    t0, t1 = d["time_s"]
+    span = (f"data {t0:.2f} to {t1:.2f} s of firmware time ({d['duration_s']:.2f} s)"
+            if d["imported"] else f"duration {d['duration_s']:.2f} s")
     out.print(
-        f"start {d['start']}  duration {d['duration_s']:.2f} s  uri {d['uri'] or '-'}  "
+        f"start {d['start']}  {span}  uri {d['uri'] or '-'}  "
         f"plan {d['plan'] or '-'}{'  tag ' + d['tag'] if d['tag'] else ''}  "
         f"firmware {d['firmware'] or '-'}"
     )
-    table = output_table("stream", "kind", "rows", "rate Hz", "expected", "dropped",
-                         "fields [unit]", console=out)
-    for name, e in d["streams"].items():
-        fields = escape(_fields_text(e["fields"]))
-        table.add_row(
-            name,
-            e["kind"],
-            str(e["rows"]),
-            _fmt(e.get("rate_hz"), ".1f"),
-            str(e.get("expected", "-")),
-            str(e.get("dropped", "-")),
-            fields,
-        )
+    rows = [[escape(name), e["kind"], str(e["rows"]), _fmt(e.get("rate_hz"), ".1f"),
+             str(e.get("expected", "-")), str(e.get("dropped", "-"))]
+            for name, e in d["streams"].items()]
+    fields = [escape(_fields_text(e["fields"]) if e["kind"] != "events" else
+                     f"level, source, text ({_count(d['events'], 'event')})")
+              for e in d["streams"].values()]
+    columns = ["stream", "kind", "rows", "rate Hz", "expected", "dropped"]
+    table = output_table(*columns, console=out)
+    for row in rows:
+        table.add_row(*row)
+    # the fields in a last column while it gets a readable width, else each under its stream
+    beside = out.width - Measurement.get(out, out.options, table).maximum >= _FIELDS_MIN_WIDTH
+    if beside:
+        table = output_table(*columns, "fields [unit]", console=out)
+        for row, text in zip(rows, fields, strict=True):
+            table.add_row(*row, text)
+    _keep_names_whole(table, [row[0] for row in rows], out.width)
     out.print(table)
+    if not beside:
+        out.print(escape("fields [unit]:"))
+        grid = Table.grid(padding=(0, 1), pad_edge=True)
+        grid.add_column()
+        grid.add_column()
+        for row, text in zip(rows, fields, strict=True):
+            grid.add_row(f"{row[0]}:", text)
+        _keep_names_whole(grid, [row[0] + ":" for row in rows], out.width)
+        out.print(grid)
     if d["phases"]:
         phases = output_table("phase", "kind", "start s", "end s", "length s", console=out)
+        _keep_names_whole(phases, [escape(p["name"]) for p in d["phases"]], out.width)
         for p in d["phases"]:
             phases.add_row(
-                p["name"],
+                escape(p["name"]),
                 p["kind"],
                 _fmt(p["start_s"]),
                 _fmt(p["end_s"]),

@@ -376,7 +376,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
     if failure:
         link.close()  # bounded (Link.close)
         why = failure[0]
-        raise LinkError(f"cannot connect to {uri}: {why}; {connect_advice(why)}")
+        raise LinkError(f"cannot connect to {uri}: {why}; {connect_advice(why, uri=uri)}")
     cf.connection_failed.remove_callback(failed)
     cf.connection_lost.remove_callback(failed)
     log.info("connected to %s in %.2f s", uri, time.monotonic() - t0)

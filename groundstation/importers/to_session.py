@@ -62,6 +62,11 @@ TIME_BASE = "imported: host_time is the firmware time in seconds (no host clock 
 NO_START = "unknown (the log carries no wall-clock time)"
 
 
+class OutputFolderError(SessionError):
+    """The ``--out`` folder takes no files (permissions, a file in the way): no import into it
+    can succeed, so a batch stops at the first."""
+
+
 @dataclass(frozen=True)
 class ImportedBlock:
     """One log block to write: ``timestamps_s`` (n,) firmware seconds, ``values[var]`` (n,),
@@ -76,11 +81,18 @@ class ImportedBlock:
 
     @property
     def period_s(self) -> float:
-        """Median sample period in seconds, rounded to 0.1 ms (0.01 s for a single sample)."""
+        """Mean sample period in seconds, over the steps that are no gap (at most 1.5 median
+        steps), rounded to 0.1 µs (0.01 s for a single sample). Not the median: a logger
+        ticking at 101.2 Hz on a millisecond clock steps 9 or 10 ms, and a median of 10 ms (or
+        a rounding to 0.1 ms) would make the rows expected over the log's span too few."""
         if len(self.timestamps_s) < 2:
             return 0.01
-        period = float(np.median(np.diff(self.timestamps_s)))
-        return round(period, 4) if np.isfinite(period) and period > 0 else 0.001
+        steps = np.diff(self.timestamps_s)
+        median = float(np.median(steps))
+        if not (np.isfinite(median) and median > 0):
+            return 0.001
+        period = float(np.mean(steps[(steps > 0) & (steps <= 1.5 * median)]))
+        return round(period, 7)
 
 
 def stream_name_of_groups(variables: Sequence[str]) -> str:
@@ -214,8 +226,8 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
         tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing",
                                        dir=out.parent))
     except OSError as exc:
-        raise SessionError(f"{out.parent}: cannot write there ({exc.strerror}); choose another "
-                           "--out folder") from None
+        raise OutputFolderError(f"{out.parent}: cannot write there ({exc.strerror}); choose "
+                                "another --out folder") from None
     try:
         tmp = tmpdir / out.name
         with SessionWriter(tmp, streams=[*specs, events_spec(), phases_spec()], metadata=meta,
@@ -233,7 +245,7 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
                 for f, var in zip(spec.fields[2:], b.values, strict=True):
                     ds[f.name] = b.values[var]
                 w.extend(spec.name, ds.tolist())
-            w.close(duration_s=t_last, summary={
+            w.close(duration_s=t_last - t_first, summary={
                 "imported": True,
                 "rows": {s.name: len(b.timestamps_s) for s, b in zip(specs, blocks, strict=True)},
                 "airborne_s": [[s.start_s, s.end_s] for s in segments]})

@@ -170,10 +170,26 @@ def load_plan(path: str | Path) -> Plan:
     """Read, validate and return the plan in ``path`` (or the shipped plan of that name)."""
     path = find_plan(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise PlanError(f"{path}: cannot read the plan ({exc}); check the file") from None
-    return parse_plan(text=text, source=str(path), name=path.stem)
+        with path.open("rb") as fh:
+            head = fh.read(len(_HDF5_SIGNATURE))
+            raw = b"" if head == _HDF5_SIGNATURE else head + fh.read()
+    except OSError as exc:
+        raise PlanError(f"{path}: cannot read the plan ({exc.strerror or exc}); check the "
+                        "file") from None
+    try:
+        text = raw.decode("utf-8") if raw else None
+    except UnicodeDecodeError:
+        text = None
+    if text is None and head:  # binary: say so, not which byte the UTF-8 decoder choked on
+        what = ("it looks like an HDF5 file, a session or a model" if head == _HDF5_SIGNATURE
+                else "not UTF-8 text")
+        raise PlanError(f"{path}: not a TOML flight plan ({what}); give a plan file (.toml) or "
+                        "a shipped plan's name, e.g. prbs-3axis")
+    return parse_plan(text=text or "", source=str(path), name=path.stem)
+
+
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+"""The first bytes of an HDF5 file (session and model files)."""
 
 
 def _plan_name(top: TomlTable, *, default: str) -> str:

@@ -279,10 +279,11 @@ def read_signal(
     else:
         nyquist = rate_hz / 2
         spec["sweep"] = t.choice("sweep", ("linear", "log"), default="linear")
+        log_sweep = spec["sweep"] == "log"
         for key in ("f_start_hz", "f_end_hz"):
-            f = spec[key] = t.number(key, lo=0, hi=nyquist, unit="Hz")
-            log_sweep = spec["sweep"] == "log"
-            if f == nyquist or (log_sweep and f == 0):
+            f = spec[key] = t.get(key, float, unit="Hz")
+            # one check, one message: the bounds it states are the ones it applies
+            if not (0 < f < nyquist if log_sweep else 0 <= f < nyquist):
                 low = "> 0 Hz (a log sweep cannot start or end at 0)" if log_sweep else ">= 0 Hz"
                 raise t.src.error(
                     (*t.path, key),

@@ -214,3 +214,49 @@ def test_a_cache_file_that_would_run_code_is_removed_before_cflib_reads_it(serve
     assert not mark.exists() and value == 250.0
     assert sorted(cache.glob("*.json")) == files  # fetched again and saved again, plainly
     assert all("exec" not in f.read_text() for f in files)
+
+
+# ------------------------------------------------------------ URIs refused before connecting
+def _fly_error(uri: str, out) -> str:
+    """``groundstation fly hover-check --uri URI``: exit 2, one error line and nothing else (no
+    cflib text), no folder created; returns the line."""
+    from click.testing import CliRunner
+
+    from groundstation.cli import main
+
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(out),
+                                    "--timeout", "2"])
+    assert res.exit_code == 2, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: cannot connect to "), res.output
+    return lines[0]
+
+
+@pytest.mark.parametrize(("uri", "says"), [
+    ("tcp://foo", "unknown link URI scheme 'tcp://'"),
+    ("tcp://foo:5000", "unknown link URI scheme 'tcp://'"),
+    ("prrt://0", "unknown link URI scheme 'prrt://'"),
+    ("udp://127.0.0.1", "udp://HOST:PORT"),
+    ("udp://:19850", "udp://HOST:PORT"),
+    ("udp://127.0.0.1:70000", "udp://HOST:PORT"),
+    ("udp://127.0.0.1:port", "udp://HOST:PORT"),
+    ("sim://x", "'x' is not a number"),
+    ("sim://x?speed=inf", "'x' is not a number"),
+    ("radio://0/126/2M/E7E7E7E7E7", "radio://DONGLE/CHANNEL/RATE/ADDRESS"),
+    ("radio://0/80/3M/E7E7E7E7E7", "radio://DONGLE/CHANNEL/RATE/ADDRESS"),
+    ("radio://0/80/2M/XYZ", "radio://DONGLE/CHANNEL/RATE/ADDRESS"),
+    ("usb://first", "usb://N"),
+])
+def test_unsupported_and_malformed_uris_are_refused_before_connecting(tmp_path, uri, says):
+    line = _fly_error(uri, tmp_path / "s")
+    assert says in line and "e.g." in line
+    assert "NoneType" not in line and "Crazyflie is on" not in line
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_refused_udp_connection_points_at_the_simulator_not_the_radio(tmp_path):
+    port = free_udp_port()  # nothing listens there: the datagrams are refused
+    line = _fly_error(f"udp://127.0.0.1:{port}", tmp_path / "s")
+    assert f"listening on 127.0.0.1:{port}" in line and f"groundstation sim --port {port}" in line
+    assert "channel" not in line and "groundstation scan" not in line

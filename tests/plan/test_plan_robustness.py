@@ -269,9 +269,17 @@ def test_altitude_hold_kinds_message_says_what_is_expected(kinds):
     [
         ("linear", "f_end_hz", "5", "5 Hz is out of range for a linear sweep; use a value >= 0 Hz "
          "and < 5 Hz"),
-        ("linear", "f_start_hz", "6", "6 Hz is out of range; use a value >= 0 and <= 5 Hz"),
+        # above Nyquist: the same bound as at it (5 Hz itself is refused: not "<= 5 Hz")
+        ("linear", "f_start_hz", "6", "6 Hz is out of range for a linear sweep; use a value "
+         ">= 0 Hz and < 5 Hz"),
+        ("linear", "f_end_hz", "8.0", "8 Hz is out of range for a linear sweep; use a value "
+         ">= 0 Hz and < 5 Hz"),
+        ("linear", "f_start_hz", "-1", "-1 Hz is out of range for a linear sweep; use a value "
+         ">= 0 Hz and < 5 Hz"),
         ("log", "f_start_hz", "0", "0 Hz is out of range for a log sweep; use a value > 0 Hz"),
         ("log", "f_end_hz", "5.0", "5 Hz is out of range for a log sweep; use a value > 0 Hz"),
+        ("log", "f_end_hz", "8", "8 Hz is out of range for a log sweep; use a value > 0 Hz (a "
+         "log sweep cannot start or end at 0) and < 5 Hz"),
     ],
 )
 def test_chirp_frequency_messages_fit_the_sweep(sweep, key, value, expected):
@@ -282,6 +290,7 @@ def test_chirp_frequency_messages_fit_the_sweep(sweep, key, value, expected):
     msg = str(info.value)
     assert msg.startswith(f"c.toml:{line}: phase[3].pitch.{key}: ") and expected in msg, msg
     assert "\n" not in msg and (sweep == "log" or "log sweep" not in msg)
+    assert "<= 5" not in msg  # the check refuses 5 Hz: no message may offer it
 
 
 _DOTTED = 'roll.signal = "prbs"\nroll.register_length = 5\nroll.amplitude = 20.0\n'

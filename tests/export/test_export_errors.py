@@ -1,0 +1,93 @@
+"""``groundstation export``'s user errors: one line saying what to do, the same for every
+format (an unwritable folder, a missing ``--to``)."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+import pytest
+from click.testing import CliRunner
+
+from groundstation.cli import main
+from tests.viz.sessions import write_session
+
+
+def _run(*args):
+    return CliRunner().invoke(main, ["export", *map(str, args)])
+
+
+def _one_line(res) -> str:
+    assert res.exit_code == 2, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    assert "Traceback" not in res.output and "\t" not in res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.output
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    return write_session(tmp_path_factory.mktemp("export") / "flight.h5")
+
+
+@pytest.fixture
+def read_only(tmp_path, monkeypatch):
+    """A folder the user may not write into (``os.access`` says so; root may write anywhere,
+    so the test cannot rely on the mode bits alone)."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real = os.access
+
+    def access(path, mode, *a, **kw):
+        if pathlib.Path(path).resolve() == ro.resolve() and mode & os.W_OK:
+            return False
+        return real(path, mode, *a, **kw)
+
+    monkeypatch.setattr(os, "access", access)
+    return ro
+
+
+@pytest.mark.parametrize(("to", "out"), [("csv", "csv"), ("parquet", "pq"), ("mat", "f.mat")])
+def test_an_unwritable_folder_is_one_line_the_same_for_every_format(session, read_only, to,
+                                                                      out):
+    line = _one_line(_run(session, "--to", to, "--out", read_only / out, "--window", "all"))
+    assert f"folder {str(read_only)!r} is not writable" in line and "-h" in line
+    assert not any(read_only.iterdir())
+
+
+@pytest.mark.parametrize("to", ["csv", "parquet"])
+def test_an_existing_unwritable_output_folder_is_named(session, read_only, to):
+    line = _one_line(_run(session, "--to", to, "--out", read_only))
+    assert f"folder {str(read_only)!r} is not writable" in line
+
+
+def test_a_file_refused_while_writing_names_its_folder(session, tmp_path, monkeypatch):
+    out = tmp_path / "csv"
+    real_open = pathlib.Path.open
+
+    def refusing_open(self, mode="r", *a, **kw):
+        if "w" in mode and self.parent == out:
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_open(self, mode, *a, **kw)
+
+    monkeypatch.setattr(pathlib.Path, "open", refusing_open)
+    line = _one_line(_run(session, "--to", "csv", "--out", out))
+    assert f"folder {str(out)!r} is not writable" in line
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_a_folder_without_write_permission(session, tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        line = _one_line(_run(session, "--to", "csv", "--out", ro / "csv"))
+    finally:
+        ro.chmod(0o700)
+    assert f"folder {str(ro)!r} is not writable" in line
+
+
+def test_a_missing_format_lists_the_choices_on_one_line(session):
+    line = _one_line(_run(session))
+    assert "Missing option '--to'" in line and "csv, mat or parquet" in line

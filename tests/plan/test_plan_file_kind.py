@@ -1,0 +1,44 @@
+"""A file that is no TOML flight plan (a session or model .h5, a .mat, any binary) given as the
+plan: one line saying so, not the UTF-8 decoder's complaint about byte 0x89."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from groundstation.cli import main
+from groundstation.errors import PlanError
+from groundstation.plan import load_plan
+
+
+def _model_like(path):
+    with h5py.File(path, "w") as f:
+        f["A"] = np.eye(2)
+    return path
+
+
+@pytest.mark.parametrize("command", [["plan", "check", "{plan}"],
+                                     ["fly", "{plan}", "--uri", "sim://0?speed=inf", "--out",
+                                      "{out}"]])
+def test_an_hdf5_file_is_not_a_flight_plan(tmp_path, command):
+    model = _model_like(tmp_path / "model.h5")
+    args = [a.format(plan=model, out=tmp_path / "s") for a in command]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2, res.output
+    [line] = res.output.strip().splitlines()
+    assert line.startswith(f"error: {model}: not a TOML flight plan (it looks like an HDF5 file")
+    assert "codec" not in line and "0x89" not in line and "e.g. prbs-3axis" in line
+    assert not (tmp_path / "s").exists()
+
+
+def test_other_binary_is_not_utf8_text(tmp_path):
+    blob = tmp_path / "plan.toml"
+    blob.write_bytes(bytes(range(128, 256)))
+    with pytest.raises(PlanError, match=r"plan\.toml: not a TOML flight plan \(not UTF-8 text\)"):
+        load_plan(blob)
+
+
+def test_a_text_plan_still_loads(tmp_path):
+    assert load_plan("hover-check").name == "hover-check"

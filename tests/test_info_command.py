@@ -1,0 +1,58 @@
+"""``groundstation info`` as text: stream and phase names are what the user types (``--inputs``,
+``--window``), so a narrow terminal never cuts them; the events stream shows no internal field."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from click.testing import CliRunner
+
+from cfsession import SessionWriter, standard_streams
+from cfsession.schema import log_block_spec
+from groundstation.cli import main as gs
+
+LONG = "stateEstimate+controller+motor+2-more"
+VARIABLES = [("stateEstimate.x", "float"), ("controller.actuatorThrust", "float"),
+             ("controller.cmd_thrust", "float"), ("controller.r_roll", "float"),
+             ("controller.pitchRate", "float"), ("motor.m1", "uint16_t")]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    path = tmp_path_factory.mktemp("info") / "s.h5"
+    spec = log_block_spec(name=LONG, variables=VARIABLES, period_s=0.01)
+    with SessionWriter(path, streams=[spec, *standard_streams()]) as w:
+        w.phase(t=0.0, phase_id=0, name="excitation-long-name-1", kind="excitation")
+        w.event(t=0.0, text="an event whose text is longer than one row " * 10)
+        w.extend(LONG, [(0.01 * k, 10 * k, 1.0, 2.0, 3.0, 4.0, 5.0, 6) for k in range(100)])
+    return path
+
+
+@pytest.mark.parametrize("width", [40, 60, 80, 120])
+def test_names_are_never_cut(session, width):
+    res = CliRunner().invoke(gs, ["info", str(session), "--width", str(width)])
+    assert res.exit_code == 0, res.output
+    assert "…" not in res.output
+    lines = res.output.splitlines()
+    assert all(len(line.rstrip()) <= width for line in lines)
+    if width >= 80:  # room for the names: the other columns give way, names stay on one line
+        assert any(line.startswith(LONG + " ") for line in lines)
+        assert any(line.startswith("excitation-long-name-1 ") for line in lines)
+    else:  # no room even so: a name folds (whole, over lines), never ends in an ellipsis
+        column = [line.split()[0] for line in lines if line[:1].strip()]
+        assert LONG in "".join(column)
+
+
+def test_every_field_name_is_whole_at_80_columns(session):
+    res = CliRunner().invoke(gs, ["info", str(session), "--width", "80"])
+    text = re.sub(r"\s+", "", res.output)  # a folded name joins up again
+    for var, _ in VARIABLES:
+        assert var.split(".")[1] in text
+
+
+def test_the_events_stream_shows_no_internal_field(session):
+    res = CliRunner().invoke(gs, ["info", str(session), "--width", "120"])
+    [row] = [line for line in res.output.splitlines() if line.startswith("events ")]
+    assert "cont" not in row
+    assert "level, source, text (1 event)" in row
