@@ -43,12 +43,13 @@ import dataclasses
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from sysid.data import IOData
 from sysid.errors import DataError
+from sysid.feedback import FeedbackTest, feedback_test
 from sysid.growth import follow_edges
 from sysid.memory import predictor_memory
 from sysid.methods import Method, Options
@@ -63,7 +64,14 @@ from sysid.parsimony import (
 from sysid.refit import final_model
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
-from sysid.variants import focus_order, n_runs, pick_feedthrough, pick_focus, tries_feedthrough
+from sysid.variants import (
+    biased_choices,
+    focus_order,
+    n_runs,
+    pick_feedthrough,
+    pick_focus,
+    tries_feedthrough,
+)
 
 __all__ = ["HOLDOUT_FRACTION", "SCORE_WINDOW_X", "NoStableModel", "Plan", "Selection",
            "default_grid", "finish", "focus_order", "holdout", "max_blocks", "n_runs",
@@ -102,6 +110,7 @@ class Selection:
     feedthrough_note: str = ""
     tolerance: float | None = None
     tolerance_basis: str = "one standard error"
+    feedback: FeedbackTest | None = None
 
     def top(self, count: int = 8) -> list[SweepRow]:
         """The best ``count`` models by score, and the chosen one after them when it is not
@@ -295,18 +304,27 @@ def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
 
 def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                 progress: Callable[[int, int], None] | None = None, keep_models: bool = False,
-                choose_focus: bool = False, choose_feedthrough: bool = False,
+                choose_focus: bool = False,
+                choose_feedthrough: bool | Literal["open-loop"] = False,
                 horizon: int | None = None, window: float | None = None,
                 client: Any | None = None) -> Selection:
     """The selection on the data and grid of ``p``: :func:`sysid.sweep.sweep`, then
     :func:`finish`. With ``choose_focus`` the grid runs for both focus choices and
     :func:`pick_focus` decides; with ``choose_feedthrough`` (open-loop data only: module
-    docstring) once more with a direct term, kept when it scores better.
+    docstring) once more with a direct term, kept when it scores better (``"open-loop"``:
+    only when :func:`sysid.feedback.feedback_test` finds no feedback). A focus or direct term
+    chosen on data with feedback is biased by it: a warning says so
+    (:func:`sysid.variants.biased_choices`); ``Selection.feedback`` is the test.
     ``progress(done, total)`` counts models over every run (``total`` is
     ``p.n_models * n_runs(...)``, more once the grid grows). ``horizon`` (k-step prediction)
     or ``window`` (simulation windows, s) replace the score's default (simulation over
     ``p.window_s``); ``client`` (Dask) runs the sweeps on a cluster. Raises
     :class:`NoStableModel` when no model of the grid is stable."""
+    loop = feedback_test(p.ident) if choose_focus or choose_feedthrough else None
+    if loop is not None:
+        log.info("selection: %s", loop.describe())
+    if choose_feedthrough == "open-loop":  # a direct term only where no feedback was found
+        choose_feedthrough = loop is not None and loop.feedback is False
     variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                 if choose_focus else [options])
     count = {"done": 0, "total": p.n_models * n_runs(options, choose_focus=choose_focus,
@@ -366,4 +384,8 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
             options, focus=chosen.model.provenance.get("focus", options.focus),
             feedthrough=True))
         chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
-    return follow_edges(p, chosen, room=max_blocks(p.ident), run=again)
+    chosen = follow_edges(p, chosen, room=max_blocks(p.ident), run=again)
+    return dataclasses.replace(chosen, feedback=loop, warnings=(
+        *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
+                                          feedthrough_chosen=tries_feedthrough(
+                                              options, choose_feedthrough))))

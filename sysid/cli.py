@@ -184,7 +184,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         given = {key: [value] for key, value in (("pasts", past), ("futures", future),
                                                   ("orders", order)) if value is not None}
         selection = choose(groups, method=meth, options=options, grid=given, workers=workers,
-                           choose_focus=focus is None, quiet=as_json)
+                           choose_focus=focus is None, quiet=as_json,
+                           choose_feedthrough="open-loop" if feedthrough is None else False)
         model = selection.model
         order, past, future = selection.best.order, selection.best.past, selection.best.future
     # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
@@ -368,6 +369,7 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
     """
     meth, options = _method(method, focus=focus, stability=stability)
     sweep_command(session=session, method=meth, options=options, choose_focus=focus is None,
+                  choose_feedthrough="open-loop",
                   pasts=pasts, futures=futures, orders=orders, workers=workers,
                   connect=lambda: scheduler_client(scheduler), validate=validate,
                   horizon=horizon, window_s=window_s, top=top, out=out, force=force,

@@ -14,7 +14,7 @@ import json
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import click
 import numpy as np
@@ -62,6 +62,7 @@ Connect = Callable[[], AbstractContextManager[Any]]
 def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
            grid: dict[str, list[int]] | None = None,
            validation: Sequence[IOData] | None = None, choose_focus: bool = False,
+           choose_feedthrough: bool | Literal["open-loop"] = False,
            horizon: int | None = None, window: float | None = None, workers: int = 1,
            connect: Connect | None = None, quiet: bool = False, label: str | None = None
            ) -> Selection:
@@ -77,7 +78,8 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
     with (connect or contextlib.nullcontext)() as client, \
             progress(label, total=total, quiet=quiet) as update:
         return select_plan(p, method=method, options=options, workers=workers,
-                           choose_focus=choose_focus, horizon=horizon, window=window,
+                           choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
+                           horizon=horizon, window=window,
                            client=client, progress=update)
 
 
@@ -124,8 +126,10 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
               + ("0.5 points" if sel.tolerance is None else
                  f"{sel.tolerance:.2f} points ({sel.tolerance_basis})")
               + " of the best stable score (score = mean fit with each channel floored at 0 %)")
-    if sel.focus_note:
-        con.print(sel.focus_note)
+    for note in (sel.feedback.describe() if sel.feedback else "", sel.focus_note,
+                 sel.feedthrough_note):
+        if note:
+            con.print(note)
     for w in sel.warnings:
         con.print(f"[yellow]warning: {w}[/]")
     bad = [n for i, n in enumerate(names) if max(r.fit[i] for r in rows) <= 0]
@@ -142,11 +146,17 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
             "tolerance_points": sel.tolerance, "tolerance_basis": sel.tolerance_basis,
             "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
             "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
-            "focus_scores": sel.focus_scores,
+            "focus_scores": sel.focus_scores, "feedthrough_note": sel.feedthrough_note,
+            "feedback": None if sel.feedback is None else {
+                "found": sel.feedback.feedback, "lags": sel.feedback.lags,
+                "p_values": dict(zip(sel.feedback.input_names,
+                                     map(float, sel.feedback.p_values), strict=True)),
+                "note": sel.feedback.describe()},
             "candidates": [r.to_record() for r in sel.top(top)]}
 
 
 def sweep_command(*, session: Path, method: Method, options: Options, choose_focus: bool,
+                  choose_feedthrough: bool | Literal["open-loop"] = False,
                   pasts: str | None, futures: str | None, orders: str | None, workers: int,
                   connect: Connect, validate: tuple[Path, ...], horizon: int | None,
                   window_s: float | None, top: int, out: Path | None, force: bool,
@@ -175,8 +185,9 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
     try:
         sel = choose(groups, method=method, options=options,
                      grid={k: list(v) for k, v in lazy.items()}, validation=val,
-                     choose_focus=choose_focus, horizon=horizon, window=window_s,
-                     workers=workers, connect=connect, quiet=as_json, label="sweep")
+                     choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
+                     horizon=horizon, window=window_s, workers=workers, connect=connect,
+                     quiet=as_json, label="sweep")
         result, rule, grid = sel.result, sel.rule, sel.grid
     except NoStableModel as exc:  # report the grid of the method's default focus anyway
         result, rule, grid = exc.results[0], exc.plan.rule, exc.plan.grid

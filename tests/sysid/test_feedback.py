@@ -1,0 +1,122 @@
+"""Feedback in the data (``sysid.feedback``) and what the no-knobs choice does with it.
+
+Known truth: how each experiment was generated (open loop with white, held-PRBS, coloured or
+multisine inputs; closed loop ``u = r - F y`` with noise), and the true system's noise-free
+response on held-out data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.signal
+
+import sysid
+from sysid.auto import select
+from sysid.feedback import feedback_test
+from sysid.methods import get_method
+
+from .systems import closed_loop, random_stable_system
+
+
+def _system(seed: int) -> sysid.StateSpaceModel:
+    return random_stable_system(n_states=4, n_inputs=2, n_outputs=2,
+                                rng=np.random.default_rng(seed), k_scale=0.3)
+
+
+def _inputs(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    if kind == "white":
+        return rng.standard_normal((n, 2))
+    if kind == "prbs":  # chips held 7 samples
+        return np.repeat(np.sign(rng.standard_normal((n // 7 + 1, 2))), 7, axis=0)[:n]
+    if kind == "coloured":
+        return scipy.signal.lfilter([1.0], [1.0, -1.6, 0.8], rng.standard_normal((n, 2)), axis=0)
+    t = np.arange(n)[:, None]
+    return np.sin(0.05 * t + [0.0, 1.0]) + np.sin(0.31 * t + [2.0, 0.5])
+
+
+@pytest.mark.parametrize("kind", ["white", "prbs", "coloured", "multisine"])
+def test_open_loop_inputs_show_no_feedback(kind):
+    rng = np.random.default_rng(3)
+    system = _system(1)
+    u = _inputs(kind, 3000, rng)
+    y = system.simulate(u)
+    y = y + 0.05 * y.std(axis=0) * rng.standard_normal(y.shape)  # 26 dB
+    test = feedback_test([sysid.IOData(u=u, y=y, dt=0.02)])
+    assert test.feedback is False, test.describe()
+    assert "no feedback found" in test.describe()
+
+
+def _closed(seed: int, *, snr_db: float = 15.0):
+    """A 4-state 2x2 system in the loop ``u = r - F y`` (F random, loop gain 0.5, halved until
+    the loop's poles are inside 0.98), innovations at ``snr_db`` below the output."""
+    rng = np.random.default_rng(seed)
+    system = random_stable_system(n_states=4, n_inputs=2, n_outputs=2, rng=rng, k_scale=0.3)
+    f = rng.standard_normal((2, 2))
+    f *= 0.5 / np.linalg.norm(f, 2)
+    while np.abs(np.linalg.eigvals(system.A - system.B @ f @ system.C)).max() >= 0.98:
+        f *= 0.5
+    clean = closed_loop(system, n_samples=3000, rng=np.random.default_rng(seed), gain=f,
+                        noise_std=0.0)
+    return closed_loop(system, n_samples=3000, rng=np.random.default_rng(seed), gain=f,
+                       noise_std=float(clean.data.y.std()) / 10 ** (snr_db / 20))
+
+
+def test_a_closed_loop_with_noise_is_feedback():
+    exp = _closed(103)
+    test = feedback_test([exp.data])
+    assert test.feedback is True and np.nanmin(test.p_values) < 1e-6, test.describe()
+    assert test.describe().startswith("feedback: the inputs depend on past outputs")
+
+
+def test_too_few_samples_cannot_tell():
+    rng = np.random.default_rng(5)
+    d = sysid.IOData(u=rng.standard_normal((30, 2)), y=rng.standard_normal((30, 2)), dt=0.1)
+    test = feedback_test([d])
+    assert test.feedback is None and "too few" in test.describe()
+
+
+def _split(exp, cut: int = 2000) -> tuple[sysid.IOData, sysid.IOData]:
+    """Identification part (noisy) and held-out truth (the noise-free response)."""
+    d = exp.data
+    return (sysid.IOData(u=d.u[:cut], y=d.y[:cut], dt=d.dt),
+            sysid.IOData(u=d.u[cut:], y=exp.y_clean[cut:], dt=d.dt))
+
+
+def _truth(model, val) -> float:
+    return float(np.mean(sysid.compare(model, val, x0="estimate", warn=False).fit))
+
+
+def test_a_focus_chosen_on_closed_loop_data_is_flagged_when_feedback_biases_it():
+    """Held-out data from the same loop reward output error's bias: when the simulation focus
+    wins there, the selection says so and names the remedy; a direct term is not tried."""
+    ident, val = _split(_closed(102))
+    iem = get_method("iem")
+    sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True,
+                 choose_feedthrough="open-loop")
+    assert sel.feedback is not None and sel.feedback.feedback is True
+    assert sel.feedthrough_note == "" and not sel.model.provenance.get("feedthrough")
+    flagged = [w for w in sel.warnings if "the simulation focus scored best" in w]
+    assert sel.model.provenance["focus"] == "simulation" and len(flagged) == 1, sel.focus_note
+    assert "--focus prediction" in flagged[0]
+    # the flag is right here: at the same settings the prediction focus fits the true plant
+    b = sel.best
+    consistent = sysid.iem(ident, order=b.order, past=b.past, future=b.future,
+                           focus="prediction")
+    assert _truth(consistent, val) > _truth(sel.model, val) + 1.0
+
+
+def test_open_loop_data_try_a_direct_term_with_no_knobs():
+    system = random_stable_system(n_states=3, n_inputs=1, n_outputs=1, feedthrough=True,
+                                  rng=np.random.default_rng(8))
+    rng = np.random.default_rng(9)
+    u = rng.standard_normal((3000, 1))
+    y = system.simulate(u)
+    exp_y = y + 0.05 * y.std() * rng.standard_normal(y.shape)
+    ident = sysid.IOData(u=u[:2000], y=exp_y[:2000], dt=0.02)
+    val = sysid.IOData(u=u[2000:], y=y[2000:], dt=0.02)
+    iem = get_method("iem")
+    sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True,
+                 choose_feedthrough="open-loop")
+    assert sel.feedback.feedback is False and sel.model.provenance["feedthrough"] is True
+    assert "direct term kept" in sel.feedthrough_note
+    assert _truth(sel.model, val) > 99.0
