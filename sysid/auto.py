@@ -373,11 +373,17 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     runs = [run(p, opts) for opts in variants]
     selections = [sel for _, sel in runs if sel is not None]
     if not selections:
+        results = [result for result, _ in runs]
+        failed = [f for result in results for f in result.failures()]
+        n_all = sum(len(result.rows) for result in results)
+        if failed and sum(n for _, n in failed) == n_all:  # none was identified: say why
+            why, n = max(failed, key=lambda f: f[1])
+            raise NoStableModel(f"all {n_all} models of the grid failed ({n} of them: {why})",
+                                plan=p, results=results)
         raise NoStableModel(f"none of the {p.n_models * len(variants)} models of the grid is "
                             "stable" + (", with either focus" if choose_focus else "")
                             + "; give horizons and an order (--past/--future/--order), other "
-                              "channels or a longer window", plan=p,
-                            results=[result for result, _ in runs])
+                              "channels or a longer window", plan=p, results=results)
     chosen = pick_focus(selections) if choose_focus else selections[0]
     if tries_feedthrough(options, choose_feedthrough):
         _, with_d = run(p, dataclasses.replace(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -262,3 +263,18 @@ def test_an_edge_is_flagged_only_while_the_score_rises_towards_it() -> None:
         "past 4 is the smallest tried: the best may lie below",
         "future 9 is the largest tried (the data allow no longer horizons): the best may lie "
         "beyond"]
+
+
+def test_a_grid_whose_models_all_fail_says_why() -> None:
+    """Not "none is stable" when none was identified: the failure itself, counted."""
+    meth = get_method("iem")
+
+    def failing(*args, **kwargs):
+        raise sysid.DataError(f"the regression is singular at order {kwargs.get('order')}")
+
+    broken = dataclasses.replace(meth, function=failing)
+    d = _plant_that_changes(0)
+    with pytest.raises(NoStableModel, match=r"all 12 models of the grid failed \(12 of them: "
+                                            r"the regression is singular at order \d+\)"):
+        select([[d]], method=broken, options=broken.options(), orders=[1, 2, 3, 4],
+               pasts=[5, 10, 20], futures=[6])
