@@ -24,11 +24,11 @@ instead. In closed loop the input is correlated with the noise and output error 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["output_error_bd"]
+__all__ = ["CHUNK", "output_error_bd"]
 
 log = logging.getLogger(__name__)
 
@@ -36,44 +36,56 @@ log = logging.getLogger(__name__)
 _COND_MODAL = 1e8
 
 
-def _modal_responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """``(resp (N, l, n, m), free (N, l, n))``: output regressors of ``B[i, j]`` and of
-    ``x0[i]`` by modal filtering; raises ``LinAlgError`` when A is not diagonalisable."""
-    import scipy.signal  # where used: scipy.signal takes 0.5 s to import
+#: Samples per block of the regression: memory is O(CHUNK l n m), not O(N l n m).
+CHUNK = 8192
 
+
+def _modal(a: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lam (n,), t (n_modes, l, n))`` of the modal route, None when A is not safely
+    diagonalisable (``cond(V) > 1e8``)."""
     lam, vec = np.linalg.eig(a)
     if not np.isfinite(vec).all() or np.linalg.cond(vec) > _COND_MODAL:
-        raise np.linalg.LinAlgError("A is not safely diagonalisable")
-    vinv = np.linalg.inv(vec)
-    t = np.einsum("oa,ai->aoi", c @ vec, vinv)  # (n_modes, l, n)
-    n_samples = u.shape[0]
-    z = np.empty((n_samples, u.shape[1], lam.size), dtype=complex)
-    for i, li in enumerate(lam):
-        z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -li], u, axis=0)
-    resp = np.einsum("kja,aoi->koij", z, t).real
-    with np.errstate(over="ignore", invalid="ignore"):
-        powers = lam[None, :] ** np.arange(n_samples)[:, None]  # (N, n_modes)
-    free = np.einsum("ka,aoi->koi", powers, t).real
-    return resp, free
+        return None
+    t = np.einsum("oa,ai->aoi", c @ vec, np.linalg.inv(vec))  # (n_modes, l, n)
+    return lam, t
 
 
-def _recursive_responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """The same as :func:`_modal_responses` by propagating ``X_j(k+1) = A X_j(k) + I u_j(k)``."""
+def _responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
+               ) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """``(start, resp (K, l, n, m), free (K, l, n))`` block by block of :data:`CHUNK`
+    samples: the output regressors of ``B[i, j]`` and of ``x0[i]`` (module docstring), by
+    modal filtering (the filters' states carried from block to block), or by propagating
+    ``X_j(k+1) = A X_j(k) + I u_j(k)`` when A is not safely diagonalisable."""
+    import scipy.signal  # where used: scipy.signal takes 0.5 s to import
+
     n_samples, m = u.shape
     n = a.shape[0]
-    xs = np.zeros((m, n, n))
-    resp = np.empty((n_samples, c.shape[0], n, m))
-    free = np.empty((n_samples, c.shape[0], n))
-    power = np.eye(n)
-    eye = np.eye(n)
-    for k in range(n_samples):
-        resp[k] = np.einsum("on,jni->oij", c, xs)
-        free[k] = c @ power
-        xs = a @ xs + eye[None] * u[k][:, None, None]
-        power = a @ power
-    return resp, free
+    modal = _modal(a, c)
+    if modal is not None:
+        lam, t = modal
+        zi = np.zeros((lam.size, 1, m), dtype=complex)
+        for start in range(0, n_samples, CHUNK):
+            block = u[start:start + CHUNK]
+            z = np.empty((block.shape[0], m, lam.size), dtype=complex)
+            for i, li in enumerate(lam):
+                z[:, :, i], zi[i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -li], block,
+                                                         axis=0, zi=zi[i])
+            with np.errstate(over="ignore", invalid="ignore"):  # left out below
+                powers = lam[None, :] ** np.arange(start, start + block.shape[0])[:, None]
+            yield (start, np.einsum("kja,aoi->koij", z, t).real,
+                   np.einsum("ka,aoi->koi", powers, t).real)
+        return
+    xs, power, eye = np.zeros((m, n, n)), np.eye(n), np.eye(n)
+    for start in range(0, n_samples, CHUNK):
+        block = u[start:start + CHUNK]
+        resp = np.empty((block.shape[0], c.shape[0], n, m))
+        free = np.empty((block.shape[0], c.shape[0], n))
+        for k, uk in enumerate(block):
+            resp[k] = np.einsum("on,jni->oij", c, xs)
+            free[k] = c @ power
+            xs = a @ xs + eye[None] * uk[:, None, None]
+            power = a @ power
+        yield start, resp, free
 
 
 def output_error_bd(*, a: np.ndarray, c: np.ndarray,
@@ -95,34 +107,37 @@ def output_error_bd(*, a: np.ndarray, c: np.ndarray,
     n_b, n_d = n * m, (ell * m if feedthrough else 0)
     n_x = n if estimate_x0 else 0
     n_par = n_b + n_d + n_x * len(flights)
-    rows, rhs, designs = [], [], []
-    for f_idx, (u, y) in enumerate(flights):
-        try:
-            resp, free = _modal_responses(a, c, u)
-        except np.linalg.LinAlgError:
-            resp, free = _recursive_responses(a, c, u)
-        n_samples = u.shape[0]
-        design = np.zeros((n_samples, ell, n_par))
-        design[:, :, :n_b] = resp.reshape(n_samples, ell, n_b)
-        if feedthrough:
-            for o in range(ell):
-                design[:, o, n_b + o * m:n_b + (o + 1) * m] = u
-        if estimate_x0:
-            x0 = n_b + n_d + n * f_idx
-            design[:, :, x0:x0 + n] = free
-        ok = np.isfinite(design).all(axis=(1, 2))
-        ok &= np.abs(design).max(axis=(1, 2), initial=0.0) < 1e12
-        if not ok.all():
-            log.info("output error: %d samples left out (A unstable: responses too large)",
-                     int((~ok).sum()))
-        rows.append(design[ok].reshape(-1, n_par))
-        rhs.append(y[ok].reshape(-1))
-        if residuals:
-            designs.append((design[ok], y[ok]))
+
+    def designs(f_idx: int, u: np.ndarray, y: np.ndarray
+                ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """``(design (K', l, n_par), y (K', l))`` block by block, samples left out dropped."""
+        for start, resp, free in _responses(a, c, u):
+            k = resp.shape[0]
+            design = np.zeros((k, ell, n_par))
+            design[:, :, :n_b] = resp.reshape(k, ell, n_b)
+            if feedthrough:
+                for o in range(ell):
+                    design[:, o, n_b + o * m:n_b + (o + 1) * m] = u[start:start + k]
+            if estimate_x0:
+                x0 = n_b + n_d + n * f_idx
+                design[:, :, x0:x0 + n] = free
+            ok = np.isfinite(design).all(axis=(1, 2))
+            ok &= np.abs(design).max(axis=(1, 2), initial=0.0) < 1e12
+            if not ok.all():
+                log.info("output error: %d samples left out (A unstable: responses too "
+                         "large)", int((~ok).sum()))
+                design = design[ok]
+            yield design, y[start:start + k][ok]
+
     # normal equations of the column-equilibrated design: (n_par, n_par), solved by SVD
-    # (rank-safe); forming them costs O(N l n_par^2), a tenth of an SVD of the design
-    gram = sum(r.T @ r for r in rows)
-    rhs_n = sum(r.T @ t for r, t in zip(rows, rhs, strict=True))
+    # (rank-safe); forming them costs O(N l n_par^2), a tenth of an SVD of the design, and
+    # block by block they hold O(CHUNK l n_par) values at a time
+    gram, rhs_n = np.zeros((n_par, n_par)), np.zeros(n_par)
+    for f_idx, (u, y) in enumerate(flights):
+        for design, y_ok in designs(f_idx, u, y):
+            rows = design.reshape(-1, n_par)
+            gram += rows.T @ rows
+            rhs_n += rows.T @ y_ok.reshape(-1)
     scale = np.sqrt(np.diag(gram)).copy()
     scale[scale == 0] = 1.0
     theta = np.linalg.lstsq(gram / np.outer(scale, scale), rhs_n / scale, rcond=None)[0] / scale
@@ -131,7 +146,8 @@ def output_error_bd(*, a: np.ndarray, c: np.ndarray,
     d = theta[n_b:n_b + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
     x0s = [theta[n_b + n_d + n * i:n_b + n_d + n * (i + 1)] if estimate_x0 else np.zeros(n)
            for i in range(len(flights))]
-    if residuals:
-        errs = [y_ok - dsg @ theta for dsg, y_ok in designs]
+    if residuals:  # a second pass: the regressors are not kept
+        errs = [np.concatenate([y_ok - dsg @ theta for dsg, y_ok in designs(f_idx, u, y)])
+                if u.shape[0] else np.zeros((0, ell)) for f_idx, (u, y) in enumerate(flights)]
         return b, d, x0s, errs
     return b, d, x0s

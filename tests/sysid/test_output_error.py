@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import sysid
-from sysid.output_error import _modal_responses, _recursive_responses, output_error_bd
+from sysid import output_error
+from sysid.output_error import _responses, output_error_bd
 
 
 def test_output_error_recovers_b_d_x0_exactly_on_noise_free_data():
@@ -24,10 +25,37 @@ def test_output_error_recovers_b_d_x0_exactly_on_noise_free_data():
     np.testing.assert_allclose(d_est, d, atol=1e-9)
     np.testing.assert_allclose(x0s[0], x0, atol=1e-9)
     # the modal (filter) route and the plain recursion agree
-    r1, f1 = _modal_responses(a, c, u)
-    r2, f2 = _recursive_responses(a, c, u)
+    [(_, r1, f1)] = list(_responses(a, c, u))
+    modal, output_error._modal = output_error._modal, lambda a, c: None
+    try:
+        [(_, r2, f2)] = list(_responses(a, c, u))
+    finally:
+        output_error._modal = modal
     np.testing.assert_allclose(r1, r2, atol=1e-10)
     np.testing.assert_allclose(f1, f2, atol=1e-10)
+
+
+@pytest.mark.parametrize("modal", [True, False])
+def test_blocks_of_samples_give_the_same_fit_and_residuals(monkeypatch, modal):
+    """The regression is formed block by block (memory O(CHUNK), not O(N)): the filters'
+    states and the powers of A carry over, so any block length gives the same estimate."""
+    rng = np.random.default_rng(4)
+    a = np.array([[0.9, 0.3, 0.0], [0.0, 0.9, 0.0], [0.0, 0.0, -0.5]]) if not modal else \
+        np.diag([0.95, 0.6, -0.4])
+    b, c = rng.normal(size=(3, 2)), rng.normal(size=(2, 3))
+    flights = []
+    for n in (1000, 333):
+        u = rng.normal(size=(n, 2))
+        y = sysid.StateSpaceModel(A=a, B=b, C=c).simulate(u, x0=rng.normal(size=3))
+        flights.append((u, y + 0.1 * rng.normal(size=y.shape)))
+    whole = output_error_bd(a=a, c=c, flights=flights, feedthrough=True, residuals=True)
+    monkeypatch.setattr(output_error, "CHUNK", 37)
+    blocks = output_error_bd(a=a, c=c, flights=flights, feedthrough=True, residuals=True)
+    for x, y in zip(whole[:2], blocks[:2], strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-10)
+    for x, y in zip([*whole[2], *whole[3]], [*blocks[2], *blocks[3]], strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-10)
+    assert [e.shape for e in blocks[3]] == [(1000, 2), (333, 2)]
 
 
 def test_output_error_handles_a_defective_a_by_recursion():
