@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -374,12 +375,15 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     selections = [sel for _, sel in runs if sel is not None]
     if not selections:
         results = [result for result, _ in runs]
-        failed = [f for result in results for f in result.failures()]
+        failed: Counter[str] = Counter()
+        for result in results:
+            failed.update(dict(result.failures()))
         n_all = sum(len(result.rows) for result in results)
-        if failed and sum(n for _, n in failed) == n_all:  # none was identified: say why
-            why, n = max(failed, key=lambda f: f[1])
-            raise NoStableModel(f"all {n_all} models of the grid failed ({n} of them: {why})",
-                                plan=p, results=results)
+        if failed and failed.total() == n_all:  # none was identified: say why
+            (why, n), = failed.most_common(1)
+            raise NoStableModel(f"all {n_all} models of the grid failed" + (
+                f": {why}" if n == n_all else f" ({n} of them: {why})"), plan=p,
+                results=results)
         raise NoStableModel(f"none of the {p.n_models * len(variants)} models of the grid is "
                             "stable" + (", with either focus" if choose_focus else "")
                             + "; give horizons and an order (--past/--future/--order), other "

@@ -20,6 +20,7 @@ __all__ = [
     "as_flights",
     "block_hankel",
     "check_excited",
+    "check_independent",
     "hankel_columns",
 ]
 
@@ -178,34 +179,97 @@ def block_hankel(x: np.ndarray, *, block_rows: int, start: int = 0) -> np.ndarra
     return np.ascontiguousarray(win.transpose(2, 1, 0).reshape(block_rows * c, cols))
 
 
-def check_excited(flights: Sequence[IOData], *, rel_tol: float = 1e-12) -> tuple[
+#: A channel is constant when its standard deviation is at most this times its mean magnitude.
+CONSTANT_TOL = 1e-12
+#: A channel is a linear combination of the channels before it (at the same sample) when its
+#: distance from their span is at most this times its norm.
+DEPENDENT_TOL = 1e-10
+
+
+def _rounding_residue(x: np.ndarray) -> bool:
+    """Whether ``x`` ``(N,)`` looks like what detrending leaves of a constant: a few values
+    (at most 16), all small integer multiples of a power of two (exact float differences of
+    numbers close to the constant). A 0/1 switching input looks the same, so this alone
+    refuses nothing (see :func:`check_excited`)."""
+    values = np.unique(x)
+    if values.size < 2 or values.size > 16:
+        return False
+    step = float(np.min(np.diff(values)))
+    ratio = values / step
+    return (np.frexp(step)[0] == 0.5 and bool(np.all(ratio == np.round(ratio)))
+            and float(np.ptp(ratio)) <= 16.0)
+
+
+def _constant(arr: np.ndarray, *, rel_tol: float) -> np.ndarray:
+    """Per column of ``arr`` ``(N, c)``: constant within this flight (:func:`check_excited`)."""
+    std = arr.std(axis=0)
+    flat = std <= rel_tol * np.abs(arr.mean(axis=0))
+    others = np.array([np.max(np.delete(std, j), initial=0.0) for j in range(std.size)])
+    residue = np.array([std[j] <= rel_tol * others[j] and _rounding_residue(arr[:, j])
+                        for j in range(std.size)], dtype=bool)
+    return flat | residue
+
+
+def check_excited(flights: Sequence[IOData], *, rel_tol: float = CONSTANT_TOL) -> tuple[
         np.ndarray, np.ndarray]:
     """Per-channel standard deviation of inputs and outputs over all flights.
 
     Returns ``(u_std (m,), y_std (l,))`` in the channels' units; raises :class:`DataError`
-    naming the first channel that is constant within every flight: its standard deviation in
-    the flight is at most ``rel_tol`` times the larger of its mean magnitude and the largest
-    standard deviation of any channel in that flight. The second reference catches what is left
-    of a constant channel after linear detrending (rounding noise around zero). A channel
-    constant within each flight makes its delayed copies in the data matrix identical, however
-    the constants differ between flights.
+    naming the first channel that is constant within every flight, then the first channel
+    that is a linear combination of the others at every sample (:func:`check_independent`).
+
+    Constancy is decided per channel on its own scale, so the units of the other channels
+    never change the verdict: a channel is constant when its standard deviation is at most
+    ``rel_tol`` times its mean magnitude (exactly zero included). The one exception is what
+    linear detrending leaves of a constant: rounding noise around zero, a handful of values
+    that are multiples of a power of two. On its own it looks like a 0/1 switching signal, so
+    it counts as constant only when its spread is also below ``rel_tol`` of another channel's.
+    A channel constant within each flight makes its delayed copies in the data matrix
+    identical, however the constants differ between flights.
     """
     ref = flights[0]
-    labels = [("input", c, ref.input_names[c]) for c in range(ref.n_inputs)] + [
-        ("output", c, ref.output_names[c]) for c in range(ref.n_outputs)]
+    labels = _channel_labels(ref)
     constant = np.ones(len(labels), dtype=bool)
     spread = np.zeros(len(labels))
     for d in flights:
         arr = np.hstack([d.u, d.y])
-        std = arr.std(axis=0)
-        floor = rel_tol * np.maximum(np.abs(arr).mean(axis=0), std.max())
-        constant &= std <= np.maximum(floor, 1e-300)
-        spread = np.maximum(spread, std)
+        constant &= _constant(arr, rel_tol=rel_tol)
+        spread = np.maximum(spread, arr.std(axis=0))
     for j in np.flatnonzero(constant)[:1]:
-        kind, c, name = labels[j]
         where = "in every flight" if len(flights) > 1 else ""
-        raise DataError(f"{kind} channel {c} ({name!r}) is constant{' ' + where if where else ''}"
+        raise DataError(f"{labels[j]} is constant{' ' + where if where else ''}"
                         f" (std {spread[j]:.3g}); drop it or excite it before identifying")
     u = np.vstack([d.u for d in flights])
     y = np.vstack([d.y for d in flights])
-    return u.std(axis=0), y.std(axis=0)
+    u_std, y_std = u.std(axis=0), y.std(axis=0)
+    check_independent(np.hstack([u, y]), labels=labels)
+    return u_std, y_std
+
+
+def _channel_labels(ref: IOData) -> list[str]:
+    return [f"input channel {c} ({ref.input_names[c]!r})" for c in range(ref.n_inputs)] + [
+        f"output channel {c} ({ref.output_names[c]!r})" for c in range(ref.n_outputs)]
+
+
+def check_independent(w: np.ndarray, *, labels: Sequence[str]) -> None:
+    """Raise :class:`DataError` naming a channel of ``w`` ``(N, c)`` (all flights' samples,
+    inputs then outputs) that is a linear combination of the channels before it at every
+    sample: a duplicated channel, an input copying an output, an output that is a multiple of
+    another. That is structural rank deficiency, which no identification resolves; the
+    dependence of outputs on past inputs and outputs (noise-free data) is not (see
+    :func:`sysid.factor.triangular_factor`)."""
+    if w.shape[0] < w.shape[1]:
+        return  # too few samples for any identification; the callers say so
+    rms = np.sqrt(np.mean(w * w, axis=0))
+    r = np.linalg.qr(w / rms, mode="r")
+    norms = np.sqrt(w.shape[0])
+    dep = np.flatnonzero(np.abs(np.diag(r)) <= DEPENDENT_TOL * norms)
+    if dep.size:
+        j = int(dep[0])
+        coef = np.linalg.lstsq(r[:j, :j], r[:j, j], rcond=None)[0] / rms[:j] * rms[j]
+        used = [labels[i] for i in np.flatnonzero(np.abs(coef) > 1e-8 * np.abs(coef).max())] \
+            if j else []
+        of = ", ".join(used) if used else "the channels before it"
+        raise DataError(f"{labels[j]} is a linear combination of {of} at every sample (the "
+                        "data are rank deficient: duplicated or linearly dependent channels); "
+                        "drop redundant channels")

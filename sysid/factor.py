@@ -25,12 +25,21 @@ the rows (e.g. ``[Z_p; y_0; u_0; y_1; ...]`` for IEM, ``[U_f; Z_p; Y_f]`` for PO
 eq. 3.16) is a symmetric permutation of G; its Cholesky factor ``L`` is the ``L`` of the LQ
 factorization ``W_perm = L Q^T`` (``Q`` orthonormal, never formed). If G is too ill conditioned
 for Cholesky (estimated ``cond(W) > 1e6``) the factor comes from a QR of ``W_perm^T`` instead.
+
+**Noise-free data.** With n states W has rank ``(p + f) m + n``: each output row beyond the
+state's reach is a function of the rows before it. Such rows (distance from the span of the
+earlier rows at most :data:`DEPENDENT_TOL` of their norm, judged on the QR factor of the data)
+get a zero diagonal and a zero column, and the methods' regressions (:func:`solve_right`) give
+them coefficient zero: exact for deterministic data, and nothing changes for noisy data, which
+has no such rows. What is not the deterministic case is refused in one line: channels
+dependent at lag 0 (:func:`sysid.data.check_independent`) and inputs that are not persistently
+exciting.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,15 +47,21 @@ import numpy as np
 import scipy.linalg
 
 from sysid.data import IOData, as_flights, block_hankel, check_excited, hankel_columns
-from sysid.errors import DataError, HorizonError
+from sysid.errors import DataError, HorizonError, ParameterError
 
-__all__ = ["DataProducts", "build_products", "given_products", "min_samples",
-           "triangular_factor"]
+__all__ = ["DataProducts", "build_products", "given_products", "grid_values", "min_samples",
+           "solve_right", "triangular_factor"]
 
 log = logging.getLogger(__name__)
 
 #: Largest estimated cond(W) accepted from the Cholesky route before falling back to QR.
 COND_LIMIT = 1e6
+#: A row of W closer than this (relative to its norm) to the span of the rows before it is
+#: taken as dependent on them: noise-free simulations leave ~1e-12, noise of 1e-10 is kept.
+DEPENDENT_TOL = 1e-10
+#: Smallest eigenvalue, relative to the largest, of the Gram of the input rows alone below
+#: which the inputs are not persistently exciting (exact dependence leaves ~1e-16).
+INPUT_RANK_TOL = 1e-13
 
 
 def min_samples(*, past: int, future: int, n_channels: int, n_flights: int = 1) -> int:
@@ -128,6 +143,16 @@ def check_horizons(*, past: int, future: int) -> None:
     for name, value, low in (("past", past, 1), ("future", future, 2)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
             raise HorizonError(f"{name}={value!r}; pass an integer horizon >= {low} (samples)")
+
+
+def grid_values(name: str, values: Iterable[object], *, low: int) -> list[int]:
+    """``values`` (pasts, futures or orders of a grid) as ints; :class:`ParameterError` naming
+    ``name`` and the first that is not an integer >= ``low`` (``4.5``, ``0``, ``True``)."""
+    out = list(values)
+    for v in out:
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < low:
+            raise ParameterError(f"{name} holds {v!r}; pass integers >= {low}")
+    return [int(v) for v in out]
 
 
 def _warn_if_offset(flights: Sequence[IOData], *, u_std: np.ndarray, y_std: np.ndarray,
@@ -214,12 +239,71 @@ def _qr_factor(products: DataProducts, order: np.ndarray) -> np.ndarray:
     return (signs[:, None] * r).T
 
 
+def solve_right(tri: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``Theta`` with ``Theta @ tri = rhs`` for a lower-triangular factor ``tri`` ``(s, s)``.
+
+    Rows of a factor from :func:`triangular_factor` that depend on earlier rows (deterministic
+    data) have a zero diagonal and a zero column: they add nothing to the span, so their
+    coefficients are set to zero and the rest solved exactly (a basic least-squares solution,
+    exact for noise-free data). Without such rows this is one triangular solve."""
+    keep = np.diag(tri) != 0.0
+    if keep.all():
+        return scipy.linalg.solve_triangular(tri, rhs.T, lower=True, trans="T",
+                                             check_finite=False).T
+    theta = np.zeros((rhs.shape[0], tri.shape[0]))
+    theta[:, keep] = scipy.linalg.solve_triangular(tri[np.ix_(keep, keep)], rhs[:, keep].T,
+                                                   lower=True, trans="T",
+                                                   check_finite=False).T
+    return theta
+
+
+def _check_inputs_exciting(products: DataProducts) -> None:
+    """Raise :class:`DataError` when the input rows of the Hankel matrix alone are dependent
+    (not persistently exciting over ``past + future`` samples): then dependent rows are a lack
+    of excitation, not the deterministic dynamics that :func:`triangular_factor` handles."""
+    blocks, c, m = products.past + products.future, products.n_channels, products.n_inputs
+    names = products.flights[0].input_names
+    for channels in [[j] for j in range(m)] + ([list(range(m))] if m > 1 else []):
+        rows = np.concatenate([np.asarray(channels) + b * c for b in range(blocks)])
+        ev = np.linalg.eigvalsh(products.gram[np.ix_(rows, rows)])
+        if ev[0] <= INPUT_RANK_TOL * ev[-1]:
+            which = (f"input channel {channels[0]} ({names[channels[0]]!r}) is" if
+                     len(channels) == 1 else "the inputs together are")
+            raise DataError(f"{which} not persistently exciting over past + future = {blocks} "
+                            "samples (the delayed copies are linearly dependent: a delayed copy "
+                            "of another input, noise-free feedback without a reference, or too "
+                            "few frequencies); excite more or shorten the horizons")
+
+
+def _drop_dependent(low: np.ndarray, dependent: np.ndarray) -> np.ndarray:
+    """``L`` re-triangularised without the rows ``dependent``: each of those rows lies in the
+    span of the rows before it, so it gets no basis direction of its own (a zero diagonal and
+    a zero column) and keeps its coordinates in the others'; what is left of it (below
+    :data:`DEPENDENT_TOL` of its norm) is dropped. ``W_perm = L Q^T`` still holds to that
+    tolerance, with ``Q`` orthonormal on the kept columns."""
+    keep = ~dependent
+    q2, r2 = scipy.linalg.qr(low[keep].T, mode="economic", check_finite=False)
+    q2 = q2 * np.where(np.diag(r2) < 0, -1.0, 1.0)
+    out = np.zeros_like(low)
+    out[:, keep] = low @ q2
+    return np.tril(out)
+
+
 def triangular_factor(products: DataProducts, order: np.ndarray, *,
                       method: str = "auto") -> np.ndarray:
     """``L`` (lower triangular, ``(r, r)``) of the LQ factorization of the rows ``order`` of W.
 
     ``method``: "cholesky" (Gram route), "qr" (explicit Hankel matrix, O(N r^2)), or "auto"
     (Cholesky, falling back to QR when the estimated ``cond(W)`` exceeds :data:`COND_LIMIT`).
+
+    Noise-free data are rank deficient in a known way: with ``n`` states, ``Y_p`` and ``Y_f``
+    are functions of the inputs and the state, so ``W`` has rank ``(p + f) m + n``, not
+    ``(p + f)(m + l)``. A row (of the QR route) whose distance from the span of the rows before
+    it is at most :data:`DEPENDENT_TOL` of its norm then gets a zero diagonal and a zero column
+    (:func:`_drop_dependent`), and the methods solve their regressions with
+    :func:`solve_right`, which is exact for such data. Channels dependent at lag 0 (duplicated
+    channels, an input copying an output) are refused before (:func:`sysid.data.check_excited`),
+    and inputs that are not persistently exciting are refused here.
     """
     if method not in ("auto", "cholesky", "qr"):
         raise ValueError(f"factorization={method!r}; use 'auto', 'cholesky' or 'qr'")
@@ -235,9 +319,11 @@ def triangular_factor(products: DataProducts, order: np.ndarray, *,
             return low
         log.info("Gram matrix ill conditioned (cond(W) ~ %.2g); using QR of the data", cond)
     low = _qr_factor(products, order)
-    diag = np.abs(np.diag(low))
-    if diag.min() <= 1e-12 * diag.max():
-        raise DataError("the data matrix is rank deficient (linearly dependent or duplicated "
-                        "channels, or too little excitation); drop redundant channels or "
-                        "excite more")
+    dependent = np.abs(np.diag(low)) <= DEPENDENT_TOL * np.linalg.norm(low, axis=1)
+    if dependent.any():
+        _check_inputs_exciting(products)
+        log.info("%d of %d rows of the data matrix depend on earlier ones (noise-free data: "
+                 "outputs determined by the inputs and the state); solved as deterministic",
+                 int(dependent.sum()), dependent.size)
+        low = _drop_dependent(low, dependent)
     return low

@@ -43,7 +43,8 @@ from sysid.realize import (
 )
 from sysid.stability import Stability, check_stability, stabilize
 
-__all__ = ["FOCUS_MODES", "Finished", "Focus", "check_focus", "finish", "stability_report"]
+__all__ = ["FOCUS_MODES", "Finished", "Focus", "check_flags", "check_focus", "finish",
+           "stability_report"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +56,14 @@ def check_focus(focus: object) -> None:
     """Raise :class:`ParameterError` unless ``focus`` is one of the modes."""
     if focus not in FOCUS_MODES:
         raise ParameterError(f"focus={focus!r}; use one of {FOCUS_MODES}")
+
+
+def check_flags(**flags: object) -> None:
+    """Raise :class:`ParameterError` for an on/off option that is not a bool: ``"no"`` and
+    ``"false"`` are true in Python, so they would switch the option on."""
+    for name, value in flags.items():
+        if not isinstance(value, bool | np.bool_):
+            raise ParameterError(f"{name}={value!r}; pass True or False")
 
 
 @dataclass(frozen=True, eq=False)

@@ -39,12 +39,11 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from sysid.data import IOData, block_hankel
 from sysid.errors import ParameterError
-from sysid.factor import DataProducts, given_products, triangular_factor
-from sysid.finish import Finished, Focus, check_focus, finish, stability_report
+from sysid.factor import DataProducts, given_products, solve_right, triangular_factor
+from sysid.finish import Finished, Focus, check_flags, check_focus, finish, stability_report
 from sysid.model import StateSpaceModel
 from sysid.pem import pem_refine
 from sysid.realize import (
@@ -109,8 +108,7 @@ def iem_signals(products: DataProducts, *, feedthrough: bool, factorization: str
         gamma_lp = np.empty((f * ell, pc))
         for i, yp in enumerate(y_pos):
             s = yp[0]
-            theta = scipy.linalg.solve_triangular(coords[:s, :s], low[yp, :s].T, lower=True,
-                                                  trans="T", check_finite=False).T
+            theta = solve_right(coords[:s, :s], low[yp, :s])
             gamma_lp[i * ell:(i + 1) * ell] = theta[:, :pc]
         if factorization == "auto":
             products.cache[key] = (low, gamma_lp)
@@ -251,6 +249,8 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         raise ParameterError(f"variant={variant!r}; use one of {tuple(_VARIANTS)}")
     check_focus(focus)
     check_stability(stability)
+    check_flags(feedthrough=feedthrough, scale=scale, direct=direct, pem=pem,
+                **({} if refine is None else {"refine": refine}))
     preset = _VARIANTS[variant]
     bk_method = preset["bk_method"] if bk_method is None else bk_method
     weighting = preset["weighting"] if weighting is None else weighting

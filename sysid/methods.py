@@ -51,6 +51,9 @@ def _check_literals(obj: object) -> None:
         types = tuple(a for a in allowed if isinstance(a, type))
         if value in literals or (types and isinstance(value, types)):
             continue
+        if bool in types:
+            raise ParameterError(f"{type(obj).__name__}.{f.name}={value!r}; pass True or False"
+                                 + (" (or None)" if type(None) in types else ""))
         raise ParameterError(f"{type(obj).__name__}.{f.name}={value!r}; use one of "
                              f"{[a if not isinstance(a, type) else a.__name__ for a in allowed]}")
 

@@ -17,12 +17,11 @@ from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
-import scipy.linalg
 
 from sysid.data import IOData
 from sysid.errors import ParameterError
-from sysid.factor import DataProducts, given_products, triangular_factor
-from sysid.finish import Finished, Focus, check_focus, finish, stability_report
+from sysid.factor import DataProducts, given_products, solve_right, triangular_factor
+from sysid.finish import Finished, Focus, check_flags, check_focus, finish, stability_report
 from sysid.model import StateSpaceModel
 from sysid.pem import pem_refine
 from sysid.realize import (
@@ -79,8 +78,7 @@ def _moesp_signals(products: DataProducts, *, factorization: str
     fm = uf.size
     l_yf = low[fm + pc:]
     l_zz = low[fm:fm + pc, fm:fm + pc]
-    gamma_lp = scipy.linalg.solve_triangular(l_zz, l_yf[:, fm:fm + pc].T, lower=True,
-                                             trans="T", check_finite=False).T
+    gamma_lp = solve_right(l_zz, l_yf[:, fm:fm + pc])
 
     def rows(idx: np.ndarray) -> np.ndarray:
         return low[pos[idx]]
@@ -123,6 +121,7 @@ def po_moesp(data: IOData | Sequence[IOData], *, order: int, past: int, future: 
         raise ParameterError(f"variant={variant!r}; use 'standard' or 'thesis'")
     check_focus(focus)
     check_stability(stability)
+    check_flags(feedthrough=feedthrough, scale=scale, pem=pem)
     products = given_products(data, products=products, past=past, future=future, scale=scale)
     m, ell = products.n_inputs, products.n_outputs
     check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)

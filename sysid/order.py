@@ -13,6 +13,7 @@ import numpy as np
 from sysid.data import IOData, as_flights
 from sysid.errors import ParameterError
 from sysid.factor import build_products
+from sysid.finish import check_flags
 from sysid.kalman import stable_predictor
 from sysid.methods import DEFAULT_METHOD, Method, get_method
 from sysid.sweep import quiet_models
@@ -36,6 +37,7 @@ def singular_values(data: IOData | Sequence[IOData], *, past: int, future: int,
     The same values are stored in ``model.provenance["singular_values"]``.
     """
     meth = get_method(method)
+    check_flags(scale=scale, **({} if feedthrough is None else {"feedthrough": feedthrough}))
     options = meth.sv_options(feedthrough=feedthrough, weighting=weighting)
     products = build_products(data, past=past, future=future, scale=scale)
     return meth.singular_values(products, options=options)
@@ -121,6 +123,8 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
 #: Smallest singular-value gap, decades (a factor of 2), that :func:`suggest_order` takes
 #: as a clear cut between signal and noise.
 GAP_MIN_DECADES = 0.3
+#: A singular value at most this times the largest is zero (as in sysid.realize).
+RANK_TOL = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,15 +163,28 @@ def suggest_order(sv: np.ndarray, ic: InformationCriteria, *, show: int | None =
     if max_order is not None:
         count = min(count, max_order + 1)
     head = sv[:count]
+    # values after s_max_order that are zero: the rank cap of the horizons (p (m + l) rows
+    # of the past), not a drop in the data; that step is no gap
+    capped = (max_order is not None and head.size == max_order + 1
+              and head[-1] <= RANK_TOL * head[0])
+    if capped:
+        head = head[:-1]
     with np.errstate(divide="ignore", invalid="ignore"):
         gaps = np.log10(head[:-1] / np.maximum(head[1:], 1e-300))
     gap_order = int(np.argmax(gaps)) + 1 if gaps.size else 1
     decades = float(gaps[gap_order - 1]) if gaps.size else 0.0
-    clear = gap_order >= 2 and decades >= min_gap
+    clear = gap_order >= 2 and decades >= min_gap and not capped
     by_rule = {"gap": gap_order, **{k: int(v) for k, v in ic.chosen.items()}}
     bic = by_rule["bic"]
     edge = (" (the largest order scored: the best may lie beyond)"
             if bic == int(ic.orders[-1]) and ic.orders.size > 1 else "")
+    if capped:
+        why = (f"the singular values after s_{max_order} are zero because these horizons "
+               f"allow at most {max_order} (the rank cap), not because of the data: the order "
+               "may be higher; use a longer past")
+        return OrderSuggestion(order=bic, rule="bic", by_rule=by_rule, gaps=gaps,
+                               gap_decades=decades, gap_clear=False,
+                               reason=f"BIC{edge}; gap rule not used: {why}")
     if clear:
         reason = (f"the singular values drop by {decades:.2f} decades after s_{gap_order}"
                   + ("" if bic == gap_order else f"; BIC picks {bic}{edge}"))

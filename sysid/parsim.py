@@ -32,8 +32,8 @@ import numpy as np
 
 from sysid.data import IOData
 from sysid.errors import OrderError
-from sysid.factor import DataProducts, given_products
-from sysid.finish import Focus, check_focus
+from sysid.factor import DataProducts, given_products, triangular_factor
+from sysid.finish import Focus, check_flags, check_focus
 from sysid.model import StateSpaceModel
 from sysid.output_error import output_error_bd
 from sysid.pem import pem_refine
@@ -43,10 +43,35 @@ from sysid.stability import Stability, check_stability, stabilize
 __all__ = ["parsim_k", "parsim_k_singular_values"]
 
 
-def _solve(gram: np.ndarray, cols: np.ndarray, lhs: np.ndarray) -> np.ndarray:
+def _dependent(products: DataProducts) -> np.ndarray:
+    """Which of the rows ``[Z_p; u_0; y_0]`` (the first ``p + 1`` blocks, canonical order)
+    depend on the rows before them: the zero diagonal of their LQ factor
+    (:func:`sysid.factor.triangular_factor`, judged on the data, not on the Gram, whose
+    rounding hides the difference between noise-free data and a nearly collinear past)."""
+    key = ("parsim-dependent",)
+    if key not in products.cache:
+        rows = np.arange((products.past + 1) * products.n_channels)
+        products.cache[key] = np.diag(triangular_factor(products, rows)) == 0.0
+    return products.cache[key]
+
+
+def _solve(gram: np.ndarray, cols: np.ndarray, lhs: np.ndarray, dependent: np.ndarray
+           ) -> np.ndarray:
     """``lhs @ pinv-solve(G[cols, cols])``: the least-squares coefficients on the rows
-    ``cols`` of the signal whose cross-Gram with them is ``lhs``."""
-    return np.linalg.lstsq(gram[np.ix_(cols, cols)], lhs.T, rcond=None)[0].T
+    ``cols`` of the signal whose cross-Gram with them is ``lhs``.
+
+    ``dependent`` marks rows of ``cols`` that depend on the rows before them (noise-free data:
+    y_0 is a function of Z_p and u_0). They get coefficient zero rather than a share of the
+    minimum-norm solution: otherwise the output coefficients G_i would be arbitrary, and with
+    them the predictor A_K. With y_0 dropped the predictor is the deterministic one, A_K = A
+    and K = 0, which is exact."""
+    g = gram[np.ix_(cols, cols)]
+    if not dependent.any():
+        return np.linalg.lstsq(g, lhs.T, rcond=None)[0].T
+    keep = ~dependent
+    theta = np.zeros((lhs.shape[0], cols.size))
+    theta[:, keep] = np.linalg.lstsq(g[np.ix_(keep, keep)], lhs[:, keep].T, rcond=None)[0].T
+    return theta
 
 
 def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
@@ -59,7 +84,8 @@ def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
     u = [products.rows(block=p + i, kind="u") for i in range(f)]
     y = [products.rows(block=p + i, kind="y") for i in range(f)]
     first = np.concatenate([z, u[0]])
-    theta = _solve(g, first, g[np.ix_(y[0], first)])
+    dependent = _dependent(products)  # over r = [Z_p; u_0; y_0]; `first` is its head
+    theta = _solve(g, first, g[np.ix_(y[0], first)], dependent[:first.size])
     gammas, h, gk = [theta[:, :pc]], [theta[:, pc:]], [None]
     r = np.concatenate([z, u[0], y[0]])
     m = products.n_inputs
@@ -67,7 +93,7 @@ def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
         cross = g[np.ix_(y[i], r)] - h[0] @ g[np.ix_(u[i], r)]
         for j in range(1, i):
             cross = cross - h[j] @ g[np.ix_(u[i - j], r)] - gk[j] @ g[np.ix_(y[i - j], r)]
-        theta = _solve(g, r, cross)
+        theta = _solve(g, r, cross, dependent)
         gammas.append(theta[:, :pc])
         h.append(theta[:, pc:pc + m])
         gk.append(theta[:, pc + m:])
@@ -100,6 +126,7 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     """
     check_focus(focus)
     check_stability(stability)
+    check_flags(feedthrough=feedthrough, scale=scale, pem=pem)
     products = given_products(data, products=products, past=past, future=future, scale=scale)
     m, ell = products.n_inputs, products.n_outputs
     check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sysid.errors import DataError
+from sysid.errors import DataError, OrderError
 from sysid.grid import pair_flights
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
@@ -39,7 +39,9 @@ def final_model(p: Plan, best: SweepRow, warnings: list[str], *, method: Method,
         with _held_back("sysid.stability") as held:  # said only of the model kept
             model = method.identify(final, order=best.order, past=best.past,
                                     future=best.future, options=options)
-    except DataError:  # the full data cannot hold what the grid's common columns could
+    except (DataError, OrderError) as exc:  # all the data cannot hold what the grid's could
+        warnings.append(f"identified again on all the data it failed ({exc}): kept the model "
+                        f"the sweep scored ({_share(p)})")
         return _scored_model(p, best, method=method, options=options)
     kept = _stable_choice(p, best, model, warnings, method=method, options=options)
     for record in held if kept is model else ():

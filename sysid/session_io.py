@@ -258,6 +258,10 @@ def load_experiments(
         log.info("%s: grid dt = %g s, the logged period", session.path, dt)
     offset = clock_offset(session, [c.stream for c in chans])
     streams = [_stream(session, c) for c in chans]
+    common = min(s.t[-1] for s in streams) - max(s.t[0] for s in streams)
+    if common < dt:  # before the anti-alias filter, whose design fails on such a step
+        raise DataError(f"{session.path}: dt={dt:g} s is longer than the {common:.3g} s where "
+                        "every channel has data; pass a smaller dt")
     fast = sorted({c.stream for c in chans if 0 < periods[c.stream] * _DECIMATE_FROM < dt})
     if fast:
         log.warning("%s: %s logged at %s Hz, decimated to the %g Hz grid with an anti-alias "

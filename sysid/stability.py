@@ -10,8 +10,10 @@ The modes (``stability=``):
   ``|z| = MARGINAL_RADIUS`` (a time constant of 1000 samples: an integrator over any
   validation window). Elsewhere (an oscillation, or near ``z = -1``) they are a lightly damped
   mode estimated just outside and are reflected as ``"enforce"`` does: at ``MARGINAL_RADIUS``
-  they would ring undamped through any simulation. Poles further out are a genuinely unstable
-  plant (closed-loop identification exists for those) and are kept, with a warning.
+  they would ring undamped through any simulation. Poles further out are kept, with a warning
+  that does not guess the cause: an unstable plant (closed-loop identification exists for
+  those) or a model with more states than the data support (an over-fitted order puts spare
+  poles anywhere, e.g. 1.99 and 1.18 at order 18 on a 4-state system).
 * ``"enforce"``: every pole strictly inside, as MATLAB's ``EnforceStability``: a pole outside
   is reflected, :math:`z \\to 1/\\bar z`, and capped at ``MARGINAL_RADIUS``.
 * ``"free"``: A as the subspace step estimated it.
@@ -99,9 +101,10 @@ def stabilize(a: np.ndarray, *, mode: Stability
             pole_up = complex(pole.real, abs(pole.imag))
             moved.append((pole_up, pole_up * scale))
         elif radius > 1.0:
-            log.warning("pole at |z| = %.3f kept: far outside the unit circle, a genuinely "
-                        "unstable plant rather than noise around an integrator "
-                        "(stability='enforce' moves it inside)", radius)
+            log.warning("pole at |z| = %.3f kept: too far outside the unit circle to be noise "
+                        "around an integrator; either the plant is unstable or the model has "
+                        "more states than the data support (a lower order may avoid it; "
+                        "stability='enforce' moves it inside)", radius)
         i += size
     if not moved:
         return a, []

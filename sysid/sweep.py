@@ -21,11 +21,10 @@ models, take the best score :math:`S^*`, keep those within one standard error of
 :math:`S \\ge S^* - \\max(\\widehat{\\mathrm{se}}(S^*),\\ 0.1)`, the standard error from the
 score's blocks of validation data (the one-standard-error rule, :mod:`sysid.parsimony`), and
 return the one of smallest order (then best score); ``best(tol=...)`` keeps those within a
-fixed ``tol`` points instead.
-Orders above the true one fit the same data about as well, so "highest fit" alone would pick
-an over-parameterised model at random. :func:`sysid.auto.select` (what ``sysid identify`` and
-``sysid sweep`` run) adds the held-out split, the default grid, the choice of focus and the
-final identification on all the data.
+fixed ``tol`` points instead. Orders above the true one fit the same data about as well, so
+"highest fit" alone would pick an over-parameterised model at random. :func:`sysid.auto.select`
+(what ``sysid identify`` and ``sysid sweep`` run) adds the held-out split, the default grid,
+the choice of focus and the final identification on all the data.
 """
 
 from __future__ import annotations
@@ -47,6 +46,7 @@ import threadpoolctl
 
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, ParameterError, SysIdError
+from sysid.factor import grid_values
 from sysid.grid import HorizonGrid, build_grid, grid_products
 from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
@@ -298,9 +298,9 @@ def sweep(
     opts = options if options is not None else meth.options(**option_values)
     flights = as_flights(data)
     val = flights if validation is None else as_flights(validation)
-    pasts = sorted({int(p) for p in pasts})
-    futures = sorted({int(f) for f in futures})
-    orders = [int(n) for n in orders]
+    pasts = sorted(set(grid_values("pasts", pasts, low=1)))
+    futures = sorted(set(grid_values("futures", futures, low=2)))
+    orders = grid_values("orders", orders, low=1)
     if not pasts or not futures or not orders:
         raise DataError("empty sweep grid; give at least one past, future and order")
     grid = build_grid(flights, past_max=pasts[-1], future_max=futures[-1])

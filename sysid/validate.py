@@ -43,6 +43,7 @@ import logging
 import math
 import warnings
 from collections.abc import Sequence
+from numbers import Real
 
 import numpy as np
 
@@ -362,6 +363,8 @@ def compare(
                         "resample the data to the model's rate (sysid.zoh_resample)")
     win = None
     if window is not None:
+        if isinstance(window, bool) or not isinstance(window, Real) or not 0 < window < np.inf:
+            raise HorizonError(f"window={window!r}; pass the window in seconds (finite, > 0)")
         win = round(window / dt)
         if win < 1 or win * C.shape[0] < A.shape[0]:
             raise HorizonError(

@@ -203,6 +203,7 @@ def test_parse_grid() -> None:
     (["identify", "{f0}", "--outputs", "Gyro"], ["(did you mean 'gyro'?)",
                                                  "choose the outputs with --outputs"]),
     (["identify", "{f0}", "--order", "400", "--past", "5", "--future", "3"], ["order"]),
+    (["identify", "{f0}", "--dt", "1e9"], ["dt=1e+09 s is longer than the"]),
     (["identify", "{f0}", "--window", "a:b"], ["--window"]),
     (["sweep", "{f0}", "--pasts", "80:20"], ["--pasts"]),
     (["compare", "{missing}", "{f0}"], ["does not exist"]),

@@ -108,3 +108,46 @@ def test_check_excited_returns_the_spread_over_all_flights():
     assert u_std.shape == (1,) and y_std.shape == (1,)
     assert u_std[0] == pytest.approx(2.0, rel=0.03) and y_std[0] == pytest.approx(0.5, rel=0.03)
 
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-6, 1.0, 1e6, 1e9])
+def test_constancy_is_decided_on_each_channels_own_scale(scale):
+    """The units of one channel never change the verdict on another: an input with std 1e-6
+    next to an output in 1e6 units is a signal, and a constant (with rounding noise on its
+    own scale) is constant whatever the others' units."""
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(500, 2)) * [1e-6, 1.0]
+    y = rng.normal(size=(500, 2)) * [1.0, scale]
+    u_std, y_std = check_excited([sysid.IOData(u=u, y=y, dt=0.01)])
+    assert u_std[0] == pytest.approx(1e-6, rel=0.1) and y_std[1] == pytest.approx(scale, rel=0.1)
+    flat = u.copy()
+    flat[:, 1] = 1500.0 * (1.0 + 1e-15 * rng.normal(size=500))  # constant, last-bit jitter
+    with pytest.raises(DataError, match=r"input channel 1 \('u1'\) is constant"):
+        check_excited([sysid.IOData(u=flat, y=y, dt=0.01)])
+
+
+def test_a_switching_input_is_not_mistaken_for_the_rounding_left_by_detrending():
+    """A 0/1 input takes two values spaced by a power of two, as what linear detrending leaves
+    of a constant does; only the latter is far below every other channel."""
+    rng = np.random.default_rng(5)
+    u = np.column_stack([rng.integers(0, 2, 600).astype(float), rng.normal(size=600)])
+    check_excited([sysid.IOData(u=u, y=rng.normal(size=(600, 1)), dt=0.01)])
+    u[:, 0] *= 2.0 ** -60  # the same pattern at the rounding level of the others
+    with pytest.raises(DataError, match=r"input channel 0 .* is constant"):
+        check_excited([sysid.IOData(u=u, y=rng.normal(size=(600, 1)), dt=0.01)])
+
+
+@pytest.mark.parametrize(("make", "words"), [
+    (lambda u, y: (np.column_stack([u, 0.5 * u[:, 0] - 2.0 * u[:, 1]]), y),
+     ["input channel 2 ('u2') is a linear combination of input channel 0 ('u0'), input "
+      "channel 1 ('u1')", "drop redundant channels"]),
+    (lambda u, y: (u, np.column_stack([y[:, 0], u[:, 1]])),
+     ["output channel 1 ('y1')", "input channel 1 ('u1')", "rank deficient"]),
+])
+def test_channels_dependent_at_every_sample_are_named(make, words):
+    rng = np.random.default_rng(6)
+    u, y = make(rng.normal(size=(400, 2)), rng.normal(size=(400, 2)))
+    with pytest.raises(DataError) as err:
+        check_excited([sysid.IOData(u=u, y=y, dt=0.01)])
+    msg = str(err.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg

@@ -98,3 +98,22 @@ def test_registry_knows_each_methods_order_limit_and_sv_options() -> None:
     assert get_method("iem").sv_options(weighting="none").weighting == "none"
     assert get_method("po-moesp").sv_options(weighting="none") == MOESPOptions()
     assert get_method("po-moesp").sv_options(feedthrough=False).feedthrough is False
+
+
+@pytest.mark.parametrize(("call", "word"), [
+    (lambda d: sysid.iem(d, order=2, past=5, future=5, feedthrough="no"), "feedthrough='no'"),
+    (lambda d: sysid.iem(d, order=2, past=5, future=5, refine="no"), "refine='no'"),
+    (lambda d: sysid.iem(d, order=2, past=5, future=5, pem="false"), "pem='false'"),
+    (lambda d: sysid.po_moesp(d, order=2, past=5, future=5, feedthrough="false"),
+     "feedthrough='false'"),
+    (lambda d: sysid.parsim_k(d, order=2, past=5, future=5, scale=1), "scale=1"),
+    (lambda d: sysid.singular_values(d, past=5, future=5, feedthrough="no"), "feedthrough='no'"),
+    (lambda d: get_method("iem").options(refine="no"), "refine='no'"),
+])
+def test_on_off_options_must_be_bools(data, call, word) -> None:
+    """"no" and "false" are true in Python: given to a boolean option they would switch it on
+    (feedthrough="no" estimated D, refine="no" refined). Refused in one line naming it."""
+    with pytest.raises(ParameterError) as err:
+        call(data)
+    msg = str(err.value)
+    assert "\n" not in msg and word in msg and "True or False" in msg, msg

@@ -1,8 +1,8 @@
 """sysid/moesp.py on (all but) noise-free open-loop data: the poles, and Γ_f L_p of numerical rank
 n whose projection of the past spans the true Γ_f.
 
-Exactly noise-free data make the joint Hankel matrix rank deficient (Y_f is a function of Z_p and
-U_f), which the factor rejects by design; a 1e-9 output noise keeps it full rank."""
+A 1e-9 output noise keeps the joint Hankel matrix full rank here; exactly noise-free data (Y_f a
+function of Z_p and U_f) are identified exactly too: tests/sysid/test_noise_free.py."""
 from __future__ import annotations
 
 import numpy as np

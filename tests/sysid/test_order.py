@@ -82,3 +82,23 @@ def test_cli_scores_and_suggests_only_orders_the_method_identifies(session, capl
     text = " ".join(res.stdout.split())
     assert "suggested order: 4, by the singular values drop" in text
     assert "--method iem --past 20 --future 10 --order 4" in text
+
+
+def test_the_rank_cap_of_a_short_past_is_not_a_gap() -> None:
+    """With past = 1 and m + l = 4 channels the matrix has rank 4 whatever the data: the values
+    after s_4 are zero. That drop (about 300 decades) is the cap, not the data's order."""
+    import sysid
+    from sysid.order import information_criteria
+    from tests.sysid.systems import open_loop, random_stable_system
+
+    rng = np.random.default_rng(12)
+    system = random_stable_system(n_states=6, n_inputs=2, n_outputs=2, rng=rng)
+    data = open_loop(system, n_samples=1500, rng=rng, noise_std=0.1).data
+    sv = sysid.singular_values(data, past=1, future=10)
+    assert sv[4] <= 1e-12 * sv[0]  # the cap
+    ic = information_criteria(data, orders=range(1, 5), past=1, future=10)
+    hint = suggest_order(sv, ic, max_order=4)
+    assert hint.rule == "bic" and not hint.gap_clear and hint.gaps.size == 3
+    assert hint.gap_decades < 5 and hint.by_rule["gap"] < 4
+    assert "rank cap" in hint.reason and "longer past" in hint.reason
+    assert "\n" not in hint.reason

@@ -88,3 +88,17 @@ def test_unknown_modes_are_refused_in_one_line(mode):
         check_stability(mode)
     with pytest.raises(ParameterError):
         stabilize(np.eye(2), mode=mode)
+
+
+def test_the_warning_for_a_pole_kept_outside_does_not_guess_its_cause(caplog):
+    """Order 18 on a 4-state system put poles at 1.99 and 1.18: an over-fitted model, not an
+    unstable plant. The warning names both causes and both remedies."""
+    with caplog.at_level(logging.WARNING, logger="sysid.stability"):
+        stabilize(np.diag([1.99, 1.18, 0.5]), mode="auto")
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 2 and messages[0].startswith("pole at |z| = 1.990 kept")
+    for msg in messages:
+        assert "genuinely" not in msg and "\n" not in msg
+        for words in ("unstable", "more states than the data support", "lower order",
+                      "stability='enforce'"):
+            assert words in msg, msg

@@ -140,3 +140,18 @@ def test_interrupted_parallel_sweep_stops_its_workers(pbsid_data: tuple[IOData, 
     assert time.perf_counter() - t0 < 20
     time.sleep(0.2)
     assert not [p for p in multiprocessing.active_children() if p.is_alive()]
+
+
+@pytest.mark.parametrize(("grid", "words"), [
+    ({"orders": [4.5]}, ["orders", "4.5"]), ({"orders": [0]}, ["orders", "0"]),
+    ({"pasts": [0]}, ["pasts", "0"]), ({"futures": [1]}, ["futures", "1", ">= 2"]),
+    ({"pasts": [2.0]}, ["pasts", "2.0"]), ({"orders": [True]}, ["orders", "True"]),
+])
+def test_grid_values_must_be_positive_integers(pbsid_data, grid, words) -> None:
+    """As the command line's --pasts/--futures/--orders: nothing is silently rounded or run."""
+    ident, _ = pbsid_data
+    kwargs = {"pasts": [5], "futures": [4], "orders": [4], **grid}
+    with pytest.raises(ParameterError) as err:
+        sweep(ident, **kwargs)
+    msg = str(err.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg

@@ -238,3 +238,13 @@ def test_fits_do_not_depend_on_the_units_of_a_channel(mode) -> None:
     again = compare(scaled, IOData(u=u, y=y * units, dt=system.dt), **mode)
     np.testing.assert_allclose(again.fit, base.fit, atol=1e-6)
     assert np.all(base.fit > 50.0), base.fit  # a useful comparison, not three failures alike
+
+
+@pytest.mark.parametrize("window", [float("nan"), float("inf"), -2.0, "2", True])
+def test_compare_refuses_a_window_that_is_not_a_positive_number_of_seconds(window) -> None:
+    system = pbsid_example1()
+    data = _noise_free(system, n=100, x0=np.zeros(4), seed=11)
+    with pytest.raises(HorizonError) as err:
+        compare(system, data, window=window)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"window={window!r}") and "seconds" in msg
