@@ -129,14 +129,16 @@ def _log_unexpected(group: str, exc: Exception) -> None:
 
 def identify_group(groups: list[list[IOData]], *, method: Method, options: Options,
                    grid: dict[str, list[int]], workers: int = 1,
-                   choose_focus: bool = False) -> dict[str, Any]:
+                   choose_focus: bool = False,
+                   choose_feedthrough: bool | Literal["open-loop"] = False) -> dict[str, Any]:
     """Select and identify one group's model (:func:`sysid.auto.select`, with the focus
-    chosen too when ``choose_focus``, as ``sysid identify`` does); runs anywhere."""
+    chosen too when ``choose_focus`` and a direct term tried as ``choose_feedthrough`` says,
+    as ``sysid identify`` does); runs anywhere."""
     from sysid.sweep import one_blas_thread
 
     with one_blas_thread():  # the same bits locally and on a Dask worker (sysid.sweep)
         sel = select(groups, method=method, options=options, workers=workers,
-                     choose_focus=choose_focus, **grid)
+                     choose_focus=choose_focus, choose_feedthrough=choose_feedthrough, **grid)
     return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
             "order": sel.best.order, "focus": sel.model.provenance.get("focus"),
             "fit": [float(f) for f in sel.best.fit], "score": sel.best.score,
@@ -174,7 +176,7 @@ def run_batch(
     load: Callable[[list[Path]], list[list[IOData]]], method: Method, options: Options,
     grid: dict[str, list[int]], workers: int = 1, client: Any | None = None,
     rows: list[BatchRow] | None = None, progress: Callable[[int, int], None] | None = None,
-    choose_focus: bool = False,
+    choose_focus: bool = False, choose_feedthrough: bool | Literal["open-loop"] = False,
 ) -> list[BatchRow]:
     """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
     group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
@@ -220,10 +222,11 @@ def run_batch(
                 if client is None:
                     outcome: dict[str, Any] | BaseException = identify_group(
                         data, method=method, options=options, grid=grid, workers=workers,
-                        choose_focus=choose_focus)
+                        choose_focus=choose_focus, choose_feedthrough=choose_feedthrough)
                 else:
                     fut = client.submit(identify_group, data, method=method, options=options,
-                                        grid=grid, choose_focus=choose_focus, pure=False)
+                                        grid=grid, choose_focus=choose_focus,
+                                        choose_feedthrough=choose_feedthrough, pure=False)
                     futures[fut] = name
                     pending[name] = (row, t0)
                     continue

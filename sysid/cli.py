@@ -428,7 +428,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
                              client=client, progress=update,
-                             choose_focus=focus is None)
+                             choose_focus=focus is None, choose_feedthrough="open-loop")
     except KeyboardInterrupt:
         n = len(json.loads(summary.read_text())) if summary.exists() else 0
         click.echo(f"interrupted: {n} finished group(s) kept in {summary} and "

@@ -135,3 +135,22 @@ def test_an_unexpected_failure_is_a_row_and_the_batch_goes_on(sessions, tmp_path
     assert rows["a1"]["error"] is None and (out / "a1.h5").exists()
     assert rows["b0"]["error"] is None and (out / "b0.h5").exists()
     assert any(r.exc_info for r in caplog.records)
+
+
+def test_a_group_of_open_loop_data_gets_a_direct_term_as_identify_does():
+    """`sysid batch` passes choose_feedthrough="open-loop" as `sysid identify` does: a plant
+    with a direct term, logged in open loop, keeps one."""
+    from sysid.methods import get_method
+    from tests.sysid.systems import random_stable_system
+
+    system = random_stable_system(n_states=2, n_inputs=1, n_outputs=1, feedthrough=True,
+                                  rng=np.random.default_rng(8))
+    rng = np.random.default_rng(9)
+    u = rng.standard_normal((1500, 1))
+    y = system.simulate(u)
+    data = sysid.IOData(u=u, y=y + 0.05 * y.std() * rng.standard_normal(y.shape), dt=0.02)
+    iem = get_method("iem")
+    out = sysid.batch.identify_group([[data]], method=iem, options=iem.options(), grid={},
+                                     choose_focus=True, choose_feedthrough="open-loop")
+    assert out["model"].provenance["feedthrough"] is True
+    np.testing.assert_allclose(out["model"].D, system.D, atol=0.05)
