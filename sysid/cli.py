@@ -17,91 +17,39 @@ from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
-from rich.console import Console
 
 from cfcommon.cli import FiniteFloat, check_output, output_table
 from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
 from sysid.cli_compare import compare_cmd, resid
+from sysid.cli_identify import identify
+from sysid.cli_options import (
+    FOCUS_OPTION,
+    FORCE_OPTION,
+    METHOD_OPTION,
+    STABILITY_OPTION,
+    method_options,
+)
 from sysid.cli_order import order_command
 from sysid.cli_progress import progress
 from sysid.cli_support import (
     JSON_OPTION,
-    MODEL_SUFFIXES,
     RRD_OPTION,
     Group,
-    check_rrd,
     console,
-    fit_table,
-    fits_json,
-    load_flights,
     load_groups,
     parse_grid,
     parse_window,
     pole_table,
-    poles_rich_table,
     session_options,
-    write_rrd,
 )
-from sysid.cli_sweep import choose, print_selection, selection_json, sweep_command
+from sysid.cli_sweep import sweep_command
 from sysid.errors import DataError, ParameterError
-from sysid.finish import FOCUS_MODES
-from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.model import load_model
 from sysid.session_io import read_metadata
-from sysid.stability import STABILITY_MODES
-from sysid.validate import compare, simulation_window
 
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
-
-
-class MethodChoice(click.Choice):
-    """``--method``: a name of the registry (:data:`sysid.methods.METHODS`; ``po_moesp`` as
-    the function is named works too). An unknown name is :func:`sysid.methods.get_method`'s
-    one line, which lists the registered names."""
-
-    name = "method"
-
-    def __init__(self) -> None:
-        super().__init__(sorted(METHODS))
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
-                ) -> str:
-        try:
-            return get_method(value).name
-        except ParameterError as exc:
-            self.fail(str(exc), param, ctx)
-
-
-METHOD_OPTION = click.option(
-    "--method", type=MethodChoice(), default=DEFAULT_METHOD, show_default=True,
-    help="; ".join(f"{name}: {m.description}" for name, m in METHODS.items()) + ".")
-FOCUS_OPTION = click.option(
-    "--focus", type=click.Choice(list(FOCUS_MODES)), default=None,
-    help="prediction: closed-loop-consistent one-step predictor (default for iem); "
-         "simulation: B, D, x0 by output error (default for po-moesp; biased in closed loop).")
-STABILITY_OPTION = click.option(
-    "--stability", type=click.Choice(list(STABILITY_MODES)), default="auto", show_default=True,
-    help="auto: poles just outside the unit circle (|z| <= 1.1) moved inside: to 0.999 near "
-         "z = 1 (integrators), reflected elsewhere (oscillations); enforce: all strictly "
-         "inside; free: as estimated.")
-FORCE_OPTION = click.option("--force", is_flag=True,
-                            help="Replace --out if it exists (never an input file).")
-
-
-def _method(name: str, *, feedthrough: bool | None = None, focus: str | None = None,
-            stability: str) -> tuple[Method, Options]:
-    """The registered method ``name`` and its options as given on the command line (the
-    method's defaults for the others)."""
-    meth = get_method(name)
-    values: dict[str, Any] = {"stability": stability}
-    if feedthrough is not None:
-        values["feedthrough"] = feedthrough
-    if focus is not None:
-        values["focus"] = focus
-    return meth, meth.options(**values)
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -121,139 +69,7 @@ def main(verbose: int) -> None:
 
 main.add_command(compare_cmd)
 main.add_command(resid)
-
-@main.command()
-@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
-@METHOD_OPTION
-@click.option("--order", type=click.IntRange(min=1),
-              help="Model order (default: chosen by validation).")
-@click.option("--past", type=click.IntRange(min=1),
-              help="Past horizon, samples (default: chosen by validation).")
-@click.option("--future", type=click.IntRange(min=2),
-              help="Future horizon, samples (default: chosen by validation).")
-@click.option("--feedthrough/--no-feedthrough", default=None,
-              help="Estimate D (default: no for iem, yes for po-moesp and parsim-k).")
-@click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
-              help="Score the model on this session (1-step and windowed simulation); "
-                   "repeatable.")
-@click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
-              help="Worker processes for the choice of horizons and order.")
-@FOCUS_OPTION
-@STABILITY_OPTION
-@session_options
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              help="Save the model (.h5, .json or .mat); an existing file needs --force.")
-@FORCE_OPTION
-@JSON_OPTION
-@RRD_OPTION
-def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: int | None,
-             future: int | None, feedthrough: bool | None, validate: tuple[Path, ...],
-             workers: int, focus: str | None, stability: str, out: Path | None, force: bool,
-             as_json: bool, rrd: Path | None, **opts: Any) -> None:
-    """Identify one model from one or more sessions (each its own experiment).
-
-    Without --past/--future/--order they are chosen by validation on held-out data (the
-    last session when several are given, else the last 30 % of each experiment; see
-    docs/sysid.md): the best candidates are listed with their fits, and a choice at the edge
-    of the grid, or held-out data too few to rank the models, is flagged. Then prints the
-    poles, whether the model and its predictor A - KC are stable, and the fit on the
-    identification data (windowed simulation and one-step prediction), and on each --validate
-    session.
-
-    \b
-    Examples:
-      sysid identify flight.h5 --out model.h5
-      sysid identify flight.h5 --order 8 --past 60 --future 17
-      sysid identify log00.h5 --validate log01.h5 \\
-        --inputs controller.cmd_roll,controller.cmd_pitch,controller.cmd_yaw \\
-        --outputs controller.r_roll,controller.r_pitch,controller.r_yaw
-    """
-    if out is not None:
-        check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
-                     overwrite=force, force_flag="--force")
-    check_rrd(rrd, inputs=(*sessions, *validate))
-    meth, options = _method(method, feedthrough=feedthrough, focus=focus, stability=stability)
-    groups = load_groups(sessions, opts=opts)
-    flights = [e for g in groups for e in g]
-    selection = None
-    if order is not None and past is not None and future is not None:
-        with Console(stderr=True).status(f"identifying ({method}, n={order})"):
-            model = meth.identify(flights, order=order, past=past, future=future,
-                                  options=options)
-    else:
-        given = {key: [value] for key, value in (("pasts", past), ("futures", future),
-                                                  ("orders", order)) if value is not None}
-        selection = choose(groups, method=meth, options=options, grid=given, workers=workers,
-                           choose_focus=focus is None, quiet=as_json,
-                           choose_feedthrough="open-loop" if feedthrough is None else False)
-        model = selection.model
-        order, past, future = selection.best.order, selection.best.past, selection.best.future
-    # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
-    # model, so the fit is over short windows (initial state estimated per window).
-    # The selection's own window when it chose the model (sized for the grid's largest order).
-    window_s = (selection.window_s if selection is not None and selection.window_s else
-                simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights),
-                                  n_states=model.n_states, n_outputs=model.n_outputs))
-    sim = compare(model, flights, window=window_s, warn=False)
-    pred = compare(model, flights, horizon=1, warn=False)
-    checks = []
-    if validate:
-        val = load_flights(list(validate), opts={**opts, "dt": model.dt},
-                           inputs=model.input_names, outputs=model.output_names)
-        v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
-                                  n_states=model.n_states, n_outputs=model.n_outputs)
-        checks = [(f"validation: simulation, {v_win:.3g} s windows",
-                   compare(model, val, window=v_win, warn=False)),
-                  ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]
-    if out is not None:
-        model.save(out)
-    if rrd is not None:
-        write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
-                  comparisons=[sim, pred, *(r for _, r in checks)],
-                  sweep=selection.result if selection else None)
-    poles = pole_table(model)
-    if as_json:
-        click.echo(json.dumps({
-            "sessions": [str(p) for p in sessions], "method": method, "order": order,
-            "past": past, "future": future, "n_samples": [d.n_samples for d in flights],
-            "experiments": [d.source for d in flights],
-            "dt_s": model.dt, "poles": poles, "stable": model.is_stable,
-            "predictor_stable": model.predictor_is_stable,
-            "fit_percent": {"simulation": fits_json(sim), "1-step": fits_json(pred)},
-            "simulation_window_s": window_s,
-            "selection": selection_json(selection) if selection else None,
-            "validation": [{"mode": label, "fit_percent": fits_json(r)} for label, r in checks],
-            "focus": model.provenance.get("focus"),
-            "stability": model.provenance.get("stability"),
-            "model": str(out) if out else None}, indent=1))
-        return
-    con = console()
-    if selection is not None:
-        print_selection(con, selection)
-    con.print(poles_rich_table(
-        model, title=f"{method} order {order}, past {past}, future {future}: poles", console=con))
-    con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
-              f"predictor A - KC stable: {model.predictor_is_stable}")
-    report = model.provenance.get("stability")
-    if isinstance(report, dict) and report.get("moved"):
-        radii = ", ".join(f"{m['radius_from']:.4f} -> {m['radius_to']:.4f}"
-                          for m in report["moved"])
-        cost = report.get("cost_points")
-        con.print(f"stability={report['mode']}: pole(s) moved {radii}; "
-                  f"{report['measure']} fit on these data "
-                  + ("not measurable: the free model diverges" if cost is None
-                     else f"{-cost:+.2f} points"))
-    con.print(fit_table(console=con, title="fit on the identification data [%]",
-                        names=model.output_names,
-                        rows=[(f"simulation, {window_s:.3g} s windows", sim.fit),
-                              ("1-step prediction", pred.fit)]))
-    if checks:
-        con.print(fit_table(console=con,
-                            title=f"fit on {', '.join(p.name for p in validate)} [%]",
-                            names=model.output_names, rows=[(k, r.fit) for k, r in checks]))
-    if out is not None:
-        con.print(f"model saved to {out}")
-
+main.add_command(identify)
 
 SCHEDULER_OPTION = click.option(
     "--scheduler", metavar="tcp://HOST:PORT",
@@ -367,7 +183,7 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
         --validate other_flight.h5 --window-s 5 --workers 2 --out model.h5
       sysid sweep flight.h5 --scheduler tcp://10.0.0.5:8786   # on a Dask cluster
     """
-    meth, options = _method(method, focus=focus, stability=stability)
+    meth, options = method_options(method, focus=focus, stability=stability)
     sweep_command(session=session, method=meth, options=options, choose_focus=focus is None,
                   choose_feedthrough="open-loop",
                   pasts=pasts, futures=futures, orders=orders, workers=workers,
@@ -415,7 +231,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     if summary.exists() and not force:
         raise ParameterError(f"--out {out_dir}: holds a batch summary already; "
                              "pass --force to replace it or choose another folder")
-    meth, options = _method(method, focus=focus, stability=stability)
+    meth, options = method_options(method, focus=focus, stability=stability)
     grid = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
             if v is not None}
     groups, bad = group_sessions(list(sessions), by=group_by,

@@ -1,0 +1,63 @@
+"""Options several ``sysid`` commands share: ``--method``, ``--focus``, ``--stability``,
+``--force``, and the method with its options as given (:func:`method_options`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from sysid.errors import ParameterError
+from sysid.finish import FOCUS_MODES
+from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
+from sysid.stability import STABILITY_MODES
+
+__all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
+           "method_options"]
+
+
+class MethodChoice(click.Choice):
+    """``--method``: a name of the registry (:data:`sysid.methods.METHODS`; ``po_moesp`` as
+    the function is named works too). An unknown name is :func:`sysid.methods.get_method`'s
+    one line, which lists the registered names."""
+
+    name = "method"
+
+    def __init__(self) -> None:
+        super().__init__(sorted(METHODS))
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> str:
+        try:
+            return get_method(value).name
+        except ParameterError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+METHOD_OPTION = click.option(
+    "--method", type=MethodChoice(), default=DEFAULT_METHOD, show_default=True,
+    help="; ".join(f"{name}: {m.description}" for name, m in METHODS.items()) + ".")
+FOCUS_OPTION = click.option(
+    "--focus", type=click.Choice(list(FOCUS_MODES)), default=None,
+    help="prediction: closed-loop-consistent one-step predictor (default for iem); "
+         "simulation: B, D, x0 by output error (default for po-moesp; biased in closed loop).")
+STABILITY_OPTION = click.option(
+    "--stability", type=click.Choice(list(STABILITY_MODES)), default="auto", show_default=True,
+    help="auto: poles just outside the unit circle (|z| <= 1.1) moved inside: to 0.999 near "
+         "z = 1 (integrators), reflected elsewhere (oscillations); enforce: all strictly "
+         "inside; free: as estimated.")
+FORCE_OPTION = click.option("--force", is_flag=True,
+                            help="Replace --out if it exists (never an input file).")
+
+
+def method_options(name: str, *, feedthrough: bool | None = None, focus: str | None = None,
+            stability: str) -> tuple[Method, Options]:
+    """The registered method ``name`` and its options as given on the command line (the
+    method's defaults for the others)."""
+    meth = get_method(name)
+    values: dict[str, Any] = {"stability": stability}
+    if feedthrough is not None:
+        values["feedthrough"] = feedthrough
+    if focus is not None:
+        values["focus"] = focus
+    return meth, meth.options(**values)
