@@ -228,9 +228,16 @@ def fit_table(*, title: str, names: Sequence[str], rows: list[tuple[str, np.ndar
     first.no_wrap = True
     first.min_width = max((len(label) for label, _ in rows), default=1)
     for label, fit in rows:
-        table.add_row(label, *["diverged" if fit_or_none(f) is None else f"{f:.1f}"
-                               for f in fit])
+        table.add_row(label, *[fit_cell(f) for f in fit])
     return table
+
+
+def fit_cell(fit: float) -> str:
+    """A fit for a table: ``"87.3"``, ``"diverged"``, or ``"n/a"`` where the measured channel
+    does not move (the fit's denominator is zero: NaN)."""
+    if np.isnan(fit):
+        return "n/a"
+    return "diverged" if fit_or_none(fit) is None else f"{fit:.1f}"
 
 
 def fits_json(res: CompareResult, fits: np.ndarray | None = None) -> dict[str, float | None]:

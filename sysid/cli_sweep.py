@@ -36,6 +36,7 @@ from sysid.cli_support import (
     MODEL_SUFFIXES,
     check_rrd,
     console,
+    fit_cell,
     grid_max,
     grid_min,
     load_flights,
@@ -97,7 +98,7 @@ def _candidates(con: Console, rows: Sequence[SweepRow], *, names: Sequence[str],
                          console=con, title=title)
     for r in rows:
         table.add_row(str(r.past), str(r.future), str(r.order), f"{r.score:.1f}",
-                      *[f"{f:.1f}" if abs(f) < 1e4 else "diverged" for f in r.fit],
+                      *[fit_cell(f) for f in r.fit],
                       f"{np.abs(r.poles).max():.4f}" if r.poles.size else "-", str(r.stable),
                       style="bold" if r is chosen else None)
     con.print(table)

@@ -120,3 +120,11 @@ def test_compare_result_json_names_channels():
                         output_names=("gyro.x", "gyro.y"))
     assert fits_json(res) == {"gyro.x": 80.0, "gyro.y": None}
     assert fits_json(res, res.fits[0]) == {"gyro.x": 70.0, "gyro.y": None}
+
+
+def test_a_fit_cell_says_what_the_number_means() -> None:
+    from sysid.cli_support import fit_cell
+
+    # NaN: the measured channel does not move (zero denominator), not a diverged model
+    assert [fit_cell(f) for f in (87.34, -12.0, -2e4, float("-inf"), float("nan"))] == [
+        "87.3", "-12.0", "diverged", "diverged", "n/a"]
