@@ -12,7 +12,11 @@ half times it, about evenly spaced on a log scale (the quadrotor flights of ``gr
 demo --speed inf`` have a memory of 6 samples at 50 Hz: pasts 2 to 18, futures 2 to 9, where
 the thesis used 60 and 17); both capped so that the identification data have at least
 three Hankel columns per row of the largest pair. Orders 2 to 12, capped by the rank the
-horizons allow.
+horizons allow. On a record so short that those caps leave the largest future unable to hold
+the order of the memory (a VARX model of lag ``L`` has order ``L l``: :func:`memory_future`),
+that future is added with fewer Hankel columns per row, down to one (a fat Hankel matrix, as
+``n4sid`` uses on short records; :data:`MIN_COLUMNS_PER_ROW`): 60 samples of a third-order
+SISO system had futures of 2 and order 1 at most.
 
 **Focus and direct term** (:mod:`sysid.variants`): when the caller does not fix the focus, the
 grid runs with both and the method's default wins unless the other scores better by more than
@@ -74,8 +78,9 @@ from sysid.variants import (
     tries_feedthrough,
 )
 
-__all__ = ["HOLDOUT_FRACTION", "SCORE_WINDOW_X", "NoStableModel", "Plan", "Selection",
-           "default_grid", "finish", "focus_order", "holdout", "max_blocks", "n_runs",
+__all__ = ["HOLDOUT_FRACTION", "MIN_COLUMNS_PER_ROW", "SCORE_WINDOW_X", "NoStableModel", "Plan",
+           "Selection", "default_grid", "finish", "focus_order", "holdout", "max_blocks",
+           "memory_future", "n_runs",
            "pick_feedthrough", "pick_focus", "plan", "select", "select_plan"]
 
 log = logging.getLogger(__name__)
@@ -84,6 +89,10 @@ log = logging.getLogger(__name__)
 HOLDOUT_FRACTION = 0.3
 #: Hankel columns per row of the largest pair the default grid leaves at least.
 COLUMNS_PER_ROW = 3.0
+#: Fewest Hankel columns per row the default grid takes on a record too short for three: only
+#: for the one future that holds the memory's order (:func:`memory_future`), or for past 2,
+#: future 2; the fewest a sweep accepts (:func:`sysid.cli_sweep.check_sweep_horizons`).
+MIN_COLUMNS_PER_ROW = 1.0
 #: Pasts and futures of the default grid, as multiples of the predictor's memory (samples).
 PAST_X = (1 / 3, 3.0)
 FUTURE_X = (1 / 6, 1.5)
@@ -167,19 +176,35 @@ def max_blocks(flights: Sequence[IOData], *, columns_per_row: float = COLUMNS_PE
     return best
 
 
+def memory_future(lag: int, n_outputs: int) -> int:
+    """The shortest future whose rank ``(f - 1) l`` holds the order of the data's memory:
+    a VARX model of lag ``L`` has a realization of order ``L l`` (observer form), here at
+    most the grid's largest order, ``ORDERS[1]``."""
+    order = min(lag * n_outputs, ORDERS[1])
+    return -(-order // n_outputs) + 1
+
+
 def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
     """Pasts, futures and orders for ``flights`` (module docstring), in samples."""
     return _grid(flights)[0]
 
 
-def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
-    """The default grid, whether the data cut it short of the memory's range, the memory."""
-    room = max_blocks(flights)
+def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int, int]:
+    """The default grid, whether the data cut it short of the memory's range, the memory,
+    and the largest ``past + future`` the grid may grow to (three Hankel columns per row, or
+    the largest pair of a grid that needed fewer)."""
     ell = flights[0].n_outputs
+    room = max_blocks(flights)
+    fat = max_blocks(flights, columns_per_row=MIN_COLUMNS_PER_ROW)
+    if room < 4 <= fat:  # past 2, future 2 only with fewer columns per row
+        room = 4
     if room < 4:
-        need = 4 * (flights[0].n_inputs + ell) * COLUMNS_PER_ROW
+        c = flights[0].n_inputs + ell
+        need = 4 * c * MIN_COLUMNS_PER_ROW + 3
         raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
-                        f"(need about {need:.0f}); give longer records or fewer channels")
+                        f"to choose horizons for {c} channels (need about {need:.0f}); give "
+                        "horizons and an order (--past/--future/--order), longer records or "
+                        "fewer channels")
     memory = predictor_memory(flights)
     lag = max(memory.lag, 1)
     f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
@@ -189,7 +214,12 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int]:
     p_lo = max(1, min(round(PAST_X[0] * lag), p_hi))
     pasts = _spread(p_lo, p_hi, 6)
     capped = p_hi < round(PAST_X[1] * lag) or memory.capped  # short data, or the longest lag
-    return {"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}, capped, lag
+    longer = min(memory_future(lag, ell), fat - pasts[-1])
+    if longer > futures[-1]:  # a short record: the future the memory's order needs
+        futures.append(longer)
+        room = max(room, pasts[-1] + longer)
+    return ({"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}, capped,
+            lag, room)
 
 
 def _orders(future: int, n_outputs: int) -> list[int]:
@@ -215,6 +245,7 @@ class Plan:
     memory: int | None = None
     fixed: tuple[str, ...] = ()  # "pasts", "futures", "orders" the caller gave: never grown
     scored_grid: dict[str, list[int]] | None = None  # the first grid, once the grid grew
+    room: int | None = None  # the largest past + future the grid may grow to (default grid)
 
     @property
     def n_models(self) -> int:
@@ -234,7 +265,10 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
-    auto, capped, memory = _grid(ident)
+    if pasts and futures:  # no default grid: only the memory, for the score's window
+        auto, capped, memory, room = {}, False, max(predictor_memory(ident).lag, 1), None
+    else:
+        auto, capped, memory, room = _grid(ident)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"]}
     grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow
@@ -249,7 +283,7 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
                 given_validation=bool(validation),
                 memory=None if pasts and futures else memory,
                 fixed=tuple(k for k, v in (("pasts", pasts), ("futures", futures),
-                                           ("orders", orders)) if v))
+                                           ("orders", orders)) if v), room=room)
 
 
 def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) -> Selection:
@@ -394,7 +428,7 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
             options, focus=chosen.model.provenance.get("focus", options.focus),
             feedthrough=True))
         chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
-    chosen = follow_edges(p, chosen, room=max_blocks(p.ident), run=again)
+    chosen = follow_edges(p, chosen, room=p.room or max_blocks(p.ident), run=again)
     return dataclasses.replace(chosen, feedback=loop, warnings=(
         *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
                                           feedthrough_chosen=tries_feedthrough(

@@ -110,7 +110,9 @@ def follow_edges(p: Plan, chosen: Selection, *, room: int,
     of a grown horizon and the chosen one, the other horizon held at its chosen value, with
     every order (the rows of the other pairs are kept from before): a few pairs per round.
     The score's window stays that of the first sweep, so every row is scored alike.
-    ``room``: the largest ``past + future`` of the identification data."""
+    ``room``: the largest ``past + future`` of the identification data (three Hankel columns
+    per row, or the largest pair of a default grid that needed fewer on a short record:
+    :attr:`sysid.auto.Plan.room`)."""
     first = p.grid
     room = min(room, ROOM_X * (first["pasts"][-1] + first["futures"][-1]))
     for _ in range(MAX_ROUNDS):
