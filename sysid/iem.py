@@ -33,9 +33,11 @@ is biased under feedback and K then comes from the state regression with B, D fi
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -57,9 +59,31 @@ from sysid.realize import (
 )
 from sysid.stability import Stability, check_stability, stabilize
 
-__all__ = ["iem", "iem_direct", "iem_order", "iem_signals", "realize_iem"]
+__all__ = ["iem", "iem_direct", "iem_order", "iem_signals", "realize_iem",
+           "without_stability_cost"]
 
 log = logging.getLogger(__name__)
+
+#: Whether :func:`iem` measures the fit a moved pole cost (``provenance["stability"]``); off
+#: inside :func:`without_stability_cost`.
+_STABILITY_COST: contextvars.ContextVar[bool] = contextvars.ContextVar("iem_stability_cost",
+                                                                       default=True)
+
+
+@contextlib.contextmanager
+def without_stability_cost() -> Iterator[None]:
+    """Inside the block :func:`iem` does not measure what moving poles inside cost: the
+    measurement identifies the model again with ``stability="free"`` (for the simulation focus
+    another output-error fit over every sample) and runs both models over the identification
+    data: on a long record most of the time of a sweep that scores its models and drops them
+    (:mod:`sysid.sweep`). The model is the same; ``provenance["stability"]`` still
+    lists the poles moved, with ``"measure": None`` and no cost. Models a sweep keeps
+    (``keep_models``) are measured as usual."""
+    token = _STABILITY_COST.set(False)
+    try:
+        yield
+    finally:
+        _STABILITY_COST.reset(token)
 
 _BK = ("state", "thesis")
 _VARIANTS = {
@@ -293,7 +317,14 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
     model = build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
                         y_scale=products.y_scale, template=products.flights[0],
                         provenance=prov)
-    if fin.moved:
+    if fin.moved and _STABILITY_COST.get():
         free, _, _ = realize_iem(gamma_lp, sig, stability="free", **common)
         model = stability_report(model=model, fin=fin, free=free, products=products)
+    elif fin.moved:  # the poles moved, their cost not measured (without_stability_cost)
+        model = model.replace(provenance={**model.provenance, "stability": {
+            "mode": stability,
+            "moved": [{"from": [p.real, p.imag], "to": [q.real, q.imag], "radius_from": abs(p),
+                       "radius_to": abs(q)} for p, q in fin.moved],
+            "measure": None, "fit_percent": None, "fit_percent_free": None,
+            "cost_points": None}})
     return model

@@ -46,8 +46,9 @@ import threadpoolctl
 
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, ParameterError, SysIdError
-from sysid.factor import grid_values
+from sysid.factor import DataProducts, grid_values
 from sysid.grid import HorizonGrid, build_grid, grid_products
+from sysid.iem import without_stability_cost
 from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
 from sysid.parsimony import block_errors, block_shares, parsimonious
@@ -181,18 +182,24 @@ class SweepResult:
 def _past_task(
     *, grid: HorizonGrid, validation: tuple[IOData, ...], method: Method, options: Options,
     past: int, futures: Sequence[int], orders: Sequence[int], horizon: int | None,
-    window: float | None, keep_models: bool,
+    window: float | None, keep_models: bool, row_done: Callable[[int], None] | None = None,
 ) -> list[SweepRow]:
     """Identify and score every (future, order) for one past (runs in a worker): the pairs
     share the grid's Gram matrix and, for IEM, one factor (:mod:`sysid.grid`).
+    ``row_done(k)`` (this process only) is called after the k-th row of the past.
 
     BLAS runs on one thread here (:func:`one_blas_thread`): a multi-threaded BLAS sums in an
     order that depends on its thread count, so a row would differ in its last bits between
-    this process, a worker process and a Dask worker (which runs one BLAS thread)."""
-    with one_blas_thread(), quiet_models():
+    this process, a worker process and a Dask worker (which runs one BLAS thread).
+    Models the sweep does not keep skip the measurement of what their stability step cost
+    (:func:`sysid.iem.without_stability_cost`): it is provenance only, and a second
+    identification and two runs over the identification data for each model whose poles
+    were moved."""
+    unmeasured = contextlib.nullcontext() if keep_models else without_stability_cost()
+    with one_blas_thread(), quiet_models(), unmeasured:
         return _past_rows(grid=grid, validation=validation, method=method, options=options,
                           past=past, futures=futures, orders=orders, horizon=horizon,
-                          window=window, keep_models=keep_models)
+                          window=window, keep_models=keep_models, row_done=row_done)
 
 
 @contextlib.contextmanager
@@ -224,7 +231,7 @@ def quiet_models() -> Iterator[None]:
 def _past_rows(
     *, grid: HorizonGrid, validation: tuple[IOData, ...], method: Method, options: Options,
     past: int, futures: Sequence[int], orders: Sequence[int], horizon: int | None,
-    window: float | None, keep_models: bool,
+    window: float | None, keep_models: bool, row_done: Callable[[int], None] | None = None,
 ) -> list[SweepRow]:
     ell = grid.n_outputs
     products = grid_products(grid, past=past, futures=futures,
@@ -234,24 +241,33 @@ def _past_rows(
     for future in futures:
         pair = products[future]
         for order in orders:
-            t0 = time.perf_counter()
-            if isinstance(pair, SysIdError):
-                rows.append(_failed(past, future, order, pair, 0.0, ell))
-                continue
-            try:
-                model = method.identify(None, order=order, past=past, future=future,
-                                        options=options, products=pair)
-                res = compare(model, list(validation), horizon=horizon, window=window,
-                              warn=False)
-            except (SysIdError, np.linalg.LinAlgError) as exc:
-                rows.append(_failed(past, future, order, exc, time.perf_counter() - t0, ell))
-                continue
-            rows.append(SweepRow(
-                past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
-                stable=model.is_stable, predictor_stable=model.predictor_is_stable,
-                seconds=time.perf_counter() - t0, model=model if keep_models else None,
-                errors=block_errors(res), shares=block_shares(res)))
+            rows.append(_row(pair, past=past, future=future, order=order, method=method,
+                             options=options, validation=validation, horizon=horizon,
+                             window=window, keep_models=keep_models, n_outputs=ell))
+            if row_done is not None:
+                row_done(len(rows))
     return rows
+
+
+def _row(pair: DataProducts | SysIdError, *, past: int, future: int, order: int,
+         method: Method, options: Options, validation: tuple[IOData, ...],
+         horizon: int | None, window: float | None, keep_models: bool, n_outputs: int
+         ) -> SweepRow:
+    """One model of the pair identified and scored (a failed row if it cannot be)."""
+    t0 = time.perf_counter()
+    if isinstance(pair, SysIdError):
+        return _failed(past, future, order, pair, 0.0, n_outputs)
+    try:
+        model = method.identify(None, order=order, past=past, future=future,
+                                options=options, products=pair)
+        res = compare(model, list(validation), horizon=horizon, window=window, warn=False)
+    except (SysIdError, np.linalg.LinAlgError) as exc:
+        return _failed(past, future, order, exc, time.perf_counter() - t0, n_outputs)
+    return SweepRow(
+        past=past, future=future, order=order, fit=res.fit, poles=model.poles(),
+        stable=model.is_stable, predictor_stable=model.predictor_is_stable,
+        seconds=time.perf_counter() - t0, model=model if keep_models else None,
+        errors=block_errors(res), shares=block_shares(res))
 
 
 def _failed(past: int, future: int, order: int, exc: Exception, seconds: float,
@@ -289,8 +305,10 @@ def sweep(
     (see :func:`sysid.compare`). ``workers > 1`` runs the pasts in that many processes.
     ``client`` (a :class:`distributed.Client`) runs the pasts on that Dask cluster instead,
     the grid and validation data scattered once per worker (:mod:`sysid.cluster`); the rows
-    are the same as locally. ``progress(done, total)`` is called in this process after each
-    past, with counts of models. ``keep_models`` keeps every model in its row (memory!).
+    are the same as locally. ``progress(done, total)`` is called in this process with counts
+    of models: after each model when the sweep runs here (``workers=1``, no ``client``), after
+    each past otherwise. ``keep_models`` keeps every model in its row (memory!), with what
+    its stability step cost measured (:func:`sysid.iem.without_stability_cost`).
     """
     meth = get_method(method)
     if options is not None and option_values:
@@ -311,11 +329,11 @@ def sweep(
     results: dict[int, list[SweepRow]] = {}
     t0 = time.perf_counter()
 
-    def finished(past: int, past_rows: list[SweepRow]) -> None:
+    def finished(past: int, past_rows: list[SweepRow], *, reported: bool = False) -> None:
         nonlocal done
         results[past] = past_rows
         done += len(past_rows)
-        if progress is not None:
+        if progress is not None and not reported:
             progress(done, total)
 
     if client is not None:
@@ -324,9 +342,11 @@ def sweep(
         shared = {k: common.pop(k) for k in ("grid", "validation")}
         run_pasts(client, task=_past_task, shared=shared, common=common, pasts=pasts,
                   finished=finished)
-    elif workers <= 1:
+    elif workers <= 1:  # progress after each model: one may take seconds (simulation focus)
         for p in pasts:
-            finished(p, _past_task(past=p, **common))
+            tick = None if progress is None else (
+                lambda k, base=done: progress(base + k, total))
+            finished(p, _past_task(past=p, row_done=tick, **common), reported=tick is not None)
     else:
         _run_parallel(pasts, common, workers=workers, finished=finished)
     rows = tuple(row for p in pasts for row in results[p])

@@ -212,15 +212,25 @@ def estimate_x0(
     single = r.ndim == 2
     if single:
         r = r[None]
-    w, length, _ = r.shape
     with np.errstate(over="ignore", invalid="ignore"):
-        obs = observability_matrix(A=A, C=C, length=length)  # (L, l, n)
+        obs = observability_matrix(A=A, C=C, length=r.shape[1])  # (L, l, n)
+    x0 = _x0_given_obs(obs=obs, A=A, C=C, residual=r, weights=weights)
+    return x0[0] if single else x0
+
+
+def _x0_given_obs(*, obs: np.ndarray, A: np.ndarray, C: np.ndarray, residual: np.ndarray,
+                  weights: np.ndarray | None) -> np.ndarray:
+    """:func:`estimate_x0` of a batch ``residual`` (W, L, l) with its observability matrix
+    ``obs`` (L, l, n) already built; returns (W, n)."""
+    r = residual
+    w = r.shape[0]
+    with np.errstate(over="ignore", invalid="ignore"):
         # An unstable A makes late rows explode: keep the samples where all is finite and sane.
         size = np.abs(obs).max(axis=(1, 2), initial=0.0)
     usable = np.isfinite(size) & (size <= _MAX_GROWTH * max(np.abs(C).max(initial=0.0), 1.0))
     usable &= np.isfinite(r).all(axis=(0, 2))
     if not usable.any():
-        return np.zeros(A.shape[0]) if single else np.zeros((w, A.shape[0]))
+        return np.zeros((w, A.shape[0]))
     scale = np.ones(C.shape[0]) if weights is None else np.asarray(weights, dtype=float)
     if scale.shape != (C.shape[0],):
         raise DimensionError(f"weights has shape {scale.shape}; pass ({C.shape[0]},), one per "
@@ -228,7 +238,7 @@ def estimate_x0(
     obs_k = (obs[usable] * scale[:, None]).reshape(-1, A.shape[0])
     rhs = (r[:, usable] * scale).reshape(w, -1).T
     x0, *_ = np.linalg.lstsq(obs_k, rhs, rcond=None)
-    return x0.T[0] if single else x0.T
+    return x0.T
 
 
 def simulate_windows(
@@ -260,9 +270,11 @@ def simulate_windows(
         yw = np.stack([y[slices[i]] for i in idx])
         states = _run_states(A=A, Bu=uw @ B.T, x0=np.zeros((len(idx), n)))
         y_forced = states @ C.T + uw @ D.T
+        with np.errstate(over="ignore", invalid="ignore"):
+            obs = observability_matrix(A=A, C=C, length=length)  # (L, l, n), built once
         if isinstance(x0, str) and x0 == "estimate":
-            x0s[idx] = estimate_x0(A=A, C=C, residual=yw - y_forced, weights=weights)
-        obs = observability_matrix(A=A, C=C, length=length)  # (L, l, n)
+            x0s[idx] = _x0_given_obs(obs=obs, A=A, C=C, residual=yw - y_forced,
+                                     weights=weights)
         free = np.einsum("kln,wn->wkl", obs, x0s[idx])
         for j, i in enumerate(idx):
             y_sim[slices[i]] = y_forced[j] + free[j]

@@ -57,7 +57,8 @@ def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData])
     result = sweep(ident, pasts=[1, 3, 10], futures=[3, 10], orders=[4], validation=val,
                    horizon=1, progress=lambda done, total: calls.append((done, total)),
                    refine=False)
-    assert calls == [(2, 6), (4, 6), (6, 6)]  # after each past (its futures share a factor)
+    # after each model (one may take seconds with the simulation focus), run here in order
+    assert calls == [(k, 6) for k in range(1, 7)]
     assert [(r.past, r.future) for r in result.rows] == [
         (1, 3), (1, 10), (3, 3), (3, 10), (10, 3), (10, 10)]
     best = result.best()
@@ -155,3 +156,62 @@ def test_grid_values_must_be_positive_integers(pbsid_data, grid, words) -> None:
         sweep(ident, **kwargs)
     msg = str(err.value)
     assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+def _integrating_data(seed: int) -> tuple[IOData, IOData]:
+    """A pole at 1.004 (an integrator's estimate lands just outside): ``stability="auto"``
+    moves poles of many models of a grid. Identification and validation records."""
+    rng = np.random.default_rng(seed)
+    from sysid.model import StateSpaceModel
+
+    system = StateSpaceModel(A=np.array([[1.004, 0.0], [0.0, 0.8]]), B=np.array([[0.1], [1.0]]),
+                             C=np.array([[1.0, 1.0]]), D=np.zeros((1, 1)), dt=0.02)
+    sets = []
+    for _ in range(2):
+        u = np.sign(rng.standard_normal((3000, 1)))
+        y = system.simulate(u)
+        sets.append(IOData(u=u, y=y + 0.01 * y.std() * rng.standard_normal(y.shape), dt=0.02))
+    return sets[0], sets[1]
+
+
+@pytest.mark.parametrize("focus", ["prediction", "simulation"])
+def test_models_a_sweep_drops_are_not_measured_and_rows_are_unchanged(focus: str) -> None:
+    """The sweep skips measuring what the stability step cost for the models it drops
+    (provenance only: a second identification and two runs over the identification data
+    each): every row is bit for bit the one of a sweep that keeps and measures its models."""
+    ident, val = _integrating_data(3)
+    grid = {"pasts": [5, 10], "futures": [5, 10], "orders": [1, 2, 3], "validation": val,
+            "window": 1.0, "focus": focus}
+    dropped = sweep(ident, **grid)
+    kept = sweep(ident, keep_models=True, **grid)
+    moved = [r for r in kept.rows if isinstance(r.model.provenance["stability"], dict)]
+    assert len(moved) >= 3  # the grid exercises the skipped measurement
+    assert all(r.model.provenance["stability"]["measure"] is not None for r in moved)
+    for a, b in zip(dropped.rows, kept.rows, strict=True):
+        assert a.model is None and (a.past, a.future, a.order) == (b.past, b.future, b.order)
+        np.testing.assert_array_equal(a.fit, b.fit)
+        np.testing.assert_array_equal(a.errors, b.errors)
+        np.testing.assert_array_equal(a.shares, b.shares)
+        np.testing.assert_array_equal(a.poles, b.poles)
+        assert (a.stable, a.predictor_stable) == (b.stable, b.predictor_stable)
+    assert dropped.best().order == kept.best().order
+
+
+def test_without_stability_cost_gives_the_same_model() -> None:
+    import sysid
+    from sysid.iem import without_stability_cost
+
+    ident, _ = _integrating_data(3)
+    for focus in ("prediction", "simulation"):
+        measured = sysid.iem(ident, order=2, past=10, future=10, focus=focus)
+        with without_stability_cost():
+            quick = sysid.iem(ident, order=2, past=10, future=10, focus=focus)
+        for name in ("A", "B", "C", "D", "K", "noise_cov"):
+            np.testing.assert_array_equal(getattr(quick, name), getattr(measured, name))
+        full, short = measured.provenance["stability"], quick.provenance["stability"]
+        assert full["moved"] and short["moved"] == full["moved"]
+        assert short["mode"] == "auto" and short["measure"] is None
+        assert short["cost_points"] is None and full["cost_points"] is not None
+    # the switch is scoped to the block
+    assert isinstance(sysid.iem(ident, order=2, past=10, future=10).provenance["stability"]
+                      ["measure"], str)

@@ -248,3 +248,38 @@ def test_compare_refuses_a_window_that_is_not_a_positive_number_of_seconds(windo
         compare(system, data, window=window)
     msg = str(err.value)
     assert "\n" not in msg and msg.startswith(f"window={window!r}") and "seconds" in msg
+
+
+def test_windowed_simulation_equals_its_parts_bit_for_bit() -> None:
+    """simulate_windows builds each window length's observability matrix once and fits the
+    initial states with it: the same numbers as estimate_x0 on the forced responses."""
+    from sysid.validate import (
+        _run_states,
+        channel_weights,
+        estimate_x0,
+        observability_matrix,
+        simulate_windows,
+        split_windows,
+    )
+
+    rng = np.random.default_rng(7)
+    system = random_stable_system(n_states=6, n_inputs=2, n_outputs=3, rng=rng)
+    u = rng.normal(size=(1030, 2))
+    y = system.simulate(u) + 0.1 * rng.normal(size=(1030, 3))
+    y_sim, x0s = simulate_windows(system, u=u, y=y, window=100)
+    weights = channel_weights(y)
+    slices = split_windows(1030, 100)
+    for length in (100, 130):  # the remainder joins the last window
+        idx = [i for i, sl in enumerate(slices) if sl.stop - sl.start == length]
+        uw = np.stack([u[slices[i]] for i in idx])
+        yw = np.stack([y[slices[i]] for i in idx])
+        forced = (_run_states(A=system.A, Bu=uw @ system.B.T, x0=np.zeros((len(idx), 6)))
+                  @ system.C.T + uw @ system.D.T)
+        x0 = estimate_x0(A=system.A, C=system.C, residual=yw - forced, weights=weights)
+        np.testing.assert_array_equal(x0s[idx], x0)
+        free = np.einsum("kln,wn->wkl", observability_matrix(A=system.A, C=system.C,
+                                                             length=length), x0s[idx])
+        for j, i in enumerate(idx):
+            np.testing.assert_array_equal(y_sim[slices[i]], forced[j] + free[j])
+    one = estimate_x0(A=system.A, C=system.C, residual=(y - system.simulate(u))[:100])
+    assert one.shape == (6,)
