@@ -25,9 +25,10 @@ def order_command(session: Path, *, method: str, past: int | None, future: int |
     """Singular values, information criteria and the suggested order of ``session``."""
     flights = load_flights([session], opts=opts)
     meth = get_method(method)
-    grid = default_grid(flights)
-    past = grid["pasts"][-1] if past is None else past
-    future = grid["futures"][-1] if future is None else future
+    if past is None or future is None:  # the default grid refuses records too short for it
+        grid = default_grid(flights)
+        past = grid["pasts"][-1] if past is None else past
+        future = grid["futures"][-1] if future is None else future
     limit = meth.max_order(past=past, future=future, n_inputs=flights[0].n_inputs,
                            n_outputs=flights[0].n_outputs)
     sv = singular_values(flights, past=past, future=future, method=meth)

@@ -245,3 +245,18 @@ def test_rrd_reports_are_written(flights, tmp_path) -> None:
 def test_help_has_an_example(command) -> None:
     res = run(command, "--help")
     assert res.exit_code == 0 and "Example" in res.stdout
+
+
+def test_order_with_horizons_given_needs_no_default_grid(tmp_path) -> None:
+    """A record too short for the default grid (which refuses it) is analysed at the horizons
+    the caller gives: ``sysid order`` no longer builds the default grid it does not use."""
+    phases = [(0.0, "takeoff", "takeoff"), (0.3, "excitation", "excitation"),
+              (1.1, "landing", "landing")]
+    short = write_flight(tmp_path / "short.h5", system=known_system(), seed=3, n=50,
+                         n_drop=0, phases=phases)
+    refused = run("order", short.path)
+    assert refused.exit_code == 2 and "--past/--future" in refused.output
+    res = run("order", short.path, "--past", "1", "--future", "2", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert (report["past"], report["future"]) == (1, 2) and report["suggested_order"] >= 1
