@@ -28,12 +28,12 @@ from sysid.cli_options import (
     METHOD_OPTION,
     STABILITY_OPTION,
     method_options,
+    model_options,
 )
 from sysid.cli_order import order_command
 from sysid.cli_progress import progress
 from sysid.cli_support import (
     JSON_OPTION,
-    RRD_OPTION,
     Group,
     console,
     load_groups,
@@ -150,14 +150,7 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
                    "times the data's memory, at least 20 samples; see docs/sysid.md).")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
               help="Candidates listed (and in --json).")
-@FOCUS_OPTION
-@STABILITY_OPTION
-@session_options
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              help="Save the selected model, identified again on all the session's data.")
-@FORCE_OPTION
-@JSON_OPTION
-@RRD_OPTION
+@model_options(out_help="Save the selected model, identified again on all the session's data.")
 def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None,
               orders: str | None, workers: int, scheduler: str | None,
               validate: tuple[Path, ...], horizon: int | None, window_s: float | None,

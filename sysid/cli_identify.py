@@ -13,16 +13,12 @@ from rich.console import Console
 
 from cfcommon.cli import check_output
 from sysid.cli_options import (
-    FOCUS_OPTION,
-    FORCE_OPTION,
     METHOD_OPTION,
-    STABILITY_OPTION,
     method_options,
+    model_options,
 )
 from sysid.cli_support import (
-    JSON_OPTION,
     MODEL_SUFFIXES,
-    RRD_OPTION,
     check_rrd,
     console,
     fit_table,
@@ -31,7 +27,6 @@ from sysid.cli_support import (
     load_groups,
     pole_table,
     poles_rich_table,
-    session_options,
     write_rrd,
 )
 from sysid.cli_sweep import choose, print_selection, selection_json
@@ -56,14 +51,7 @@ __all__ = ["identify"]
                    "repeatable.")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes for the choice of horizons and order.")
-@FOCUS_OPTION
-@STABILITY_OPTION
-@session_options
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              help="Save the model (.h5, .json or .mat); an existing file needs --force.")
-@FORCE_OPTION
-@JSON_OPTION
-@RRD_OPTION
+@model_options(out_help="Save the model (.h5, .json or .mat); an existing file needs --force.")
 def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: int | None,
              future: int | None, feedthrough: bool | None, validate: tuple[Path, ...],
              workers: int, focus: str | None, stability: str, out: Path | None, force: bool,

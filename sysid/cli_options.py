@@ -1,19 +1,23 @@
 """Options several ``sysid`` commands share: ``--method``, ``--focus``, ``--stability``,
-``--force``, and the method with its options as given (:func:`method_options`)."""
+``--force``, the stack of a command that makes a model (:func:`model_options`), and the method
+with its options as given (:func:`method_options`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import click
 
+from sysid.cli_support import JSON_OPTION, RRD_OPTION, session_options
 from sysid.errors import ParameterError
 from sysid.finish import FOCUS_MODES
 from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.stability import STABILITY_MODES
 
 __all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
-           "method_options"]
+           "method_options", "model_options"]
 
 
 class MethodChoice(click.Choice):
@@ -48,6 +52,21 @@ STABILITY_OPTION = click.option(
          "inside; free: as estimated.")
 FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
+
+
+def model_options(*, out_help: str) -> Callable[[Callable], Callable]:
+    """The options of a command that identifies and may save a model (``identify``,
+    ``sweep``): ``--focus``, ``--stability``, the session options, ``--out`` (``out_help``),
+    ``--force``, ``--json``, ``--rrd``, in that order in ``--help``."""
+    out = click.option("--out", type=click.Path(dir_okay=False, path_type=Path), help=out_help)
+
+    def decorate(func: Callable) -> Callable:
+        for option in (RRD_OPTION, JSON_OPTION, FORCE_OPTION, out, session_options,
+                       STABILITY_OPTION, FOCUS_OPTION):
+            func = option(func)
+        return func
+
+    return decorate
 
 
 def method_options(name: str, *, feedthrough: bool | None = None, focus: str | None = None,
