@@ -76,7 +76,15 @@ def _solve(gram: np.ndarray, cols: np.ndarray, lhs: np.ndarray, dependent: np.nd
 
 def _gamma(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
     """The weighted :math:`\\Gamma W` ``(f l, p (m+l))`` (module docstring) and its singular
-    values."""
+    values, computed once per data products (``products.cache``: a sweep's orders at one
+    pair of horizons share them; the order only truncates)."""
+    key = ("parsim-gamma",)
+    if key not in products.cache:
+        products.cache[key] = _gamma_of(products)
+    return products.cache[key]
+
+
+def _gamma_of(products: DataProducts) -> tuple[np.ndarray, np.ndarray]:
     g = products.gram
     p, f = products.past, products.future
     pc = p * products.n_channels
