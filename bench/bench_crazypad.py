@@ -86,9 +86,10 @@ def main() -> int:
           " |    mean")
     iem = get_method("iem")
     for focus in ("prediction", "simulation"):
-        sel = select([ident], method=iem, options=iem.options(focus=focus))
+        sel = select([ident], method=iem, options=iem.options(focus=focus), choose_method=True)
         b = sel.best
-        print(f"IEM focus={focus}: chose past {b.past}, future {b.future}, order {b.order} "
+        print(f"IEM focus={focus} (method chosen: {sel.model.provenance['method']}): chose "
+              f"past {b.past}, future {b.future}, order {b.order} "
               f"(held-out score {b.score:.1f} %){'; ' if sel.warnings else ''}"
               f"{'; '.join(sel.warnings)}")
         _row("sysid identify (no knobs)", sel.model, val)

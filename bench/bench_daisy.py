@@ -7,7 +7,8 @@ over IEM, PO-MOESP and PARSIM-K with prediction and simulation focus (and their 
 ``BENCH_DAISY_PEM=1``: slow on cstr); SIPPY 1.0.1's over N4SID, MOESP, CVA, PARSIM-K/S/P.
 Target (issue 10): project >= SIPPY on every set. The last column is what the no-knobs
 selection chooses for open-loop data (IEM, held-out selection on the identification part, focus
-and direct term chosen: ``select(..., choose_focus=True, choose_feedthrough=True)``), by the
+and direct term chosen, PARSIM-K tried at the chosen horizons:
+``select(..., choose_focus=True, choose_feedthrough=True, choose_method=True)``), by the
 protocol.
 ``BENCH_DAISY_SETS=dryer,cstr`` picks sets.
 """
@@ -85,9 +86,10 @@ def _no_knobs(name: str) -> tuple[float, str]:
     ident, val = load(name)
     iem = get_method("iem")
     sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True,
-                 choose_feedthrough=True)
+                 choose_feedthrough=True, choose_method=True)
     b = sel.best
     d = " D" if sel.model.provenance.get("feedthrough") else ""
+    d += " pk" if sel.model.provenance.get("method") == "parsim-k" else ""
     return protocol_fit(sel.model, val), f"p={b.past} f={b.future} n={b.order}{d}"
 
 

@@ -4,7 +4,8 @@ Each case is a random discrete-time system of known order with data generated fr
 (:data:`CASES`, deterministic from the case id). The first 2/3 of the record identify, the
 last 1/3 validates. For each case:
 
-- **no knobs**: :func:`sysid.auto.select` on the identification part (IEM, past, future,
+- **no knobs**: :func:`sysid.auto.select` on the identification part (IEM, and PARSIM-K at
+  the chosen horizons: ``choose_method``; past, future,
   order, focus and direct term chosen on its own held-out part);
 - **truth**: the chosen model's fit on the *noise-free* output of the validation third, x0
   estimated (``sysid.compare(model, data, x0="estimate")``), mean over outputs, in %;
@@ -270,19 +271,20 @@ def run_case(cid: int) -> dict:
     val = sysid.IOData(u=g["u"][cut:], y=g["yc"][cut:], dt=s["dt"])
     iem = get_method("iem")
     sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True,
-                 choose_feedthrough=True)
+                 choose_feedthrough=True, choose_method=True)
     b = sel.best
     truth = _truth(sel.model, val)
     best = oracle(s, ident, val)
     return dict(case=cid, spec=s, past=b.past, future=b.future, order=b.order,
                 focus=str(sel.model.provenance.get("focus")),
+                method=str(sel.model.provenance.get("method")),
                 D=bool(sel.model.provenance.get("feedthrough")), truth=truth, oracle=best,
                 gap=truth - best, warnings=sel.warnings, unranked=unranked(sel.warnings),
                 wall=time.perf_counter() - t0)
 
 
 def choice(r: dict) -> tuple:
-    return r["past"], r["future"], r["order"], r["focus"], r["D"]
+    return r["past"], r["future"], r["order"], r["focus"], r["D"], r["method"]
 
 
 def _summary(rows: list[dict], failed: list[int], wall: float) -> None:
@@ -315,7 +317,7 @@ def main() -> int:
     log = logging.getLogger("sysid")
     level = log.level
     log.setLevel(logging.ERROR)  # the selection's notes per case would drown the table
-    print(f"{'case':>4} {'description':38s} {'chose p/f/n focus D':24s} {'truth':>6s} "
+    print(f"{'case':>4} {'description':38s} {'chose p/f/n focus D pk':24s} {'truth':>6s} "
           f"{'oracle':>6s} {'gap':>6s} {'warn':>4s} {'wall':>6s}", flush=True)
     rows: list[dict] = []
     failed: list[int] = []
@@ -329,13 +331,15 @@ def main() -> int:
                 print(f"{cid:4d} {describe(spec(cid)):38s} FAILED: {exc!r:.200}", flush=True)
                 continue
             rows.append(r)
-            how = f"{r['past']}/{r['future']}/{r['order']} {r['focus'][:4]}{' D' if r['D'] else ''}"
+            how = (f"{r['past']}/{r['future']}/{r['order']} {r['focus'][:4]}"
+                   f"{' D' if r['D'] else ''}{' pk' if r['method'] == 'parsim-k' else ''}")
             mark = "*" if r["unranked"] else ""
             print(f"{cid:4d} {describe(r['spec']):38s} {how:24s} {r['truth']:6.2f} "
                   f"{r['oracle']:6.2f} {r['gap']:+6.2f} {len(r['warnings']):3d}{mark:1s} "
                   f"{r['wall']:5.1f}s", flush=True)
     finally:
         log.setLevel(level)
-    print("(warn: the selection's warnings; * = the held-out data cannot rank the models)")
+    print("(warn: the selection's warnings; * = the held-out data cannot rank the models; "
+          "pk: PARSIM-K chosen beside IEM)")
     _summary(rows, failed, time.perf_counter() - t0)
     return 1 if failed else 0

@@ -103,6 +103,7 @@ def _long_selection(n_samples: int) -> bool:
     ticks: list[tuple[float, int]] = []
     p = plan([[data]])
     sel = select_plan(p, method=meth, options=meth.options(), choose_focus=True,
+                      choose_method=True,
                       progress=lambda done, _total: ticks.append((time.perf_counter(), done)))
     wall, cpu1 = time.perf_counter() - t0, os.times()
     cpu = sum(cpu1[:4]) - sum(cpu0[:4])

@@ -36,6 +36,9 @@ warning says when that standard error is a point or more (held-out data too few 
 models). Where the caller did not fix the grid, an edge that binds is followed: the grid grows
 past it and is swept again with the chosen focus and direct term (:mod:`sysid.growth`, at
 most twice); the warning stays only for an edge still binding after that.
+**Method** (``choose_method``, :func:`sysid.variants.pick_method`): PARSIM-K is swept at the
+chosen horizons with the chosen focus and direct term, and the smaller order within the
+tolerance of the best score of either method wins (IEM on a tie).
 The chosen horizons and order are then identified again on all the data. ``sysid identify``
 (without horizons and order) and ``sysid sweep`` both run :func:`select_plan`, so on the
 same data and grid they choose the same past, future, order and focus.
@@ -57,7 +60,7 @@ from sysid.errors import DataError
 from sysid.feedback import FeedbackTest, feedback_test
 from sysid.growth import follow_edges
 from sysid.memory import predictor_memory
-from sysid.methods import Method, Options
+from sysid.methods import Method, Options, get_method
 from sysid.model import StateSpaceModel
 from sysid.parsimony import (
     close_to_best,
@@ -70,11 +73,13 @@ from sysid.refit import final_model
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
 from sysid.variants import (
+    ALTERNATIVE,
     biased_choices,
     focus_order,
     n_runs,
     pick_feedthrough,
     pick_focus,
+    pick_method,
     tries_feedthrough,
 )
 
@@ -118,6 +123,7 @@ class Selection:
     memory: int | None = None
     focus_scores: dict[str, float] | None = None
     feedthrough_note: str = ""
+    method_note: str = ""
     tolerance: float | None = None
     tolerance_basis: str = "one standard error"
     feedback: FeedbackTest | None = None
@@ -326,21 +332,23 @@ def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
            orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
            workers: int = 1, progress: Callable[[int, int], None] | None = None,
            keep_models: bool = False, choose_focus: bool = False,
-           choose_feedthrough: bool = False, horizon: int | None = None,
-           window: float | None = None, client: Any | None = None) -> Selection:
+           choose_feedthrough: bool = False, choose_method: bool = False,
+           horizon: int | None = None, window: float | None = None,
+           client: Any | None = None) -> Selection:
     """Choose past, future and order (module docstring) and identify the chosen model on all
     the data: :func:`plan`, then :func:`select_plan` (the other keywords are its own)."""
     p = plan(groups, pasts=pasts, futures=futures, orders=orders, validation=validation)
     return select_plan(p, method=method, options=options, workers=workers, progress=progress,
                        keep_models=keep_models, choose_focus=choose_focus,
-                       choose_feedthrough=choose_feedthrough, horizon=horizon, window=window,
-                       client=client)
+                       choose_feedthrough=choose_feedthrough, choose_method=choose_method,
+                       horizon=horizon, window=window, client=client)
 
 
 def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                 progress: Callable[[int, int], None] | None = None, keep_models: bool = False,
                 choose_focus: bool = False,
                 choose_feedthrough: bool | Literal["open-loop"] = False,
+                choose_method: bool = False,
                 horizon: int | None = None, window: float | None = None,
                 client: Any | None = None) -> Selection:
     """The selection on the data and grid of ``p``: :func:`sysid.sweep.sweep`, then
@@ -349,7 +357,10 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     docstring) once more with a direct term, kept when it scores better (``"open-loop"``:
     only when :func:`sysid.feedback.feedback_test` finds no feedback). A focus or direct term
     chosen on data with feedback is biased by it: a warning says so
-    (:func:`sysid.variants.biased_choices`); ``Selection.feedback`` is the test.
+    (:func:`sysid.variants.biased_choices`); ``Selection.feedback`` is the test. With
+    ``choose_method`` the method of :data:`sysid.variants.ALTERNATIVE` (PARSIM-K for IEM) is
+    identified at the chosen horizons, with the focus and direct term chosen, over the grid's
+    orders, and :func:`sysid.variants.pick_method` decides.
     ``progress(done, total)`` counts models over every run (``total`` is
     ``p.n_models * n_runs(...)``, more once the grid grows). ``horizon`` (k-step prediction)
     or ``window`` (simulation windows, s) replace the score's default (simulation over
@@ -365,21 +376,22 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     count = {"done": 0, "total": p.n_models * n_runs(options, choose_focus=choose_focus,
                                                       choose_feedthrough=choose_feedthrough)}
 
-    def run(q: Plan, opts: Options, *, finishing: bool = True, keep: bool = False
-            ) -> tuple[SweepResult, Selection | None]:
-        """One run of the grid of ``q``: sweep, then finish; progress counts on."""
+    def run(q: Plan, opts: Options, *, finishing: bool = True, keep: bool = False,
+            meth: Method = method) -> tuple[SweepResult, Selection | None]:
+        """One run of the grid of ``q`` with ``meth``: sweep, then finish; progress counts
+        on."""
         start = count["done"]
         report = None if progress is None else (
             lambda done, _n: progress(start + done, count["total"]))
         score_window = None if horizon is not None else q.window_s if window is None else window
-        result = sweep(q.ident, **q.grid, method=method, options=opts, validation=q.val,
+        result = sweep(q.ident, **q.grid, method=meth, options=opts, validation=q.val,
                        horizon=horizon, window=score_window, workers=workers, progress=report,
                        keep_models=keep_models or keep, client=client)
         count["done"] = start + q.n_models
         if not finishing:
             return result, None
         try:
-            return result, finish(q, result, method=method, options=opts)
+            return result, finish(q, result, method=meth, options=opts)
         except DataError as exc:
             log.info("selection: focus %s, direct term %s: %s", opts.focus,
                      getattr(opts, "feedthrough", "-"), exc)
@@ -429,6 +441,19 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
             feedthrough=True))
         chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
     chosen = follow_edges(p, chosen, room=p.room or max_blocks(p.ident), run=again)
+    if choose_method and method.name in ALTERNATIVE:
+        alt = get_method(ALTERNATIVE[method.name])
+        prov = chosen.model.provenance
+        alt_opts = alt.options(focus=prov.get("focus", options.focus),
+                               feedthrough=bool(prov.get("feedthrough", False)),
+                               stability=options.stability)
+        q = dataclasses.replace(p, grid={"pasts": [chosen.best.past],
+                                         "futures": [chosen.best.future],
+                                         "orders": sorted({r.order for r in chosen.result.rows})})
+        count["total"] += q.n_models
+        other, _ = run(q, alt_opts, finishing=False, meth=alt)
+        chosen = pick_method(chosen, other, name=alt.name, refit=lambda row, warnings: (
+            final_model(q, row, warnings, method=alt, options=alt_opts)))
     return dataclasses.replace(chosen, feedback=loop, warnings=(
         *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
                                           feedthrough_chosen=tries_feedthrough(

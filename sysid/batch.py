@@ -59,6 +59,7 @@ class BatchRow:
     past: int | None = None
     future: int | None = None
     order: int | None = None
+    method: str | None = None
     focus: str | None = None
     poles: list[complex] = field(default_factory=list)
     fit: list[float] = field(default_factory=list)
@@ -71,7 +72,8 @@ class BatchRow:
     def record(self) -> dict[str, Any]:
         return {"group": self.group, "sessions": self.sessions, "flights": self.flights,
                 "past": self.past, "future": self.future, "order": self.order,
-                "focus": self.focus, "poles": [[float(p.real), float(p.imag)] for p in self.poles],
+                "method": self.method, "focus": self.focus,
+                "poles": [[float(p.real), float(p.imag)] for p in self.poles],
                 "validation_fit_percent": self.fit, "score_percent": self.score,
                 "stable": self.stable, "model": self.model, "error": self.error,
                 "seconds": round(self.seconds, 3)}
@@ -130,7 +132,8 @@ def _log_unexpected(group: str, exc: Exception) -> None:
 def identify_group(groups: list[list[IOData]], *, method: Method, options: Options,
                    grid: dict[str, list[int]], workers: int = 1,
                    choose_focus: bool = False,
-                   choose_feedthrough: bool | Literal["open-loop"] = False) -> dict[str, Any]:
+                   choose_feedthrough: bool | Literal["open-loop"] = False,
+                   choose_method: bool = False) -> dict[str, Any]:
     """Select and identify one group's model (:func:`sysid.auto.select`, with the focus
     chosen too when ``choose_focus`` and a direct term tried as ``choose_feedthrough`` says,
     as ``sysid identify`` does); runs anywhere."""
@@ -138,9 +141,11 @@ def identify_group(groups: list[list[IOData]], *, method: Method, options: Optio
 
     with one_blas_thread():  # the same bits locally and on a Dask worker (sysid.sweep)
         sel = select(groups, method=method, options=options, workers=workers,
-                     choose_focus=choose_focus, choose_feedthrough=choose_feedthrough, **grid)
+                     choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
+                     choose_method=choose_method, **grid)
     return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
             "order": sel.best.order, "focus": sel.model.provenance.get("focus"),
+            "method": sel.model.provenance.get("method"),
             "fit": [float(f) for f in sel.best.fit], "score": sel.best.score,
             "stable": sel.model.is_stable}
 
@@ -154,12 +159,13 @@ def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
     tmp = out_dir / ".summary.csv.tmp"
     with tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["group", "sessions", "flights", "past", "future", "order", "focus", "poles",
+        w.writerow(["group", "sessions", "flights", "past", "future", "order", "method",
+                    "focus", "poles",
                     "validation_fit_percent", "score_percent", "stable", "model", "error",
                     "seconds"])
         for r in rows:
             w.writerow([r.group, ";".join(r.sessions), r.flights, _cell(r.past),
-                        _cell(r.future), _cell(r.order), r.focus or "",
+                        _cell(r.future), _cell(r.order), r.method or "", r.focus or "",
                         ";".join(f"{p.real:.6g}{p.imag:+.6g}j" for p in r.poles),
                         ";".join(f"{f:.3f}" for f in r.fit),
                         "" if r.score is None else f"{r.score:.3f}", _cell(r.stable),
@@ -177,6 +183,7 @@ def run_batch(
     grid: dict[str, list[int]], workers: int = 1, client: Any | None = None,
     rows: list[BatchRow] | None = None, progress: Callable[[int, int], None] | None = None,
     choose_focus: bool = False, choose_feedthrough: bool | Literal["open-loop"] = False,
+    choose_method: bool = False,
 ) -> list[BatchRow]:
     """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
     group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
@@ -201,7 +208,7 @@ def run_batch(
             row.error = _one_line(outcome)
         else:
             row.past, row.future, row.order = outcome["past"], outcome["future"], outcome["order"]
-            row.focus = outcome["focus"]
+            row.focus, row.method = outcome["focus"], outcome["method"]
             row.poles = list(np.sort_complex(outcome["model"].poles()))
             row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
             row.model = str(path)
@@ -222,11 +229,13 @@ def run_batch(
                 if client is None:
                     outcome: dict[str, Any] | BaseException = identify_group(
                         data, method=method, options=options, grid=grid, workers=workers,
-                        choose_focus=choose_focus, choose_feedthrough=choose_feedthrough)
+                        choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
+                        choose_method=choose_method)
                 else:
                     fut = client.submit(identify_group, data, method=method, options=options,
                                         grid=grid, choose_focus=choose_focus,
-                                        choose_feedthrough=choose_feedthrough, pure=False)
+                                        choose_feedthrough=choose_feedthrough,
+                                        choose_method=choose_method, pure=False)
                     futures[fut] = name
                     pending[name] = (row, t0)
                     continue

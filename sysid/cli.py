@@ -27,6 +27,7 @@ from sysid.cli_options import (
     FORCE_OPTION,
     METHOD_OPTION,
     STABILITY_OPTION,
+    method_chosen,
     method_options,
     model_options,
 )
@@ -163,7 +164,9 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
     choose the same past, future, order and focus. The score is the mean of the per-channel
     fits floored at 0 % (one channel no model can predict cannot decide the ranking); the
     smallest order within one standard error of the best stable score (over blocks of the
-    held-out data, at least 0.1 points) is chosen. Without --focus the grid runs once per
+    held-out data, at least 0.1 points) is chosen. Without --method PARSIM-K is tried beside
+    IEM at the chosen horizons (the smaller order that scores as well wins, IEM on a tie).
+    Without --focus the grid runs once per
     focus and the focus whose choice scores best is taken. The report lists the best --top
     candidates with their fits, warns when the choice is at the edge of the grid or when the
     held-out data are too few to rank the models, and --out saves the chosen model identified
@@ -178,7 +181,7 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
     """
     meth, options = method_options(method, focus=focus, stability=stability)
     sweep_command(session=session, method=meth, options=options, choose_focus=focus is None,
-                  choose_feedthrough="open-loop",
+                  choose_feedthrough="open-loop", choose_method=method_chosen(),
                   pasts=pasts, futures=futures, orders=orders, workers=workers,
                   connect=lambda: scheduler_client(scheduler), validate=validate,
                   horizon=horizon, window_s=window_s, top=top, out=out, force=force,
@@ -237,7 +240,8 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
                              client=client, progress=update,
-                             choose_focus=focus is None, choose_feedthrough="open-loop")
+                             choose_focus=focus is None, choose_feedthrough="open-loop",
+                             choose_method=method_chosen())
     except KeyboardInterrupt:
         n = len(json.loads(summary.read_text())) if summary.exists() else 0
         click.echo(f"interrupted: {n} finished group(s) kept in {summary} and "

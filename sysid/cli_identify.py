@@ -14,6 +14,7 @@ from rich.console import Console
 from cfcommon.cli import check_output
 from sysid.cli_options import (
     METHOD_OPTION,
+    method_chosen,
     method_options,
     model_options,
 )
@@ -61,7 +62,9 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     Without --past/--future/--order they are chosen by validation on held-out data (the
     last session when several are given, else the last 30 % of each experiment; see
     docs/sysid.md): the best candidates are listed with their fits, and a choice at the edge
-    of the grid, or held-out data too few to rank the models, is flagged. Then prints the
+    of the grid, or held-out data too few to rank the models, is flagged. Without --method,
+    PARSIM-K is tried beside IEM at the chosen horizons and the smaller order that scores as
+    well wins (IEM on a tie; docs/sysid.md, "Method"). Then prints the
     poles, whether the model and its predictor A - KC are stable, and the fit on the
     identification data (windowed simulation and one-step prediction), and on each --validate
     session.
@@ -92,6 +95,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                                                   ("orders", order)) if value is not None}
         selection = choose(groups, method=meth, options=options, grid=given, workers=workers,
                            choose_focus=focus is None, quiet=as_json,
+                           choose_method=method_chosen(),
                            choose_feedthrough="open-loop" if feedthrough is None else False)
         model = selection.model
         order, past, future = selection.best.order, selection.best.past, selection.best.future
@@ -119,6 +123,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                   comparisons=[sim, pred, *(r for _, r in checks)],
                   sweep=selection.result if selection else None)
     poles = pole_table(model)
+    method = str(model.provenance.get("method", method))  # the selection may choose it
     if as_json:
         click.echo(json.dumps({
             "sessions": [str(p) for p in sessions], "method": method, "order": order,

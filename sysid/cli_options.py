@@ -17,7 +17,7 @@ from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.stability import STABILITY_MODES
 
 __all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
-           "method_options", "model_options"]
+           "method_chosen", "method_options", "model_options"]
 
 
 class MethodChoice(click.Choice):
@@ -52,6 +52,13 @@ STABILITY_OPTION = click.option(
          "inside; free: as estimated.")
 FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
+
+
+def method_chosen() -> bool:
+    """Whether the running command may choose the method (``--method`` not given): the
+    selection then also tries :data:`sysid.variants.ALTERNATIVE` at its horizons."""
+    ctx = click.get_current_context()
+    return ctx.get_parameter_source("method") is click.core.ParameterSource.DEFAULT
 
 
 def model_options(*, out_help: str) -> Callable[[Callable], Callable]:

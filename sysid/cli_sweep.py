@@ -64,6 +64,7 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
            grid: dict[str, list[int]] | None = None,
            validation: Sequence[IOData] | None = None, choose_focus: bool = False,
            choose_feedthrough: bool | Literal["open-loop"] = False,
+           choose_method: bool = False,
            horizon: int | None = None, window: float | None = None, workers: int = 1,
            connect: Connect | None = None, quiet: bool = False, label: str | None = None
            ) -> Selection:
@@ -80,7 +81,7 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
             progress(label, total=total, quiet=quiet) as update:
         return select_plan(p, method=method, options=options, workers=workers,
                            choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
-                           horizon=horizon, window=window,
+                           choose_method=choose_method, horizon=horizon, window=window,
                            client=client, progress=update)
 
 
@@ -123,12 +124,13 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
                  "best ARX model by AICc)"))
     con.print(f"chosen: past {sel.best.past} ({sel.best.past * dt:.2f} s), future "
               f"{sel.best.future} ({sel.best.future * dt:.2f} s), order {sel.best.order}, "
+              f"method {sel.model.provenance.get('method')}, "
               f"focus {sel.model.provenance.get('focus')}: the smallest order within "
               + ("0.5 points" if sel.tolerance is None else
                  f"{sel.tolerance:.2f} points ({sel.tolerance_basis})")
               + " of the best stable score (score = mean fit with each channel floored at 0 %)")
     for note in (sel.feedback.describe() if sel.feedback else "", sel.focus_note,
-                 sel.feedthrough_note):
+                 sel.feedthrough_note, sel.method_note):
         if note:
             con.print(note)
     for w in sel.warnings:
@@ -148,6 +150,7 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
             "chosen": sel.best.to_record(), "warnings": list(sel.warnings),
             "focus": sel.model.provenance.get("focus"), "focus_note": sel.focus_note,
             "focus_scores": sel.focus_scores, "feedthrough_note": sel.feedthrough_note,
+            "method": sel.model.provenance.get("method"), "method_note": sel.method_note,
             "feedback": None if sel.feedback is None else {
                 "found": sel.feedback.feedback, "lags": sel.feedback.lags,
                 "p_values": dict(zip(sel.feedback.input_names,
@@ -158,6 +161,7 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
 
 def sweep_command(*, session: Path, method: Method, options: Options, choose_focus: bool,
                   choose_feedthrough: bool | Literal["open-loop"] = False,
+                  choose_method: bool = False,
                   pasts: str | None, futures: str | None, orders: str | None, workers: int,
                   connect: Connect, validate: tuple[Path, ...], horizon: int | None,
                   window_s: float | None, top: int, out: Path | None, force: bool,
@@ -187,8 +191,8 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
         sel = choose(groups, method=method, options=options,
                      grid={k: list(v) for k, v in lazy.items()}, validation=val,
                      choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
-                     horizon=horizon, window=window_s, workers=workers, connect=connect,
-                     quiet=as_json, label="sweep")
+                     choose_method=choose_method, horizon=horizon, window=window_s,
+                     workers=workers, connect=connect, quiet=as_json, label="sweep")
         result, rule, grid = sel.result, sel.rule, sel.grid
     except NoStableModel as exc:  # report the grid of the method's default focus anyway
         result, rule, grid = exc.results[0], exc.plan.rule, exc.plan.grid

@@ -16,18 +16,27 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from sysid.methods import Options
-from sysid.parsimony import significantly_better
+from sysid.parsimony import FIXED_TOL, FLOOR_POINTS, significantly_better
 
 if TYPE_CHECKING:  # sysid.auto imports this module
     from sysid.auto import Selection
     from sysid.feedback import FeedbackTest
+    from sysid.model import StateSpaceModel
+    from sysid.sweep import SweepResult, SweepRow
 
-__all__ = ["biased_choices", "focus_order", "n_runs", "pick_feedthrough", "pick_focus",
-           "tries_feedthrough"]
+__all__ = ["ALTERNATIVE", "biased_choices", "focus_order", "n_runs", "pick_feedthrough",
+           "pick_focus", "pick_method", "tries_feedthrough"]
+
+#: The method a selection also tries at the chosen horizons (``choose_method``): PARSIM-K for
+#: IEM. Both are consistent in closed loop; PARSIM-K enforces the causal (Toeplitz) structure
+#: of the future's input terms that IEM's row regressions leave free (Qin, Lin & Ljung 2005),
+#: which keeps its variance down when the future inputs are nearly predictable from the past
+#: (low-passed or slowly held inputs).
+ALTERNATIVE = {"iem": "parsim-k"}
 
 log = logging.getLogger("sysid.auto")  # part of the selection's report
 
@@ -54,6 +63,42 @@ def pick_focus(selections: Sequence[Selection], *, tol: float | None = None) -> 
     log.info("selection: %s", note)
     return dataclasses.replace(chosen, focus_note=note, focus_scores={
         str(s.model.provenance.get("focus")): float(s.best.score) for s in selections})
+
+
+def pick_method(first: Selection, other: SweepResult, *, name: str,
+                refit: Callable[[SweepRow, list[str]], StateSpaceModel]) -> Selection:
+    """The cross-method parsimony rule at ``first``'s horizons. ``other``: the sweep of the
+    method ``name`` there (:data:`ALTERNATIVE`); its parsimonious best row competes with
+    ``first``'s chosen one. Of the two, those whose held-out score is within the tolerance
+    (one standard error of the best score, at least 0.1 points: ``first.tolerance``) of the
+    best stable score of either method, the one of smaller order wins; ``first`` (the
+    caller's method) on a tie. When ``other`` wins, ``refit(row, warnings)`` identifies it
+    on all the data (:func:`sysid.refit.final_model`) and the selection keeps ``first``'s
+    candidates, grid and warnings (the search for the horizons was ``first``'s). The reason
+    is in :attr:`Selection.method_note`."""
+    mine = str(first.model.provenance.get("method"))
+    ranked = other.ranked(require_stable=True)
+    if not ranked:
+        note = f"method {mine}: {name} has no stable model at past {first.best.past}, " \
+               f"future {first.best.future}"
+        log.info("selection: %s", note)
+        return dataclasses.replace(first, method_note=note)
+    row = other.best()
+    tol = max(FIXED_TOL if first.tolerance is None else first.tolerance, FLOOR_POINTS)
+    top = max(first.result.ranked(require_stable=True)[0].score, ranked[0].score)
+    first_close, row_close = (r.score >= top - tol for r in (first.best, row))
+    wins = row_close and (row.order < first.best.order or not first_close)
+    note = (f"method {name if wins else mine}: at past {first.best.past}, future "
+            f"{first.best.future} {mine} chose order {first.best.order} (held-out "
+            f"{first.best.score:.1f}), {name} order {row.order} ({row.score:.1f}); the smaller "
+            f"order within {tol:.2g} points of the best ({top:.1f}) wins, {mine} on a tie")
+    log.info("selection: %s", note)
+    if not wins:
+        return dataclasses.replace(first, method_note=note)
+    warnings = [w for w in first.warnings if not w.startswith("identified again on all")]
+    model = refit(row, warnings)
+    return dataclasses.replace(first, best=row, model=model, warnings=tuple(warnings),
+                               method_note=note)
 
 
 def n_runs(options: Options, *, choose_focus: bool, choose_feedthrough: bool = False) -> int:

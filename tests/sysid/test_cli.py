@@ -141,7 +141,7 @@ def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> Non
 
     def key(sel: dict) -> tuple:
         return (sel["chosen"]["past"], sel["chosen"]["future"], sel["chosen"]["order"],
-                sel["focus"])
+                sel["focus"], sel["method"])
 
     assert key(report) == key(chose) and report["grid"] == chose["grid"]
     # the grid is set by the data's memory (samples), and the report says it
@@ -153,17 +153,28 @@ def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> Non
     assert report["best"] == report["chosen"] and report["rule"] == chose["rule"]
     model = sysid.load_model(out)
     assert (model.provenance["past"], model.provenance["future"], model.A.shape[0],
-            model.provenance["focus"]) == key(chose)
+            model.provenance["focus"], model.provenance["method"]) == key(chose)
     assert pole_error(flights[0].system.poles(), model.poles()) < 0.03
+    # no --method: PARSIM-K was tried at the chosen horizons, and the report says which won
+    assert chose["method_note"].startswith(f"method {chose['method']}: at past")
+    assert json.loads(ident.stdout)["method"] == chose["method"]
+
+
+def test_a_named_method_is_not_replaced(flights) -> None:
+    res = run("sweep", flights[0].path, "--pasts", "10", "--futures", "10", "--orders", "3,4",
+              "--method", "iem", "--json")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert report["method"] == "iem" and report["method_note"] == ""
 
 
 def test_sweep_reports_the_best_candidates_and_the_grid_edge(flights) -> None:
     res = run("sweep", flights[0].path, "--pasts", "10,20", "--futures", "10",
-              "--orders", "2,3", "--focus", "prediction", "--top", "3")
+              "--orders", "2,3", "--focus", "prediction", "--top", "3", "--method", "iem")
     assert res.exit_code == 0, res.output
     text = " ".join(res.stdout.split())
     assert "best 3 candidates of 4" in text and "acc.z" in text and "gyro.x" in text
-    assert "chosen: past" in text and "order 3, focus prediction" in text
+    assert "chosen: past" in text and "order 3, method iem, focus prediction" in text
     assert "warning: order 3 is the largest tried: the best may lie beyond" in text
     assert "futures [10], orders [2, 3]" in text  # the orders swept, not a range of them
 
