@@ -3,6 +3,7 @@
 >>> import sysid
 >>> data = sysid.IOData(u=u, y=y, dt=0.02)                       # doctest: +SKIP
 >>> model = sysid.iem(data, order=8, past=60, future=17)          # doctest: +SKIP
+>>> model = sysid.identify(data).model   # horizons, order, focus, method chosen  # doctest: +SKIP
 """
 
 from sysid.comparison import CompareResult
@@ -21,6 +22,7 @@ from sysid.iem import iem
 from sysid.kalman import stable_predictor
 from sysid.model import StateSpaceModel, load_model
 from sysid.moesp import po_moesp
+from sysid.no_knobs import identify
 from sysid.order import InformationCriteria, information_criteria, singular_values
 from sysid.parsim import parsim_k
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams, trim, zoh_resample
@@ -47,6 +49,7 @@ __all__ = [
     "compare",
     "detrend_data",
     "fit_percent",
+    "identify",
     "iem",
     "information_criteria",
     "iodata_from_streams",

@@ -332,7 +332,7 @@ def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
            orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
            workers: int = 1, progress: Callable[[int, int], None] | None = None,
            keep_models: bool = False, choose_focus: bool = False,
-           choose_feedthrough: bool = False, choose_method: bool = False,
+           choose_feedthrough: bool | Literal["open-loop"] = False, choose_method: bool = False,
            horizon: int | None = None, window: float | None = None,
            client: Any | None = None) -> Selection:
     """Choose past, future and order (module docstring) and identify the chosen model on all
