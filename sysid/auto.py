@@ -69,6 +69,7 @@ from sysid.parsimony import (
     tolerance,
     tolerance_basis,
 )
+from sysid.quirks import data_warnings
 from sysid.refit import final_model
 from sysid.sweep import SweepResult, SweepRow, sweep
 from sysid.validate import simulation_window
@@ -454,7 +455,9 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
         other, _ = run(q, alt_opts, finishing=False, meth=alt)
         chosen = pick_method(chosen, other, name=alt.name, refit=lambda row, warnings: (
             final_model(q, row, warnings, method=alt, options=alt_opts)))
+    # outliers and drift in every record the selection used (held-out parts included)
+    quirks = data_warnings([*p.everything, *(p.val if p.given_validation else [])])
     return dataclasses.replace(chosen, feedback=loop, warnings=(
-        *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
+        *quirks, *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
                                           feedthrough_chosen=tries_feedthrough(
                                               options, choose_feedthrough))))

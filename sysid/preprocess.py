@@ -35,11 +35,13 @@ import numpy as np
 
 from sysid.data import IOData
 from sysid.errors import DataError, DimensionError
+from sysid.quirks import outlier_masks
 
 __all__ = [
     "IOTrend",
     "Stream",
     "Trend",
+    "despike",
     "detrend",
     "detrend_data",
     "iodata_from_streams",
@@ -318,3 +320,35 @@ def detrend_data(data: IOData, *, kind: TrendKind = "mean") -> tuple[IOData, IOT
     u, tu = detrend(data.u, time=time, kind=kind)
     y, ty = detrend(data.y, time=time, kind=kind)
     return _replace_arrays(data, u=u, y=y), IOTrend(u=tu, y=ty)
+
+
+def despike(data: IOData, *, mask: np.ndarray | None = None) -> tuple[IOData, int]:
+    """Replace outliers by linear interpolation between the nearest good samples of their
+    channel (the nearest good value at a record's ends).
+
+    Parameters
+    ----------
+    data : one record, ``u`` (N, m), ``y`` (N, l).
+    mask : (N, m + l) bool, the samples to replace, columns as ``data.w`` (inputs, then
+        outputs); default those :func:`sysid.quirks.outlier_masks` finds in ``data`` alone.
+
+    Returns
+    -------
+    The repaired copy (names, units, dt and source kept) and how many samples were replaced.
+    """
+    if mask is None:
+        mask = outlier_masks([data])[0]
+    w = np.array(data.w, dtype=float)
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape != w.shape:
+        raise DimensionError(f"mask has shape {mask.shape}; pass {w.shape} (samples, inputs "
+                             "then outputs) to match the data")
+    k = np.arange(w.shape[0])
+    for j in np.flatnonzero(mask.any(axis=0)):
+        good = ~mask[:, j]
+        if not good.any():
+            raise DataError(f"every sample of channel {j} is marked; nothing to interpolate "
+                            "from")
+        w[~good, j] = np.interp(k[~good], k[good], w[good, j])
+    m = data.n_inputs
+    return _replace_arrays(data, u=w[:, :m], y=w[:, m:]), int(mask.sum())
