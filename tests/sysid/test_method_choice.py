@@ -52,3 +52,23 @@ def test_low_passed_inputs_choose_parsim_k_at_the_true_order() -> None:
                          options=iem.options(focus=both.model.provenance["focus"]))
     assert _truth(both.model, val) > _truth(alone, val)
 
+
+
+def test_iem_warns_when_the_past_predicts_the_future_inputs(caplog) -> None:
+    """IEM at a fixed order on low-passed inputs says so and names PARSIM-K; on white inputs
+    it is silent. The share of the future inputs the past leaves unpredicted is in the
+    provenance."""
+    ident, _, n = _low_passed(3)
+    with caplog.at_level("WARNING", logger="sysid.iem"):
+        model = sysid.iem(ident, order=n, past=20, future=20)
+    assert model.provenance["future_input_innovation"] < 1e-2
+    [warned] = [r.getMessage() for r in caplog.records if r.name == "sysid.iem"]
+    assert "predicts the future inputs" in warned and "parsim-k" in warned
+    caplog.clear()
+    rng = np.random.default_rng(0)
+    white = sysid.IOData(u=rng.standard_normal((1000, 2)), y=rng.standard_normal((1000, 2)),
+                         dt=0.01)
+    with caplog.at_level("WARNING", logger="sysid.iem"):
+        model = sysid.iem(white, order=2, past=10, future=10)
+    assert model.provenance["future_input_innovation"] > 0.8
+    assert not [r for r in caplog.records if "predicts the future inputs" in r.getMessage()]
