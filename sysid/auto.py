@@ -46,6 +46,7 @@ same data and grid they choose the same past, future, order and focus.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 from collections import Counter
@@ -56,9 +57,10 @@ from typing import Any, Literal
 import numpy as np
 
 from sysid.data import IOData
-from sysid.errors import DataError
+from sysid.errors import DataError, DimensionError
 from sysid.feedback import FeedbackTest, feedback_test
 from sysid.growth import follow_edges
+from sysid.iem import without_input_warning
 from sysid.memory import predictor_memory
 from sysid.methods import Method, Options, get_method
 from sysid.model import StateSpaceModel
@@ -269,6 +271,10 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
     everything = [e for g in groups for e in g]
     if validation:
         ident, val = everything, list(validation)
+        shapes = {(d.n_inputs, d.n_outputs) for d in [*ident, *val]}
+        if len(shapes) > 1:
+            raise DimensionError(f"the validation records' channels differ from the "
+                                 f"identification data's (inputs, outputs): {sorted(shapes)}")
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)
@@ -328,6 +334,26 @@ class NoStableModel(DataError):
         self.results = tuple(results)
 
 
+def _no_stable(p: Plan, results: Sequence[SweepResult], *, either_focus: bool) -> NoStableModel:
+    """Why a grid gave no model to choose: every model failed (the commonest reason), or none
+    is stable; the advice fits what the caller fixed."""
+    failed: Counter[str] = Counter()
+    for result in results:
+        failed.update(dict(result.failures()))
+    n_all = sum(len(result.rows) for result in results)
+    if failed and failed.total() == n_all:  # none was identified: say why
+        (why, n), = failed.most_common(1)
+        return NoStableModel(f"all {n_all} models of the grid failed" + (
+            f": {why}" if n == n_all else f" ({n} of them: {why})"), plan=p, results=results)
+    fixed_all = {"pasts", "futures", "orders"} <= set(p.fixed)
+    advice = ("other horizons or order, another method (--method), other channels or a longer "
+              "window" if fixed_all else "give horizons and an order (--past/--future/--order), "
+              "other channels or a longer window")
+    return NoStableModel(f"none of the {n_all} models of the grid is stable"
+                         + (", with either focus" if either_focus else "") + f"; {advice}",
+                         plan=p, results=results)
+
+
 def select(groups: Sequence[Sequence[IOData]], *, method: Method, options: Options,
            pasts: Sequence[int] | None = None, futures: Sequence[int] | None = None,
            orders: Sequence[int] | None = None, validation: Sequence[IOData] | None = None,
@@ -367,97 +393,105 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     or ``window`` (simulation windows, s) replace the score's default (simulation over
     ``p.window_s``); ``client`` (Dask) runs the sweeps on a cluster. Raises
     :class:`NoStableModel` when no model of the grid is stable."""
-    loop = feedback_test(p.ident) if choose_focus or choose_feedthrough else None
-    if loop is not None:
-        log.info("selection: %s", loop.describe())
-    if choose_feedthrough == "open-loop":  # a direct term only where no feedback was found
-        choose_feedthrough = loop is not None and loop.feedback is False
-    variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
-                if choose_focus else [options])
-    count = {"done": 0, "total": p.n_models * n_runs(options, choose_focus=choose_focus,
-                                                      choose_feedthrough=choose_feedthrough)}
+    quiet = without_input_warning() if choose_method and method.name in ALTERNATIVE \
+        else contextlib.nullcontext()  # PARSIM-K is tried: IEM need not advise it
+    with quiet:
+        loop = feedback_test(p.ident) if choose_focus or choose_feedthrough else None
+        if loop is not None:
+            log.info("selection: %s", loop.describe())
+        if choose_feedthrough == "open-loop":  # a direct term only where no feedback was found
+            choose_feedthrough = loop is not None and loop.feedback is False
+        variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
+                    if choose_focus else [options])
+        # the method choice's sweep (one pair of horizons over the orders) counted from the start
+        alt_models = len(p.grid["orders"]) if choose_method and method.name in ALTERNATIVE else 0
+        count = {"done": 0, "total": alt_models + p.n_models * n_runs(
+            options, choose_focus=choose_focus, choose_feedthrough=choose_feedthrough)}
 
-    def run(q: Plan, opts: Options, *, finishing: bool = True, keep: bool = False,
-            meth: Method = method) -> tuple[SweepResult, Selection | None]:
-        """One run of the grid of ``q`` with ``meth``: sweep, then finish; progress counts
-        on."""
-        start = count["done"]
-        report = None if progress is None else (
-            lambda done, _n: progress(start + done, count["total"]))
-        score_window = None if horizon is not None else q.window_s if window is None else window
-        result = sweep(q.ident, **q.grid, method=meth, options=opts, validation=q.val,
-                       horizon=horizon, window=score_window, workers=workers, progress=report,
-                       keep_models=keep_models or keep, client=client)
-        count["done"] = start + q.n_models
-        if not finishing:
-            return result, None
-        try:
-            return result, finish(q, result, method=meth, options=opts)
-        except DataError as exc:
-            log.info("selection: focus %s, direct term %s: %s", opts.focus,
-                     getattr(opts, "feedthrough", "-"), exc)
-            return result, None
+        def run(q: Plan, opts: Options, *, finishing: bool = True, keep: bool = False,
+                meth: Method = method) -> tuple[SweepResult, Selection | None]:
+            """One run of the grid of ``q`` with ``meth``: sweep, then finish; progress counts
+            on."""
+            start = count["done"]
+            report = None if progress is None else (
+                lambda done, _n: progress(start + done, count["total"]))
+            score_window = None if horizon is not None else q.window_s if window is None else window
+            result = sweep(q.ident, **q.grid, method=meth, options=opts, validation=q.val,
+                           horizon=horizon, window=score_window, workers=workers, progress=report,
+                           keep_models=keep_models or keep, client=client)
+            count["done"] = start + q.n_models
+            if not finishing:
+                return result, None
+            try:
+                return result, finish(q, result, method=meth, options=opts)
+            except DataError as exc:
+                log.info("selection: focus %s, direct term %s: %s", opts.focus,
+                         getattr(opts, "feedthrough", "-"), exc)
+                return result, None
 
-    def again(q: Plan, swept: dict[str, list[int]], sel: Selection) -> Selection | None:
-        """``swept`` with the focus and direct term ``sel`` chose, chosen among its rows and
-        those of ``sel`` on ``q`` (:func:`sysid.growth.follow_edges`)."""
-        prov = sel.model.provenance
-        opts = dataclasses.replace(options, focus=prov.get("focus", options.focus))
-        if hasattr(opts, "feedthrough"):
-            opts = dataclasses.replace(opts, feedthrough=bool(prov.get("feedthrough", False)))
-        part = dataclasses.replace(q, grid=swept, window_s=sel.result.window or q.window_s)
-        count["total"] += part.n_models
-        result, _ = run(part, opts, finishing=False, keep=True)
-        seen = {(r.past, r.future, r.order) for r in sel.result.rows}
-        rows = [*sel.result.rows, *(r for r in result.rows
-                                    if (r.past, r.future, r.order) not in seen)]
-        merged = dataclasses.replace(sel.result, rows=tuple(
-            sorted(rows, key=lambda r: (r.past, r.future, r.order))))
-        try:
-            return finish(q, merged, method=method, options=opts)
-        except DataError:
-            return None
+        def again(q: Plan, swept: dict[str, list[int]], sel: Selection) -> Selection | None:
+            """``swept`` with the focus and direct term ``sel`` chose, chosen among its rows and
+            those of ``sel`` on ``q`` (:func:`sysid.growth.follow_edges`)."""
+            prov = sel.model.provenance
+            opts = dataclasses.replace(options, focus=prov.get("focus", options.focus))
+            if hasattr(opts, "feedthrough"):
+                opts = dataclasses.replace(opts, feedthrough=bool(prov.get("feedthrough", False)))
+            part = dataclasses.replace(q, grid=swept, window_s=sel.result.window or q.window_s)
+            count["total"] += part.n_models
+            result, _ = run(part, opts, finishing=False, keep=True)
+            seen = {(r.past, r.future, r.order) for r in sel.result.rows}
+            rows = [*sel.result.rows, *(r for r in result.rows
+                                        if (r.past, r.future, r.order) not in seen)]
+            merged = dataclasses.replace(sel.result, rows=tuple(
+                sorted(rows, key=lambda r: (r.past, r.future, r.order))))
+            try:
+                return finish(q, merged, method=method, options=opts)
+            except DataError:
+                return None
 
-    runs = [run(p, opts) for opts in variants]
-    selections = [sel for _, sel in runs if sel is not None]
-    if not selections:
-        results = [result for result, _ in runs]
-        failed: Counter[str] = Counter()
-        for result in results:
-            failed.update(dict(result.failures()))
-        n_all = sum(len(result.rows) for result in results)
-        if failed and failed.total() == n_all:  # none was identified: say why
-            (why, n), = failed.most_common(1)
-            raise NoStableModel(f"all {n_all} models of the grid failed" + (
-                f": {why}" if n == n_all else f" ({n} of them: {why})"), plan=p,
-                results=results)
-        raise NoStableModel(f"none of the {p.n_models * len(variants)} models of the grid is "
-                            "stable" + (", with either focus" if choose_focus else "")
-                            + "; give horizons and an order (--past/--future/--order), other "
-                              "channels or a longer window", plan=p, results=results)
-    chosen = pick_focus(selections) if choose_focus else selections[0]
-    if tries_feedthrough(options, choose_feedthrough):
-        _, with_d = run(p, dataclasses.replace(
-            options, focus=chosen.model.provenance.get("focus", options.focus),
-            feedthrough=True))
-        chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
-    chosen = follow_edges(p, chosen, room=p.room or max_blocks(p.ident), run=again)
-    if choose_method and method.name in ALTERNATIVE:
-        alt = get_method(ALTERNATIVE[method.name])
-        prov = chosen.model.provenance
-        alt_opts = alt.options(focus=prov.get("focus", options.focus),
-                               feedthrough=bool(prov.get("feedthrough", False)),
-                               stability=options.stability)
-        q = dataclasses.replace(p, grid={"pasts": [chosen.best.past],
-                                         "futures": [chosen.best.future],
-                                         "orders": sorted({r.order for r in chosen.result.rows})})
-        count["total"] += q.n_models
-        other, _ = run(q, alt_opts, finishing=False, meth=alt)
-        chosen = pick_method(chosen, other, name=alt.name, refit=lambda row, warnings: (
-            final_model(q, row, warnings, method=alt, options=alt_opts)))
-    # outliers and drift in every record the selection used (held-out parts included)
-    quirks = data_warnings([*p.everything, *(p.val if p.given_validation else [])])
-    return dataclasses.replace(chosen, feedback=loop, warnings=(
-        *quirks, *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
-                                          feedthrough_chosen=tries_feedthrough(
-                                              options, choose_feedthrough))))
+        runs = [run(p, opts) for opts in variants]
+        selections = [sel for _, sel in runs if sel is not None]
+        if not selections:
+            error = _no_stable(p, [result for result, _ in runs], either_focus=choose_focus)
+            if not (choose_method and method.name in ALTERNATIVE):
+                raise error
+            alt = get_method(ALTERNATIVE[method.name])  # the whole grid with the other method
+            log.info("selection: %s; trying %s", error, alt.name)
+            try:
+                sel = select_plan(p, method=alt, options=alt.options(
+                    focus=options.focus, feedthrough=getattr(options, "feedthrough", False),
+                    stability=options.stability), workers=workers, progress=progress,
+                    keep_models=keep_models, choose_focus=choose_focus,
+                    choose_feedthrough=choose_feedthrough, horizon=horizon, window=window,
+                    client=client)
+            except NoStableModel:
+                raise error from None
+            return dataclasses.replace(sel, method_note=f"method {alt.name}: {method.name}: "
+                                                        f"{error}; {alt.name} on the same grid "
+                                                        "chose the model")
+        chosen = pick_focus(selections) if choose_focus else selections[0]
+        if tries_feedthrough(options, choose_feedthrough):
+            _, with_d = run(p, dataclasses.replace(
+                options, focus=chosen.model.provenance.get("focus", options.focus),
+                feedthrough=True))
+            chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
+        chosen = follow_edges(p, chosen, room=p.room or max_blocks(p.ident), run=again)
+        if choose_method and method.name in ALTERNATIVE:
+            alt = get_method(ALTERNATIVE[method.name])
+            prov = chosen.model.provenance
+            alt_opts = alt.options(focus=prov.get("focus", options.focus),
+                                   feedthrough=bool(prov.get("feedthrough", False)),
+                                   stability=options.stability)
+            orders = sorted({r.order for r in chosen.result.rows})
+            q = dataclasses.replace(p, grid={"pasts": [chosen.best.past],
+                                             "futures": [chosen.best.future], "orders": orders})
+            count["total"] += q.n_models - alt_models
+            other, _ = run(q, alt_opts, finishing=False, meth=alt)
+            chosen = pick_method(chosen, other, name=alt.name, refit=lambda row, warnings: (
+                final_model(q, row, warnings, method=alt, options=alt_opts)))
+        # outliers and drift in every record the selection used (held-out parts included)
+        quirks = data_warnings([*p.everything, *(p.val if p.given_validation else [])])
+        return dataclasses.replace(chosen, feedback=loop, warnings=(
+            *quirks, *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
+                                              feedthrough_chosen=tries_feedthrough(
+                                                  options, choose_feedthrough))))

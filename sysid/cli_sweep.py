@@ -48,6 +48,7 @@ from sysid.data import IOData
 from sysid.errors import DataError, HorizonError
 from sysid.methods import Method, Options
 from sysid.sweep import SweepRow
+from sysid.variants import ALTERNATIVE
 
 __all__ = ["MAX_SWEEP_MODELS", "check_sweep_horizons", "choose", "print_selection",
            "selection_json", "sweep_command"]
@@ -75,7 +76,8 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
     if p.n_models > MAX_SWEEP_MODELS:
         raise DataError(f"the grid has {p.n_models} models, more than {MAX_SWEEP_MODELS}; use "
                         "coarser steps (START:STOP:STEP) and refine around the best")
-    total = p.n_models * n_runs(options, choose_focus=choose_focus)
+    total = p.n_models * n_runs(options, choose_focus=choose_focus) + (
+        len(p.grid["orders"]) if choose_method and method.name in ALTERNATIVE else 0)
     label = label or "choosing horizons, order" + (" and focus" if choose_focus else "")
     with (connect or contextlib.nullcontext)() as client, \
             progress(label, total=total, quiet=quiet) as update:
@@ -114,7 +116,8 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
     shown = min(top, len(sel.result.ranked()))
     _candidates(con, rows, names=names, chosen=sel.best,
                 title=f"best {shown} candidates of {len(sel.result.rows)}"
-                      + ("" if len(rows) == shown else " and the chosen one (bold)")
+                      + ("" if len(rows) == shown else
+                         f" and the chosen one (bold, {sel.model.provenance.get('method')})")
                       + f" (fit [%], {sel.scoring} of held-out data)")
     dt = sel.model.dt
     con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
@@ -207,7 +210,7 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
     if as_json:
         chosen = selection_json(sel, top=top) if sel is not None else {
             "rule": rule, "grid": grid, "chosen": None, "warnings": [], "focus": None,
-            "focus_note": "", "focus_scores": None}
+            "focus_note": "", "focus_scores": None, "method": None, "method_note": ""}
         chosen.pop("candidates", None)  # listed as "top"
         click.echo(json.dumps({
             "session": str(session), "n_models": len(result.rows), "n_failed": n_failed,

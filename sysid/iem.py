@@ -60,7 +60,7 @@ from sysid.realize import (
 from sysid.stability import Stability, check_stability, stabilize
 
 __all__ = ["PREDICTABLE_INPUTS", "future_input_innovation", "iem", "iem_direct", "iem_order",
-           "iem_signals", "realize_iem", "without_stability_cost"]
+           "iem_signals", "realize_iem", "without_input_warning", "without_stability_cost"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +68,10 @@ log = logging.getLogger(__name__)
 #: inside :func:`without_stability_cost`.
 _STABILITY_COST: contextvars.ContextVar[bool] = contextvars.ContextVar("iem_stability_cost",
                                                                        default=True)
+#: Whether :func:`iem` warns of predictable future inputs; off inside
+#: :func:`without_input_warning`.
+_INPUT_WARNING: contextvars.ContextVar[bool] = contextvars.ContextVar("iem_input_warning",
+                                                                     default=True)
 
 
 @contextlib.contextmanager
@@ -122,6 +126,17 @@ def _innovation(products: DataProducts) -> np.ndarray:
     explained = np.sum(g_zu * coef, axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.clip(np.where(var > 0, 1.0 - explained / var, 1.0), 0.0, 1.0)
+
+
+@contextlib.contextmanager
+def without_input_warning() -> Iterator[None]:
+    """Inside the block :func:`iem` does not warn of predictable future inputs (a selection
+    that tries PARSIM-K beside IEM: the warning's advice is being followed)."""
+    token = _INPUT_WARNING.set(False)
+    try:
+        yield
+    finally:
+        _INPUT_WARNING.reset(token)
 
 
 _BK = ("state", "thesis")
@@ -329,7 +344,7 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
     m, ell = products.n_inputs, products.n_outputs
     check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)
     innovation = float(np.min(future_input_innovation(products), initial=1.0))
-    if innovation < PREDICTABLE_INPUTS:
+    if innovation < PREDICTABLE_INPUTS and _INPUT_WARNING.get():
         log.warning("IEM: the past predicts the future inputs to within %.2g of their variance "
                     "(low-passed or slowly varying inputs): IEM's row regressions cannot tell "
                     "their terms from the past's, and its model can be far off; PARSIM-K "

@@ -26,6 +26,14 @@ from sysid.stability import Stability
 __all__ = ["identify"]
 
 
+def _records(data: object, *, name: str) -> list[IOData]:
+    records = [data] if isinstance(data, IOData) else (
+        list(data) if isinstance(data, Sequence) and not isinstance(data, str) else [])
+    if not records or not all(isinstance(d, IOData) for d in records):
+        raise ParameterError(f"{name}: pass an IOData or a list of them")
+    return records
+
+
 def identify(data: IOData | Sequence[IOData], *, method: str | None = None,
              focus: Focus | None = None, feedthrough: bool | None = None,
              stability: Stability = "auto",
@@ -53,10 +61,13 @@ def identify(data: IOData | Sequence[IOData], *, method: str | None = None,
     Returns:
         The :class:`~sysid.auto.Selection`; ``.model`` is the ``StateSpaceModel``.
     """
-    flights = [data] if isinstance(data, IOData) else list(data)
-    if not flights or not all(isinstance(d, IOData) for d in flights):
-        raise ParameterError("data: pass an IOData or a list of them")
-    val = [validation] if isinstance(validation, IOData) else validation
+    flights = _records(data, name="data")
+    val = None if validation is None else _records(validation, name="validation")
+    for name, values in (("pasts", pasts), ("futures", futures), ("orders", orders)):
+        if values is not None and not len(values):
+            raise ParameterError(f"{name}: pass at least one value, or None for the default")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ParameterError(f"workers={workers!r}; pass a whole number >= 1")
     meth = get_method(DEFAULT_METHOD if method is None else method)
     values: dict[str, object] = {"stability": stability}
     if focus is not None:

@@ -288,22 +288,24 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
     :data:`IMPRECISE_POINTS` (the held-out score itself says little of the model, whichever
     order wins), or there are fewer than :data:`MIN_BLOCKS` blocks to measure it on (under
     about 100 held-out samples). When a few blocks make most of that spread
-    (:func:`dominant_blocks`) the warning says so instead of asking for more data: the data
-    are not too few, a few stretches of them are odd (outliers or a disturbance there).
+    (:func:`dominant_blocks`, and the standard error without them is under
+    :data:`UNRESOLVED_POINTS`) the warning names them and where to look (outliers or a
+    disturbance there) instead of only asking for more data.
     ``ranked``: the candidates, best score first; ``n_samples``: held-out samples. None when
     the score is precise enough, or ranks one order clearly above the rest."""
     se = score_se(ranked[0])
     remedy = "give longer or more validation flights (--validate)"
     if np.isfinite(se) and se >= UNRESOLVED_POINTS:
         few = dominant_blocks(ranked[0])
-        if few is not None:
+        if few is not None and few[1] < UNRESOLVED_POINTS:  # they do make the spread
             blocks, rest = few
-            remedy = (f"not for want of data: {blocks.size} of its {ranked[0].errors.shape[0]} "
-                      f"held-out blocks (blocks {', '.join(str(b + 1) for b in blocks)}, in "
-                      f"held-out order) make most of that spread (+- {rest:.2f} points "
-                      f"without them): outliers or a disturbance there? look for outliers "
-                      f"(sysid.quirks.outlier_warnings), replace them (sysid.preprocess."
-                      f"despike), or validate on other flights (--validate)")
+            which = (f"block {blocks[0] + 1} makes" if blocks.size == 1 else
+                     f"blocks {', '.join(str(b + 1) for b in blocks)} make")
+            remedy = (f"most of that spread comes from {blocks.size} of its "
+                      f"{ranked[0].errors.shape[0]} held-out blocks ({which} it, in held-out "
+                      f"order; +- {rest:.2f} points without them): look there for outliers "
+                      f"(sysid.quirks.outlier_warnings; sysid.preprocess.despike replaces "
+                      f"them) or a disturbance, or validate on other flights (--validate)")
         orders = sorted({r.order for r in close_to_best(ranked)})
         if len(orders) > 1:
             return (f"the {n_samples} held-out samples cannot rank the models: they measure "

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 
 from sysid.data import IOData
-from sysid.errors import DataError, DimensionError
+from sysid.errors import DataError, DimensionError, ParameterError
 from sysid.quirks import outlier_masks
 
 __all__ = [
@@ -336,6 +336,8 @@ def despike(data: IOData, *, mask: np.ndarray | None = None) -> tuple[IOData, in
     -------
     The repaired copy (names, units, dt and source kept) and how many samples were replaced.
     """
+    if not isinstance(data, IOData):
+        raise ParameterError(f"data: pass one IOData record, not {type(data).__name__}")
     if mask is None:
         mask = outlier_masks([data])[0]
     w = np.array(data.w, dtype=float)

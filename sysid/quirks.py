@@ -47,6 +47,7 @@ from statistics import NormalDist
 import numpy as np
 
 from sysid.data import IOData
+from sysid.errors import DimensionError, ParameterError
 from sysid.memory import predictor_memory
 
 __all__ = ["AR_ORDER", "DRIFT_RATIO", "DRIFT_T", "FALSE_ALARM", "MAX_LAG", "MIN_THRESHOLD",
@@ -202,12 +203,26 @@ def _standardised(flights: Sequence[IOData]) -> tuple[list[np.ndarray], np.ndarr
     return [w / np.where(scale > 0, scale, 1.0) for w in ws], scale
 
 
+def _records(flights: Sequence[IOData]) -> list[IOData]:
+    """``flights`` as a list, checked: at least one ``IOData``, all with the same channels."""
+    if isinstance(flights, IOData):
+        flights = [flights]
+    flights = list(flights) if isinstance(flights, Sequence) else []
+    if not flights or not all(isinstance(d, IOData) for d in flights):
+        raise ParameterError("flights: pass a list of IOData records (at least one)")
+    shapes = {(d.n_inputs, d.n_outputs) for d in flights}
+    if len(shapes) > 1:
+        raise DimensionError(f"the records have different channels (inputs, outputs): "
+                             f"{sorted(shapes)}; pass records of one system")
+    return flights
+
+
 def _distances(flights: Sequence[IOData], *, lag: int | None, alpha: float
                ) -> tuple[list[np.ndarray], float]:
     """Each sample's distance (N, c) in robust standard deviations (NaN where untested: the
     first and last ``lag`` samples, records too short, data too few for the predictors) and
     the threshold, after the second fit."""
-    flights = list(flights)
+    flights = _records(flights)
     lag = _lag(flights, lag)
     out = [np.full(d.w.shape, np.nan) for d in flights]
     usable = [i for i, d in enumerate(flights) if d.n_samples >= 2 * lag + 2]
@@ -291,10 +306,11 @@ def find_outliers(flights: Sequence[IOData], *, lag: int | None = None,
 
 
 def _place(flights: Sequence[IOData], record: int, sample: int) -> str:
-    """``"5.556 s into log00.h5 airborne-1"`` (the record's source, else its number)."""
+    """``"5.556 s from the start of log00.h5#airborne-1"`` (the record's source, else its
+    number): the time from the record's first sample, not the session's clock."""
     t = f"{sample * flights[record].dt:.6g} s"
     if flights[record].source:
-        return f"{t} into {flights[record].source}"
+        return f"{t} from the start of {flights[record].source}"
     return t if len(flights) == 1 else f"{t} of record {record + 1}"
 
 
@@ -354,6 +370,7 @@ def trend_ratios(flights: Sequence[IOData]) -> tuple[np.ndarray, np.ndarray]:
     ratio, t : (records, m + l) arrays, columns as ``IOData.w``; 0 for a constant channel
     or a record of fewer than 20 samples.
     """
+    flights = _records(flights)
     shape = (len(flights), flights[0].w.shape[1])
     ratio, t = np.zeros(shape), np.zeros(shape)
     for i, d in enumerate(flights):
@@ -426,7 +443,4 @@ def data_warnings(flights: Sequence[IOData]) -> list[str]:
     -------
     list of str, empty for clean data.
     """
-    flights = list(flights)
-    if not flights:
-        return []
-    return [*outlier_warnings(flights), *drift_warnings(flights)]
+    return [*outlier_warnings(_records(flights)), *drift_warnings(_records(flights))]

@@ -79,8 +79,11 @@ def pick_method(first: Selection, other: SweepResult, *, name: str,
     mine = str(first.model.provenance.get("method"))
     ranked = other.ranked(require_stable=True)
     if not ranked:
-        note = f"method {mine}: {name} has no stable model at past {first.best.past}, " \
-               f"future {first.best.future}"
+        failed = other.failures()
+        why = (f"failed ({failed[0][0]})" if failed and sum(n for _, n in failed) ==
+               len(other.rows) else "has no stable model")
+        note = (f"method {mine}: {name} {why} at past {first.best.past}, future "
+                f"{first.best.future}")
         log.info("selection: %s", note)
         return dataclasses.replace(first, method_note=note)
     row = other.best()

@@ -5,10 +5,11 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 import scipy.signal
 
 import sysid
-from sysid.auto import select
+from sysid.auto import NoStableModel, select
 from sysid.methods import get_method
 from tests.sysid.systems import random_stable_system
 
@@ -72,3 +73,43 @@ def test_iem_warns_when_the_past_predicts_the_future_inputs(caplog) -> None:
         model = sysid.iem(white, order=2, past=10, future=10)
     assert model.provenance["future_input_innovation"] > 0.8
     assert not [r for r in caplog.records if "predicts the future inputs" in r.getMessage()]
+
+
+def test_no_stable_iem_model_falls_back_to_parsim_k(caplog) -> None:
+    """Past 20, future 10, order 4 on low-passed inputs: IEM has no stable model, and no
+    knobs used to stop there ("none of the 1 models of the grid is stable; give horizons and
+    an order", which were given); with the method chosen PARSIM-K's model is taken and the
+    note says why. IEM's own advice to try PARSIM-K is not logged while it is being tried."""
+    ident, val, n = _low_passed(0)
+    iem = get_method("iem")
+    grid = {"pasts": [20], "futures": [10], "orders": [n]}
+    with pytest.raises(NoStableModel, match="stable; other horizons or order, another method"):
+        select([[ident]], method=iem, options=iem.options(focus="prediction"), **grid)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="sysid.iem"):
+        sel = select([[ident]], method=iem, options=iem.options(focus="prediction"),
+                     choose_method=True, **grid)
+    assert sel.model.provenance["method"] == "parsim-k" and sel.model.is_stable
+    assert sel.method_note.startswith("method parsim-k: iem: none of the 1 models")
+    assert _truth(sel.model, val) > 95.0
+    assert not [r for r in caplog.records if "predicts the future inputs" in r.getMessage()]
+
+
+def test_the_note_says_why_parsim_k_failed(monkeypatch) -> None:
+    """PARSIM-K failing at every order is named with its reason, not as "no stable model"."""
+    import dataclasses
+
+    from sysid.errors import OrderError
+    from sysid.methods import METHODS
+
+    def fail(*_args, **_kwargs):
+        raise OrderError("PARSIM-K: made to fail here")
+
+    ident, _, _ = _low_passed(3)
+    iem = get_method("iem")
+    monkeypatch.setitem(METHODS, "parsim-k", dataclasses.replace(METHODS["parsim-k"],
+                                                                 function=fail))
+    sel = select([[ident]], method=iem, options=iem.options(focus="prediction"),
+                 pasts=[10], futures=[10], orders=[3, 4], choose_method=True)
+    assert sel.model.provenance["method"] == "iem"
+    assert "parsim-k failed (PARSIM-K: made to fail here)" in sel.method_note

@@ -56,3 +56,21 @@ def test_given_settings_are_kept() -> None:
 def test_bad_data_is_one_line(bad) -> None:
     with pytest.raises(sysid.ParameterError, match="pass an IOData"):
         sysid.identify(bad)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"validation": "x"}, "validation: pass an IOData"),
+    ({"orders": []}, "orders: pass at least one value"),
+    ({"workers": 0}, "workers=0"),
+])
+def test_bad_keywords_are_one_line(kwargs, message) -> None:
+    ident, _ = _open_loop(9, n=300)
+    with pytest.raises(sysid.ParameterError, match=message):
+        sysid.identify(ident, **kwargs)
+
+
+def test_validation_with_other_channels_is_refused_before_the_grid_runs() -> None:
+    ident, _ = _open_loop(9, n=300)
+    other = sysid.IOData(u=np.zeros((200, 2)), y=np.zeros((200, 1)), dt=0.1)
+    with pytest.raises(sysid.DimensionError, match="validation records' channels differ"):
+        sysid.identify(ident, validation=other)

@@ -153,5 +153,16 @@ def test_a_slowly_wandering_output_is_not_a_drift() -> None:
     assert drift_warnings([data]) == []
 
 
-def test_no_data_no_warnings() -> None:
-    assert data_warnings([]) == []
+def test_bad_records_are_one_line() -> None:
+    """No records, something else than records, or records of different channels: one line,
+    a sysid error (they were IndexError and AttributeError)."""
+    rng = np.random.default_rng(0)
+    one = sysid.IOData(u=rng.standard_normal((100, 1)), y=rng.standard_normal((100, 2)), dt=1.0)
+    two = sysid.IOData(u=rng.standard_normal((100, 2)), y=rng.standard_normal((100, 2)), dt=1.0)
+    with pytest.raises(sysid.ParameterError, match="pass a list of IOData"):
+        data_warnings([])
+    with pytest.raises(sysid.DimensionError, match="different channels"):
+        data_warnings([one, two])
+    with pytest.raises(sysid.ParameterError, match="pass one IOData record"):
+        despike(np.zeros((10, 3)))
+    assert data_warnings([one]) == []
