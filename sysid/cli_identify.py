@@ -151,10 +151,11 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         radii = ", ".join(f"{m['radius_from']:.4f} -> {m['radius_to']:.4f}"
                           for m in report["moved"])
         cost = report.get("cost_points")
-        con.print(f"stability={report['mode']}: pole(s) moved {radii}; "
-                  f"{report['measure']} fit on these data "
-                  + ("not measurable: the free model diverges" if cost is None
-                     else f"{-cost:+.2f} points"))
+        con.print(f"stability={report['mode']}: pole(s) moved {radii}; " + (
+            "what it cost not measured" if report.get("measure") is None else
+            f"{report['measure']} fit on these data "
+            + ("not measurable: the free model diverges" if cost is None
+               else f"{-cost:+.2f} points")))
     con.print(fit_table(console=con, title="fit on the identification data [%]",
                         names=model.output_names,
                         rows=[(f"simulation, {window_s:.3g} s windows", sim.fit),

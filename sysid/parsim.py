@@ -175,6 +175,12 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     if pem:
         mats, prov["pem"] = pem_refine(matrices=mats, flights=flights, feedthrough=feedthrough,
                                        criterion=focus)
+    if moved:  # the report IEM gives (cli_identify prints it), the cost not measured here
+        prov["stability"] = {
+            "mode": stability, "measure": None, "fit_percent": None, "fit_percent_free": None,
+            "cost_points": None,
+            "moved": [{"from": [p0.real, p0.imag], "to": [p1.real, p1.imag],
+                       "radius_from": abs(p0), "radius_to": abs(p1)} for p0, p1 in moved]}
     a, b, c, d, k, cov = mats
     return build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
                        y_scale=products.y_scale, template=products.flights[0],

@@ -63,3 +63,17 @@ def test_registered_with_options_focus_and_order_limits(tmp_path):
                                     "--order", "4", "--past", "10", "--future", "10", "--json"])
     assert res.exit_code == 0, res.output
     assert '"parsim-k"' in res.output
+
+
+def test_moved_poles_are_reported_as_iem_reports_them() -> None:
+    """DaISy flutter at order 10: ``stability="auto"`` moves a pole at |z| = 1.005 inside; the
+    provenance says so in IEM's form (mode, each pole from and to), so ``sysid identify``
+    prints it for a PARSIM-K model too (it printed nothing: the mode was a bare string)."""
+    if not DAISY.is_dir():
+        pytest.skip("DaISy sets not present")
+    ident, _ = load("flutter")
+    model = sysid.parsim_k(ident, order=10, past=20, future=20)
+    report = model.provenance["stability"]
+    assert report["mode"] == "auto" and report["measure"] is None
+    [moved] = report["moved"]
+    assert 1.0 < moved["radius_from"] < 1.1 and moved["radius_to"] < 1.0
