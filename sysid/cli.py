@@ -253,12 +253,13 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                                "groups": [r.record() for r in rows]}, indent=1))
     else:
         con = console()
-        table = output_table("group", "flights", "past", "future", "order", "score [%]",
-                             "stable", "model / reason", console=con,
+        table = output_table("group", "flights", "past", "future", "order", "method", "focus",
+                             "score [%]", "stable", "model / reason", console=con,
                              title=f"{len(rows)} group(s), {len(failed)} failed")
         for r in rows:
             table.add_row(r.group, str(r.flights), *(str(v) if v is not None else "-"
-                                                     for v in (r.past, r.future, r.order)),
+                                                     for v in (r.past, r.future, r.order,
+                                                               r.method, r.focus)),
                           "-" if r.score is None else f"{r.score:.1f}",
                           "-" if r.stable is None else str(r.stable),
                           r.error or r.model or "")

@@ -63,6 +63,11 @@ def test_batch_by_vehicle_writes_models_and_a_summary_with_failed_rows(sessions,
     assert set(rows) == set(table)
     assert rows["radio-0-80-2M-E7E7E7E7E7"]["order"] == "4"
     assert rows["junk"]["error"] == table["junk"]["error"]
+    # the method (no --method: IEM, or PARSIM-K where it wins at the horizons) in every place
+    assert a["method"] in ("iem", "parsim-k") and rows["radio-0-80-2M-E7E7E7E7E7"]["method"] == (
+        a["method"]) and sysid.load_model(a["model"]).provenance["method"] == a["method"]
+    header = " ".join(res.stdout.split())
+    assert "order method focus score [%]" in header
     # not a terminal: plain progress lines, the last one at 100 %
     assert "batch: 3/3 (100 %)" in res.stderr
     # a second run into the same folder needs --force
