@@ -1,0 +1,212 @@
+"""The data and grid of a no-knobs selection: the held-out split and the default grid.
+
+**Held-out rule** (:func:`holdout`). With experiments from several sessions, the experiments
+of the *last* session validate and those of the others identify. With one session, the first
+70 % of each of its experiments identifies and the last 30 % validates.
+
+**Default grid** (:func:`default_grid`), scaled to the data's memory in samples, not to the
+sample time: the lag of the best VARX model by AICc (:func:`sysid.memory.predictor_memory`,
+as MATLAB's ``n4sid`` chooses its horizons) is how many past samples the one-step predictor
+needs. Pasts from a third of it to three times it, futures from a sixth of it to one and a
+half times it, about evenly spaced on a log scale (the quadrotor flights of ``groundstation
+demo --speed inf`` have a memory of 6 samples at 50 Hz: pasts 2 to 18, futures 2 to 9, where
+the thesis used 60 and 17); both capped so that the identification data have at least
+three Hankel columns per row of the largest pair. Orders 2 to 12, capped by the rank the
+horizons allow. On a record so short that those caps leave the largest future unable to hold
+the order of the memory (a VARX model of lag ``L`` has order ``L l``: :func:`memory_future`),
+that future is added with fewer Hankel columns per row, down to one (a fat Hankel matrix, as
+``n4sid`` uses on short records; :data:`MIN_COLUMNS_PER_ROW`): 60 samples of a third-order
+SISO system had futures of 2 and order 1 at most.
+
+:func:`plan` makes the :class:`Plan` that :func:`sysid.auto.select_plan` sweeps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sysid.data import IOData
+from sysid.errors import DataError, DimensionError
+from sysid.memory import predictor_memory
+from sysid.validate import simulation_window
+
+__all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "HOLDOUT_FRACTION", "MIN_COLUMNS_PER_ROW", "ORDERS",
+           "PAST_X", "SCORE_WINDOW_X", "Plan", "default_grid", "holdout", "max_blocks",
+           "memory_future", "plan"]
+
+#: Share of each experiment kept for validation when only one session is given.
+HOLDOUT_FRACTION = 0.3
+#: Hankel columns per row of the largest pair the default grid leaves at least.
+COLUMNS_PER_ROW = 3.0
+#: Fewest Hankel columns per row the default grid takes on a record too short for three: only
+#: for the one future that holds the memory's order (:func:`memory_future`), or for past 2,
+#: future 2; the fewest a sweep accepts (:func:`sysid.cli_sweep.check_sweep_horizons`).
+MIN_COLUMNS_PER_ROW = 1.0
+#: Pasts and futures of the default grid, as multiples of the predictor's memory (samples).
+PAST_X = (1 / 3, 3.0)
+FUTURE_X = (1 / 6, 1.5)
+ORDERS = (2, 12)
+#: Simulation windows of the score, in multiples of the data's memory (samples; at least 20
+#: samples and 10 output values per initial-state parameter, at most the shortest validation
+#: record: :func:`sysid.validate.simulation_window`).
+SCORE_WINDOW_X = 12
+
+
+def holdout(groups: Sequence[Sequence[IOData]], *, fraction: float = HOLDOUT_FRACTION
+            ) -> tuple[list[IOData], list[IOData], str]:
+    """``(identification, validation, rule)`` by the held-out rule (module docstring);
+    ``groups`` holds the experiments of each session."""
+    groups = [list(g) for g in groups if g]
+    if len(groups) > 1:
+        ident = [e for g in groups[:-1] for e in g]
+        val = groups[-1]
+        return ident, val, (f"identified on {len(ident)} experiment(s) of the first "
+                            f"{len(groups) - 1} session(s), validated on the last session "
+                            f"({len(val)} experiment(s))")
+    ident, val = [], []
+    for e in groups[0]:
+        cut = round(e.n_samples * (1.0 - fraction))
+        ident.append(_part(e, 0, cut))
+        val.append(_part(e, cut, e.n_samples))
+    return ident, val, (f"one session: the first {100 * (1 - fraction):.0f} % of each of its "
+                        f"{len(ident)} experiment(s) identifies, the last "
+                        f"{100 * fraction:.0f} % validates")
+
+
+def _part(d: IOData, start: int, stop: int) -> IOData:
+    return dataclasses.replace(d, u=d.u[start:stop], y=d.y[start:stop])
+
+
+def _spread(low: int, high: int, count: int) -> list[int]:
+    if high <= low:
+        return [max(high, 1)]
+    return sorted({round(v) for v in np.geomspace(low, high, count)})
+
+
+def max_blocks(flights: Sequence[IOData], *, columns_per_row: float = COLUMNS_PER_ROW) -> int:
+    """Largest ``past + future`` leaving ``columns_per_row`` Hankel columns per row."""
+    c = flights[0].n_inputs + flights[0].n_outputs
+    best = 0
+    for b in range(2, max(d.n_samples for d in flights) + 1):  # columns fall, rows grow
+        if sum(max(d.n_samples - b + 1, 0) for d in flights) < columns_per_row * b * c:
+            break
+        best = b
+    return best
+
+
+def memory_future(lag: int, n_outputs: int) -> int:
+    """The shortest future whose rank ``(f - 1) l`` holds the order of the data's memory:
+    a VARX model of lag ``L`` has a realization of order ``L l`` (observer form), here at
+    most the grid's largest order, ``ORDERS[1]``."""
+    order = min(lag * n_outputs, ORDERS[1])
+    return -(-order // n_outputs) + 1
+
+
+def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
+    """Pasts, futures and orders for ``flights`` (module docstring), in samples."""
+    return _grid(flights)[0]
+
+
+def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int, int]:
+    """The default grid, whether the data cut it short of the memory's range, the memory,
+    and the largest ``past + future`` the grid may grow to (three Hankel columns per row, or
+    the largest pair of a grid that needed fewer)."""
+    ell = flights[0].n_outputs
+    room = max_blocks(flights)
+    fat = max_blocks(flights, columns_per_row=MIN_COLUMNS_PER_ROW)
+    if room < 4 <= fat:  # past 2, future 2 only with fewer columns per row
+        room = 4
+    if room < 4:
+        c = flights[0].n_inputs + ell
+        need = 4 * c * MIN_COLUMNS_PER_ROW + 3
+        raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
+                        f"to choose horizons for {c} channels (need about {need:.0f}); give "
+                        "horizons and an order (--past/--future/--order), longer records or "
+                        "fewer channels")
+    memory = predictor_memory(flights)
+    lag = max(memory.lag, 1)
+    f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
+    f_lo = max(2, min(round(FUTURE_X[0] * lag), f_hi))
+    futures = _spread(f_lo, f_hi, 4)
+    p_hi = max(1, min(round(PAST_X[1] * lag), room - futures[-1]))
+    p_lo = max(1, min(round(PAST_X[0] * lag), p_hi))
+    pasts = _spread(p_lo, p_hi, 6)
+    capped = p_hi < round(PAST_X[1] * lag) or memory.capped  # short data, or the longest lag
+    longer = min(memory_future(lag, ell), fat - pasts[-1])
+    if longer > futures[-1]:  # a short record: the future the memory's order needs
+        futures.append(longer)
+        room = max(room, pasts[-1] + longer)
+    return ({"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}, capped,
+            lag, room)
+
+
+def _orders(future: int, n_outputs: int) -> list[int]:
+    """Orders 2 to 12, capped by the rank a largest future of ``future`` allows."""
+    top = max(1, min((future - 1) * n_outputs, ORDERS[1]))
+    return list(range(min(ORDERS[0], top), top + 1))
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The data and grid of a selection: identification and validation experiments, the
+    rule that split them, the grid (samples), the score's simulation window (s) and the
+    data's memory (samples, :mod:`sysid.memory`) when it set the horizons."""
+
+    everything: list[IOData]
+    ident: list[IOData]
+    val: list[IOData]
+    rule: str
+    grid: dict[str, list[int]]
+    window_s: float
+    capped: bool
+    given_validation: bool
+    memory: int | None = None
+    fixed: tuple[str, ...] = ()  # "pasts", "futures", "orders" the caller gave: never grown
+    scored_grid: dict[str, list[int]] | None = None  # the first grid, once the grid grew
+    room: int | None = None  # the largest past + future the grid may grow to (default grid)
+
+    @property
+    def n_models(self) -> int:
+        """Models of the grid: pasts x futures x orders."""
+        return len(self.grid["pasts"]) * len(self.grid["futures"]) * len(self.grid["orders"])
+
+
+def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = None,
+         futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
+         validation: Sequence[IOData] | None = None) -> Plan:
+    """Split the data (held-out rule, or ``validation``) and choose the grid; given
+    ``pasts``/``futures``/``orders`` replace the default grid's (orders not given go as high as
+    the largest future allows)."""
+    everything = [e for g in groups for e in g]
+    if validation:
+        ident, val = everything, list(validation)
+        shapes = {(d.n_inputs, d.n_outputs) for d in [*ident, *val]}
+        if len(shapes) > 1:
+            raise DimensionError(f"the validation records' channels differ from the "
+                                 f"identification data's (inputs, outputs): {sorted(shapes)}")
+        rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
+    else:
+        ident, val, rule = holdout(groups)
+    if pasts and futures:  # no default grid: only the memory, for the score's window
+        auto, capped, memory, room = {}, False, max(predictor_memory(ident).lag, 1), None
+    else:
+        auto, capped, memory, room = _grid(ident)
+    grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
+            "futures": sorted(futures) if futures else auto["futures"]}
+    grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow
+                      _orders(grid["futures"][-1], ident[0].n_outputs))
+    shortest = min(d.n_samples for d in val)
+    capped = capped and not pasts
+    return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
+                window_s=simulation_window(dt=ident[0].dt, n_samples=shortest,
+                                          samples=SCORE_WINDOW_X * memory,
+                                          n_states=grid["orders"][-1],
+                                          n_outputs=ident[0].n_outputs), capped=capped,
+                given_validation=bool(validation),
+                memory=None if pasts and futures else memory,
+                fixed=tuple(k for k, v in (("pasts", pasts), ("futures", futures),
+                                           ("orders", orders)) if v), room=room)
