@@ -221,7 +221,7 @@ def test_usage_errors_are_one_line(files) -> None:
 @pytest.mark.parametrize("whole_group", [False, True], ids=["parent", "process-group"])
 def test_ctrl_c_stops_a_parallel_sweep(files, whole_group) -> None:
     """SIGINT to the parent (or to the whole group, as a terminal's Ctrl-C) ends a parallel
-    sweep within seconds, with its workers; it used to hang waiting for them."""
+    sweep, with its workers; it used to hang waiting for them."""
     import os
     import signal
     import subprocess
@@ -243,8 +243,10 @@ def test_ctrl_c_stops_a_parallel_sweep(files, whole_group) -> None:
             os.killpg(proc.pid, signal.SIGINT)
         else:
             proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=10)
-        assert time.monotonic() - t0 < 10
+        # a generous deadline: it hung before; under a busy suite the workers' terminate and
+        # joins took more than 10 s twice in a day (the point is that it ends, not how fast)
+        _, err = proc.communicate(timeout=40)
+        assert time.monotonic() - t0 < 40
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
