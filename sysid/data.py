@@ -140,7 +140,12 @@ def as_flights(data: IOData | Sequence[IOData]) -> tuple[IOData, ...]:
 
     All flights must have the same channel counts and sample period (relative 1e-9).
     """
-    flights = (data,) if isinstance(data, IOData) else tuple(data)
+    if isinstance(data, IOData):
+        flights: tuple[IOData, ...] = (data,)
+    elif isinstance(data, Sequence) and not isinstance(data, str | bytes):
+        flights = tuple(data)
+    else:
+        raise DataError(f"data is a {type(data).__name__}; pass an IOData or a list of IOData")
     if not flights:
         raise DataError("no data given; pass an IOData or a non-empty list of IOData")
     for i, d in enumerate(flights):

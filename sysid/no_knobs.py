@@ -17,21 +17,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from sysid.auto import Selection, select
-from sysid.data import IOData
+from sysid.data import IOData, as_flights
 from sysid.errors import ParameterError
 from sysid.finish import Focus
 from sysid.methods import DEFAULT_METHOD, get_method
 from sysid.stability import Stability
 
 __all__ = ["identify"]
-
-
-def _records(data: object, *, name: str) -> list[IOData]:
-    records = [data] if isinstance(data, IOData) else (
-        list(data) if isinstance(data, Sequence) and not isinstance(data, str) else [])
-    if not records or not all(isinstance(d, IOData) for d in records):
-        raise ParameterError(f"{name}: pass an IOData or a list of them")
-    return records
 
 
 def identify(data: IOData | Sequence[IOData], *, method: str | None = None,
@@ -61,8 +53,8 @@ def identify(data: IOData | Sequence[IOData], *, method: str | None = None,
     Returns:
         The :class:`~sysid.auto.Selection`; ``.model`` is the ``StateSpaceModel``.
     """
-    flights = _records(data, name="data")
-    val = None if validation is None else _records(validation, name="validation")
+    flights = list(as_flights(data))
+    val = None if validation is None else list(as_flights(validation))
     for name, values in (("pasts", pasts), ("futures", futures), ("orders", orders)):
         if values is not None and not len(values):
             raise ParameterError(f"{name}: pass at least one value, or None for the default")

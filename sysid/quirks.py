@@ -46,8 +46,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from sysid.data import IOData
-from sysid.errors import DimensionError, ParameterError
+from sysid.data import IOData, as_flights
 from sysid.memory import predictor_memory
 
 __all__ = ["AR_ORDER", "DRIFT_RATIO", "DRIFT_T", "FALSE_ALARM", "MAX_LAG", "MIN_THRESHOLD",
@@ -204,17 +203,8 @@ def _standardised(flights: Sequence[IOData]) -> tuple[list[np.ndarray], np.ndarr
 
 
 def _records(flights: Sequence[IOData]) -> list[IOData]:
-    """``flights`` as a list, checked: at least one ``IOData``, all with the same channels."""
-    if isinstance(flights, IOData):
-        flights = [flights]
-    flights = list(flights) if isinstance(flights, Sequence) else []
-    if not flights or not all(isinstance(d, IOData) for d in flights):
-        raise ParameterError("flights: pass a list of IOData records (at least one)")
-    shapes = {(d.n_inputs, d.n_outputs) for d in flights}
-    if len(shapes) > 1:
-        raise DimensionError(f"the records have different channels (inputs, outputs): "
-                             f"{sorted(shapes)}; pass records of one system")
-    return flights
+    """``flights`` checked as every method checks its data (:func:`sysid.data.as_flights`)."""
+    return list(as_flights(flights))
 
 
 def _distances(flights: Sequence[IOData], *, lag: int | None, alpha: float

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from sysid.methods import Options
-from sysid.parsimony import FIXED_TOL, FLOOR_POINTS, significantly_better
+from sysid.parsimony import significantly_better, tolerance
 
 if TYPE_CHECKING:  # sysid.auto imports this module
     from sysid.auto import Selection
@@ -87,7 +87,8 @@ def pick_method(first: Selection, other: SweepResult, *, name: str,
         log.info("selection: %s", note)
         return dataclasses.replace(first, method_note=note)
     row = other.best()
-    tol = max(FIXED_TOL if first.tolerance is None else first.tolerance, FLOOR_POINTS)
+    tol = tolerance(first.result.ranked(require_stable=True)[0]) if first.tolerance is None \
+        else first.tolerance  # finish() sets it: sysid.parsimony.tolerance of the best
     top = max(first.result.ranked(require_stable=True)[0].score, ranked[0].score)
     first_close, row_close = (r.score >= top - tol for r in (first.best, row))
     wins = row_close and (row.order < first.best.order or not first_close)

@@ -52,20 +52,23 @@ def test_given_settings_are_kept() -> None:
     assert sel.method_note == "" and sel.feedthrough_note == ""
 
 
-@pytest.mark.parametrize("bad", [[], "data.csv", [np.zeros((10, 2))]])
-def test_bad_data_is_one_line(bad) -> None:
-    with pytest.raises(sysid.ParameterError, match="pass an IOData"):
+@pytest.mark.parametrize(("bad", "message"), [
+    ([], "no data given"), ("data.csv", "data is a str"), (5, "data is a int"),
+    ([np.zeros((10, 2))], r"data\[0\] is a ndarray; wrap arrays in sysid.IOData")])
+def test_bad_data_is_one_line(bad, message) -> None:
+    """The checks every method makes on its data (``sysid.data.as_flights``)."""
+    with pytest.raises(sysid.DataError, match=message):
         sysid.identify(bad)
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
-    ({"validation": "x"}, "validation: pass an IOData"),
+    ({"validation": "x"}, "data is a str"),
     ({"orders": []}, "orders: pass at least one value"),
     ({"workers": 0}, "workers=0"),
 ])
 def test_bad_keywords_are_one_line(kwargs, message) -> None:
     ident, _ = _open_loop(9, n=300)
-    with pytest.raises(sysid.ParameterError, match=message):
+    with pytest.raises(sysid.SysIdError, match=message):
         sysid.identify(ident, **kwargs)
 
 
