@@ -129,7 +129,8 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
              sorted({r.order for r in close_to_best(ranked)}))
     warnings = edge_warnings(best, ranked, p.grid, capped=p.capped,
                              n_outputs=p.ident[0].n_outputs)
-    unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val))
+    unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val),
+                                 validation_given=p.given_validation)
     if unresolved is not None:
         warnings.append(unresolved)
     model = final_model(p, best, warnings, method=method, options=options)

@@ -21,6 +21,7 @@ __all__ = [
     "block_hankel",
     "check_excited",
     "check_independent",
+    "check_magnitudes",
     "hankel_columns",
 ]
 
@@ -138,7 +139,8 @@ class IOData:
 def as_flights(data: IOData | Sequence[IOData]) -> tuple[IOData, ...]:
     """Normalise one ``IOData`` or a list of them to a tuple of consistent flights.
 
-    All flights must have the same channel counts and sample period (relative 1e-9).
+    All flights must have the same channel counts and sample period (relative 1e-9), and
+    values whose sums of squares float64 holds (:func:`check_magnitudes`).
     """
     if isinstance(data, IOData):
         flights: tuple[IOData, ...] = (data,)
@@ -161,6 +163,7 @@ def as_flights(data: IOData | Sequence[IOData]) -> tuple[IOData, ...]:
         if abs(d.dt - ref.dt) > 1e-9 * ref.dt:
             raise DataError(f"data[{i}] has dt={d.dt} s but data[0] has dt={ref.dt} s; "
                             "resample every flight to the same rate")
+    check_magnitudes(flights)
     return flights
 
 
@@ -189,6 +192,11 @@ CONSTANT_TOL = 1e-12
 #: A channel is a linear combination of the channels before it (at the same sample) when its
 #: distance from their span is at most this times its norm.
 DEPENDENT_TOL = 1e-10
+#: Room the sums of squares of an identification need beyond one sum of squares of a
+#: channel (products of Hankel rows, Gram matrices): a channel whose largest magnitude
+#: exceeds sqrt(float max / (samples * HEADROOM)), or lies below sqrt(float tiny *
+#: HEADROOM) (about 1e-151), is refused (:func:`check_magnitudes`).
+HEADROOM = 1e6
 
 
 def _rounding_residue(x: np.ndarray) -> bool:
@@ -213,6 +221,41 @@ def _constant(arr: np.ndarray, *, rel_tol: float) -> np.ndarray:
     residue = np.array([std[j] <= rel_tol * others[j] and _rounding_residue(arr[:, j])
                         for j in range(std.size)], dtype=bool)
     return flat | residue
+
+
+def check_magnitudes(flights: Sequence[IOData], *, headroom: float = HEADROOM) -> None:
+    r"""Raise :class:`sysid.errors.DataError`, in one line naming the channel, when a channel's
+    values would overflow the sums of squares an identification forms (largest magnitude
+    above :math:`\sqrt{f_{max} / (N h)}`, :math:`N` the samples of all the records, :math:`h`
+    = ``headroom``) or underflow them (all magnitudes below :math:`\sqrt{f_{tiny} h}`, none
+    zero), :math:`f` float64's limits. The remedy is another unit.
+
+    Parameters
+    ----------
+    flights : records of one system (checked: :func:`as_flights`), each ``u`` (N, m),
+        ``y`` (N, l).
+    headroom : room beyond one sum of squares (:data:`HEADROOM`).
+    """
+    recs = list(flights)
+    n = sum(d.n_samples for d in recs)
+    fmax, tiny = np.finfo(float).max, np.finfo(float).tiny
+    high, low = np.sqrt(fmax / (max(n, 1) * headroom)), np.sqrt(tiny * headroom)
+    ref = recs[0]
+    labels = _channel_labels(ref)
+    peaks = np.array([np.abs(d.w).max(axis=0, initial=0.0) for d in recs])
+    peak = peaks.max(axis=0)
+    for j, label in enumerate(labels):
+        if peak[j] > high:
+            e = int(np.argmax(peaks[:, j]))
+            k = int(np.argmax(np.abs(recs[e].w[:, j])))
+            where = f"sample {k}" + (f" of record {e + 1}" if len(recs) > 1 else "")
+            raise DataError(f"{label} reaches {recs[e].w[k, j]:.3g} at {where}: beyond "
+                            f"{high:.3g} the sums of squares of {n} samples overflow; rescale "
+                            f"it (another unit) before identifying")
+        if 0.0 < peak[j] < low:
+            raise DataError(f"{label} is at most {peak[j]:.3g} in magnitude: below {low:.3g} "
+                            f"its squares underflow; rescale it (another unit) before "
+                            f"identifying")
 
 
 def check_excited(flights: Sequence[IOData], *, rel_tol: float = CONSTANT_TOL) -> tuple[

@@ -18,6 +18,24 @@ that future is added with fewer Hankel columns per row, down to one (a fat Hanke
 ``n4sid`` uses on short records; :data:`MIN_COLUMNS_PER_ROW`): 60 samples of a third-order
 SISO system had futures of 2 and order 1 at most.
 
+When the records are too short for the memory itself to be measured (the VARX lag search
+stops at the longest lag they allow, and picks it: :attr:`sysid.memory.Memory.capped` below
+:data:`sysid.memory.MAX_LAG`), the memory is only a lower bound; if the grid it sets then
+reaches no order above ``max(2, l)`` (no more than a future of 2 holds), the largest future
+the records hold at one Hankel column per row is added, up to the future of order 12
+(:func:`short_record_future`), and the held-out score chooses. On 57 samples of 5-input,
+2-output systems of order 3 to 5 (6-8 seeds each, noise 0.05 and 0.3) the grid was future 2,
+order 2 only, and the chosen models fit the noise-free truth 62-67 % (mean); with the added
+future 3, 89-99 % (80 and 120 samples: 65-67 % -> 89-99 %; 40 samples of second-order SISO
+systems at 20 dB, 8 seeds: -80 -> 95 %). Grids that already reach higher orders are left as
+they are: adding the future to every grid on a capped memory made some choices worse (80
+samples, one input, noise 0.3: 87 -> 75 %). Identification data too short for past 2, future
+2 at one column per row are refused: a 5-input, 2-output record of 38 samples holds out 11
+and identifies on 27, where only past 1, future 2 (order 2 at most) fit; that model fit true
+order-3 and -4 systems 63-65 % (mean of 6 seeds; order 2: 99 %), against 92-99 % for past 1,
+future 3, order 3 on all 38 samples of the order-3 ones, which the refusal's
+--past/--future/--order give.
+
 :func:`plan` makes the :class:`Plan` that :func:`sysid.auto.select_plan` sweeps.
 """
 
@@ -29,14 +47,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid.data import IOData
+from sysid.data import IOData, as_flights
 from sysid.errors import DataError, DimensionError
+from sysid.memory import MAX_LAG as MEMORY_MAX_LAG
 from sysid.memory import predictor_memory
 from sysid.validate import simulation_window
 
 __all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "HOLDOUT_FRACTION", "MIN_COLUMNS_PER_ROW", "ORDERS",
            "PAST_X", "SCORE_WINDOW_X", "Plan", "default_grid", "holdout", "max_blocks",
-           "memory_future", "plan"]
+           "memory_future", "plan", "short_record_future"]
 
 #: Share of each experiment kept for validation when only one session is given.
 HOLDOUT_FRACTION = 0.3
@@ -102,8 +121,42 @@ def memory_future(lag: int, n_outputs: int) -> int:
     """The shortest future whose rank ``(f - 1) l`` holds the order of the data's memory:
     a VARX model of lag ``L`` has a realization of order ``L l`` (observer form), here at
     most the grid's largest order, ``ORDERS[1]``."""
-    order = min(lag * n_outputs, ORDERS[1])
+    return _future_for(min(lag * n_outputs, ORDERS[1]), n_outputs)
+
+
+def _future_for(order: int, n_outputs: int) -> int:
+    """The shortest future whose rank ``(f - 1) l`` holds ``order``."""
     return -(-order // n_outputs) + 1
+
+
+def short_record_future(flights: Sequence[IOData], grid: dict[str, list[int]], *,
+                        memory_capped: bool, max_lag: int) -> int | None:
+    """The future a grid on records too short to measure their memory adds (module
+    docstring), or None.
+
+    Parameters
+    ----------
+    flights : the identification records, each ``u`` (N, m), ``y`` (N, l).
+    grid : the default grid so far (samples; states).
+    memory_capped : whether the memory's lag is the longest one tried
+        (:attr:`sysid.memory.Memory.capped`) ...
+    max_lag : ... and that longest lag (samples): below :data:`sysid.memory.MAX_LAG` the
+        records cut the search short.
+
+    Returns
+    -------
+    The largest future (samples) the records hold beside the grid's largest past at one
+    Hankel column per row, at most the future of order ``ORDERS[1]``, when the memory was
+    cut short, the grid reaches no order above ``max(ORDERS[0], l)`` and that future is
+    longer than the grid's; else None.
+    """
+    ell = flights[0].n_outputs
+    if not memory_capped or max_lag >= MEMORY_MAX_LAG or grid["orders"][-1] > max(ORDERS[0],
+                                                                                  ell):
+        return None
+    fat = max_blocks(flights, columns_per_row=MIN_COLUMNS_PER_ROW)
+    top = min(_future_for(ORDERS[1], ell), fat - grid["pasts"][-1])
+    return top if top > grid["futures"][-1] else None
 
 
 def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
@@ -140,8 +193,14 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int, i
     if longer > futures[-1]:  # a short record: the future the memory's order needs
         futures.append(longer)
         room = max(room, pasts[-1] + longer)
-    return ({"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}, capped,
-            lag, room)
+    grid = {"pasts": pasts, "futures": futures, "orders": _orders(futures[-1], ell)}
+    extra = short_record_future(flights, grid, memory_capped=memory.capped,
+                                max_lag=memory.max_lag)
+    if extra is not None:  # the memory is a lower bound, the orders no more than f=2's
+        futures.append(extra)
+        grid["orders"] = _orders(extra, ell)
+        room = max(room, pasts[-1] + extra)
+    return grid, capped, lag, room
 
 
 def _orders(future: int, n_outputs: int) -> list[int]:
@@ -180,14 +239,16 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
          validation: Sequence[IOData] | None = None) -> Plan:
     """Split the data (held-out rule, or ``validation``) and choose the grid; given
     ``pasts``/``futures``/``orders`` replace the default grid's (orders not given go as high as
-    the largest future allows)."""
-    everything = [e for g in groups for e in g]
+    the largest future allows). Data whose magnitudes would overflow the identification's
+    sums of squares are refused first, in one line (:func:`sysid.data.check_magnitudes`)."""
+    everything = list(as_flights([e for g in groups for e in g]))
     if validation:
         ident, val = everything, list(validation)
         shapes = {(d.n_inputs, d.n_outputs) for d in [*ident, *val]}
         if len(shapes) > 1:
             raise DimensionError(f"the validation records' channels differ from the "
                                  f"identification data's (inputs, outputs): {sorted(shapes)}")
+        as_flights(val)
         rule = f"identified on all {len(ident)} experiment(s), validated on the given ones"
     else:
         ident, val, rule = holdout(groups)

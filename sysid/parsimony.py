@@ -280,7 +280,8 @@ def dominant_blocks(row: Scored) -> tuple[np.ndarray, float] | None:
     return far, float(np.sqrt((n_blocks - 1) / rest.size * np.sum((rest - rest.mean()) ** 2)))
 
 
-def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
+def ranking_warning(ranked: Sequence[Scored], *, n_samples: int,
+                    validation_given: bool = False) -> str | None:
     """A warning when the held-out data cannot rank the models or measure the score: the
     standard error of the best score (:func:`score_se`) is at least
     :data:`UNRESOLVED_POINTS` and models of several orders score within it (scores two
@@ -291,10 +292,17 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
     (:func:`dominant_blocks`, and the standard error without them is under
     :data:`UNRESOLVED_POINTS`) the warning names them and where to look (outliers or a
     disturbance there) instead of only asking for more data.
-    ``ranked``: the candidates, best score first; ``n_samples``: held-out samples. None when
+    ``ranked``: the candidates, best score first; ``n_samples``: held-out samples;
+    ``validation_given``: the held-out samples are validation flights the caller gave
+    (:attr:`sysid.holdout.Plan.given_validation`), so the remedy asks for longer ones or
+    more of them rather than for validation flights as if none had been given. None when
     the score is precise enough, or ranks one order clearly above the rest."""
     se = score_se(ranked[0])
-    remedy = "give longer or more validation flights (--validate)"
+    remedy = ("the validation flights given are too short or too few: give longer ones or "
+              "more of them" if validation_given else
+              "give longer or more validation flights (sysid sweep --validate)")
+    elsewhere = "validate on other flights" + ("" if validation_given else
+                                                 " (sysid sweep --validate)")
     if np.isfinite(se) and se >= UNRESOLVED_POINTS:
         few = dominant_blocks(ranked[0])
         if few is not None and few[1] < UNRESOLVED_POINTS:  # they do make the spread
@@ -305,7 +313,7 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int) -> str | None:
                       f"{ranked[0].errors.shape[0]} held-out blocks ({which} it, in held-out "
                       f"order; +- {rest:.2f} points without them): look there for outliers "
                       f"(sysid.quirks.outlier_warnings; sysid.preprocess.despike replaces "
-                      f"them) or a disturbance, or validate on other flights (--validate)")
+                      f"them) or a disturbance, or {elsewhere}")
         orders = sorted({r.order for r in close_to_best(ranked)})
         if len(orders) > 1:
             return (f"the {n_samples} held-out samples cannot rank the models: they measure "

@@ -1,0 +1,57 @@
+"""Quirks of the data that mislead a selection, each in its module: gross outliers
+(:mod:`sysid.quirks.outliers`), a drift, a linear trend (:mod:`sysid.quirks.drift`), and a
+quantised output (:mod:`sysid.quirks.quantised`). :func:`data_warnings` gives them as one-line
+warnings, for a selection's report (:func:`sysid.auto.select` calls it on all its records).
+
+**Magnitudes**: every check works on the channels scaled by a power of two (exact: a grid
+stays a grid), so values of any finite magnitude raise no overflow. The identification itself
+forms sums of squares of the data; :func:`sysid.data.check_magnitudes` refuses, in one line, a
+channel whose values would overflow or underflow them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from sysid.data import IOData
+from sysid.quirks._scaling import records
+from sysid.quirks.drift import AR_ORDER, DRIFT_RATIO, DRIFT_T, drift_warnings, trend_ratios
+from sysid.quirks.outliers import (
+    FALSE_ALARM,
+    MAX_LAG,
+    MIN_THRESHOLD,
+    Outliers,
+    find_outliers,
+    outlier_masks,
+    outlier_threshold,
+    outlier_warnings,
+)
+from sysid.quirks.quantised import (
+    QUANT_DISTINCT,
+    QUANT_NOISE,
+    Quantised,
+    find_quantised,
+    quantisation_warnings,
+)
+
+__all__ = ["AR_ORDER", "DRIFT_RATIO", "DRIFT_T", "FALSE_ALARM", "MAX_LAG", "MIN_THRESHOLD",
+           "QUANT_DISTINCT", "QUANT_NOISE", "Outliers", "Quantised", "data_warnings",
+           "drift_warnings", "find_outliers", "find_quantised", "outlier_masks",
+           "outlier_threshold", "outlier_warnings", "quantisation_warnings", "trend_ratios"]
+
+
+def data_warnings(flights: Sequence[IOData]) -> list[str]:
+    """The data's quirks that mislead a selection, one line each: outliers
+    (:func:`outlier_warnings`), then drifts (:func:`drift_warnings`), then quantised outputs
+    (:func:`quantisation_warnings`).
+
+    Parameters
+    ----------
+    flights : the identification records of one system, each ``u`` (N, m), ``y`` (N, l).
+
+    Returns
+    -------
+    list of str, empty for clean data.
+    """
+    recs = records(flights)
+    return [*outlier_warnings(recs), *drift_warnings(recs), *quantisation_warnings(flights)]

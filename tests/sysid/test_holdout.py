@@ -1,0 +1,53 @@
+"""The default grid on records too short to measure their memory (sysid.holdout)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sysid
+from sysid.holdout import default_grid, holdout, plan
+from sysid.memory import predictor_memory
+from tests.sysid.systems import open_loop, random_stable_system
+
+
+def _erie_like(n: int, *, seed: int = 0) -> tuple[sysid.IOData, sysid.StateSpaceModel]:
+    """A third-order system of 5 inputs and 2 outputs, ``n`` samples (DaISy erie's shape)."""
+    rng = np.random.default_rng(3000 + seed)
+    system = random_stable_system(n_states=3, n_inputs=5, n_outputs=2, rng=rng,
+                                  radius=(0.3, 0.85))
+    return open_loop(system, n_samples=n, rng=rng, noise_std=0.05).data, system
+
+
+def _truth_fit(model: sysid.StateSpaceModel, system: sysid.StateSpaceModel) -> np.ndarray:
+    """Fit (%) of ``model``'s simulation to the noise-free truth on a fresh white input."""
+    u = np.random.default_rng(99).standard_normal((2000, system.n_inputs))
+    yt, yh = system.simulate(u), model.simulate(u)
+    return 100 * (1 - np.linalg.norm(yt - yh, axis=0) / np.linalg.norm(yt - yt.mean(0), axis=0))
+
+
+def test_a_short_record_whose_memory_is_unmeasured_still_compares_orders() -> None:
+    """57 samples of 5 inputs and 2 outputs: 40 identify, too few for the VARX lag search to
+    try lag 1 (memory 0 of at most 0). The grid was future 2, order 2 only, and chose order 2
+    (truth fit 67 % on average over six seeds, 36 % at worst); the largest future the
+    records hold at one Hankel column per row (3) is added, and the true order 3 is chosen
+    (97-99 %)."""
+    data, system = _erie_like(57)
+    ident, _, _ = holdout([[data]])
+    memory = predictor_memory(ident)
+    assert memory.capped and memory.max_lag == 0
+    grid = default_grid(ident)
+    assert grid["futures"][-1] == 3 and grid["orders"] == [2, 3, 4]
+    assert grid["pasts"][-1] + grid["futures"][-1] <= 5  # 40 - 5 + 1 columns, 5 x 7 rows
+    sel = sysid.identify(data)
+    assert sel.best.order == 3
+    assert _truth_fit(sel.model, system).min() > 95
+
+
+def test_records_too_short_for_past_2_future_2_are_still_refused() -> None:
+    """38 samples leave 27 to identify: past 1, future 2 (order 2 at most) only; refused in
+    one line that names the horizons to give."""
+    data, _ = _erie_like(38)
+    with pytest.raises(sysid.DataError, match=r"27 identification samples are too few.*"
+                                              r"--past/--future/--order"):
+        plan([[data]])

@@ -1,0 +1,102 @@
+"""Data checks: quantised outputs are named; huge magnitudes raise no overflow."""
+
+from __future__ import annotations
+
+import warnings
+from functools import partial
+
+import numpy as np
+import pytest
+
+import sysid
+from sysid.data import check_magnitudes
+from sysid.quirks import (
+    QUANT_NOISE,
+    data_warnings,
+    find_outliers,
+    find_quantised,
+    quantisation_warnings,
+)
+from tests.sysid.systems import open_loop, random_stable_system
+
+
+def _experiment(n: int = 1500, *, seed: int = 0) -> sysid.IOData:
+    rng = np.random.default_rng(seed)
+    system = random_stable_system(n_states=4, n_inputs=1, n_outputs=2, rng=rng,
+                                  radius=(0.6, 0.9))
+    return open_loop(system, n_samples=n, rng=rng, noise_std=0.02).data
+
+
+def _rounded(data: sysid.IOData, levels: int) -> sysid.IOData:
+    """Output 0 rounded onto ``levels`` levels across its range."""
+    y = np.array(data.y)
+    lo, hi = y[:, 0].min(), y[:, 0].max()
+    step = (hi - lo) / (levels - 1)
+    y[:, 0] = np.round((y[:, 0] - lo) / step) * step + lo
+    return sysid.IOData(u=data.u, y=y, dt=data.dt, output_names=["alt", "rate"],
+                        output_units=["m", "rad/s"])
+
+
+def test_a_quantised_output_is_named_with_its_levels_step_and_fit_bound() -> None:
+    """An output rounded to 6 levels (step 1.26 standard deviations: the selection chose
+    order 7 for a true 4) and to 16 (0.45: order 10) is named with its levels, step and the
+    fit its rounding allows; 35 levels (0.17: order 4) and the unrounded output are not."""
+    clean = _experiment()
+    assert quantisation_warnings([clean]) == []
+    (q,) = find_quantised([_rounded(clean, 6)])
+    assert (q.name, q.column, q.levels) == ("alt", 0, 6)
+    assert q.noise == pytest.approx(1.26 / np.sqrt(12), rel=0.05)
+    (line,) = quantisation_warnings([_rounded(clean, 6)])
+    assert "\n" not in line and line.startswith("output alt is quantised: 6 levels")
+    assert f"a step of {q.step:.3g} m" in line and "step^2/12" in line
+    assert f"bounded near {100 * (1 - q.noise):.0f} %" in line and "finer resolution" in line
+    assert [w.startswith("output alt is quantised") for w in data_warnings(
+        [_rounded(clean, 16)])] == [True]
+    assert find_quantised([_rounded(clean, 35)]) == []
+
+
+def test_excitation_inputs_on_few_levels_and_short_continuous_records_are_not_flagged() -> None:
+    """A PRBS (2 levels) and a held staircase (5 levels) are inputs by design: not flagged; an
+    on/off output is (2 levels); 8 continuous samples are not a grid."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    prbs = np.sign(rng.standard_normal(n // 10).repeat(10))
+    stairs = rng.integers(0, 5, n // 50).repeat(50).astype(float)
+    y = np.convolve(prbs + stairs, np.ones(4) / 4, "same")
+    data = sysid.IOData(u=np.column_stack([prbs, stairs]),
+                        y=np.column_stack([y, y > 0.5]), dt=0.01)
+    (q,) = find_quantised([data])
+    assert (q.name, q.levels) == ("y1", 2) and q.noise > QUANT_NOISE
+    short = sysid.IOData(u=rng.standard_normal(8), y=rng.standard_normal(8), dt=1.0)
+    assert find_quantised([short]) == []
+
+
+def test_huge_or_tiny_magnitudes_raise_no_overflow_and_are_refused_in_one_line() -> None:
+    """Data times 1e300 overflowed the squares of the data checks (RuntimeWarnings from
+    sysid.quirks) and ended in a false 'linear combination' refusal; the checks now work on
+    channels scaled by a power of two (the same outliers found), and an identification
+    refuses magnitudes whose sums of squares overflow or underflow, naming the channel."""
+    clean = _experiment(n=600, seed=2)
+    y = np.array(clean.y)
+    y[300, 1] += 30 * y[:, 1].std()
+    spiked = sysid.IOData(u=clean.u, y=y, dt=clean.dt)
+    where = [o.where for o in find_outliers([spiked])]
+    assert where == [((0, 300),)]
+    for scale in (1e140, 1e-140):  # squares in range, sums of squares near the edge
+        data = sysid.IOData(u=clean.u, y=y * scale, dt=clean.dt)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert [o.where for o in find_outliers([data])] == where
+            assert len(data_warnings([data])) == 1
+    for scale in (1e300, 1e-320):
+        data = sysid.IOData(u=clean.u, y=y * scale, dt=clean.dt)
+        calls = ((sysid.identify, data), (find_outliers, [data]),
+                 (partial(sysid.iem, order=4, past=10, future=10), data))
+        for call, arg in calls:  # no knobs, the data checks and a fixed-knob method alike
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                with pytest.raises(sysid.DataError, match=r"^output channel 0 \('y0'\) .*"
+                                                          r"rescale it \(another unit\)") as err:
+                    call(arg)
+            assert "\n" not in str(err.value)
+    check_magnitudes([spiked])  # ordinary data pass
