@@ -195,7 +195,7 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                 choose_feedthrough: bool | Literal["open-loop"] = False,
                 choose_method: bool = False,
                 horizon: int | None = None, window: float | None = None,
-                client: Any | None = None) -> Selection:
+                client: Any | None = None, feedback: FeedbackTest | None = None) -> Selection:
     """The selection on the data and grid of ``p``: :func:`sysid.sweep.sweep`, then
     :func:`finish`. With ``choose_focus`` the grid runs for both focus choices and
     :func:`pick_focus` decides; with ``choose_feedthrough`` (open-loop data only: module
@@ -209,13 +209,15 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
     ``progress(done, total)`` counts models over every run (``total`` is
     ``p.n_models * n_runs(...)``, more once the grid grows). ``horizon`` (k-step prediction)
     or ``window`` (simulation windows, s) replace the score's default (simulation over
-    ``p.window_s``); ``client`` (Dask) runs the sweeps on a cluster. Raises
+    ``p.window_s``); ``client`` (Dask) runs the sweeps on a cluster; ``feedback``: the
+    feedback test of ``p.ident`` when the caller has run it (not run again). Raises
     :class:`NoStableModel` when no model of the grid is stable."""
     quiet = without_input_warning() if choose_method and method.name in ALTERNATIVE \
         else contextlib.nullcontext()  # PARSIM-K is tried: IEM need not advise it
     with quiet:
-        loop = feedback_test(p.ident) if choose_focus or choose_feedthrough else None
-        if loop is not None:
+        loop = None if not (choose_focus or choose_feedthrough) else \
+            feedback if feedback is not None else feedback_test(p.ident)
+        if loop is not None and feedback is None:
             log.info("selection: %s", loop.describe())
         if choose_feedthrough == "open-loop":  # a direct term only where no feedback was found
             choose_feedthrough = loop is not None and loop.feedback is False
@@ -281,7 +283,7 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                     stability=options.stability), workers=workers, progress=progress,
                     keep_models=keep_models, choose_focus=choose_focus,
                     choose_feedthrough=choose_feedthrough, horizon=horizon, window=window,
-                    client=client)
+                    client=client, feedback=loop)
             except NoStableModel:
                 raise error from None
             return dataclasses.replace(sel, method_note=f"method {alt.name}: {method.name}: "

@@ -95,6 +95,22 @@ def test_no_stable_iem_model_falls_back_to_parsim_k(caplog) -> None:
     assert not [r for r in caplog.records if "predicts the future inputs" in r.getMessage()]
 
 
+def test_the_fallback_does_not_test_for_feedback_again(monkeypatch) -> None:
+    """With the focus chosen too, the fallback to PARSIM-K reuses the feedback test of the
+    first run (it was run twice: 0.1-30 s more on the path where IEM had no stable model)."""
+    import sysid.auto
+
+    calls = []
+    real = sysid.auto.feedback_test
+    monkeypatch.setattr(sysid.auto, "feedback_test", lambda data: calls.append(1) or real(data))
+    ident, _, n = _low_passed(0)
+    iem = get_method("iem")
+    sel = select([[ident]], method=iem, options=iem.options(), choose_method=True,
+                 choose_focus=True, pasts=[20], futures=[10], orders=[n])
+    assert sel.model.provenance["method"] == "parsim-k" and sel.feedback is not None
+    assert len(calls) == 1
+
+
 def test_the_note_says_why_parsim_k_failed(monkeypatch) -> None:
     """PARSIM-K failing at every order is named with its reason, not as "no stable model"."""
     import dataclasses
