@@ -4,7 +4,8 @@ Under ``pytest -n 2 --dist loadfile`` (``make test``) every test that runs the r
 the loop (a ``sitl`` parameter, or anything under ``tests/sitl/``) goes to one xdist scope, so at
 most one real-time firmware runs at a time and the other worker keeps the rest of the suite;
 that scope is sent first, being the longest, then the longest other files. Connects cache the
-firmware's TOCs in a folder of the run (:func:`pytest_configure`).
+firmware's TOCs in a folder of the run (:func:`pytest_configure`). Each xdist worker gives
+BLAS its share of the cores (:func:`_blas_threads`).
 """
 
 from __future__ import annotations
@@ -13,24 +14,48 @@ import os
 import shutil
 import tempfile
 
-from groundstation.flight.drivers import TOC_CACHE_ENV
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _blas_threads() -> None:
+    """In an xdist worker, at most cores / workers BLAS threads (unless the environment says
+    otherwise), set before numpy loads here and inherited by the commands the tests start.
+    OpenBLAS, as numpy and scipy ship it, otherwise starts one thread per core in every
+    worker, and its idle threads spin: two workers on two cores ran four, and tests/sysid
+    took 94 s of wall time (179 s of CPU) instead of 38 s (67 s)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT") or 0)
+    if workers < 1:
+        return
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    for name in _BLAS_THREADS:
+        os.environ.setdefault(name, str(max(1, (cores or 1) // workers)))
+
+
+_blas_threads()  # before anything imports numpy (groundstation does: imported lazily below)
 
 
 def pytest_configure(config):
     """cflib's TOC cache in a folder of this run, not the user's ``~/.cache`` (each xdist worker
     and the commands it starts share one)."""
+    from groundstation.flight.drivers import TOC_CACHE_ENV
+
     os.environ[TOC_CACHE_ENV] = tempfile.mkdtemp(prefix="groundstation-toc-")
 
 
 def pytest_unconfigure(config):
+    from groundstation.flight.drivers import TOC_CACHE_ENV
+
     shutil.rmtree(os.environ.pop(TOC_CACHE_ENV, ""), ignore_errors=True)
 
 
 _LONG_FILES = ("tests/flight/test_liveid.py", "tests/flight/test_aliased_flights.py",
-               "tests/test_docs_examples.py", "tests/flight/test_connect.py",
-               "tests/sysid/test_batch.py", "tests/demo/test_demo.py", "tests/sysid/test_cli.py")
-"""The longest files outside the firmware's scope (12-30 s each on 2 cores, measured with
-``--durations``), longest first; the alphabetical order put three of them near the end."""
+               "tests/test_docs_examples.py", "tests/sim_crtp/test_udp.py",
+               "tests/flight/test_connect.py", "tests/demo/test_demo.py", "tests/fuzz/test_fuzz.py",
+               "tests/sim_crtp/test_link.py", "tests/sysid/test_cli.py",
+               "tests/sysid/test_cli_robustness.py", "tests/flight/test_repeatable.py")
+"""The longest files outside the firmware's scope (5-30 s each on 2 cores, measured with
+``--durations``; the other flight files of 5-22 s come first by themselves), longest first;
+the collection order put several of them near the end."""
 
 
 def _is_sitl(nodeid: str) -> bool:

@@ -145,6 +145,12 @@ class Simulator:
         """
         ms = math.ceil(until_s * 1000.0) + _PACE_LEAD_MS
         with self.cond:
+            if self._ever_attached and not self._token:
+                # The link has detached (closed, or lost: cflib closes it on the error), so no
+                # scheduler is flying this vehicle: a sleep on its clock after that (the abort
+                # path's stop after a link loss) must not hold time, or the vehicle would stand
+                # still for _PACE_HOLD_S once the runner is gone (its watchdog with it).
+                return
             if self._pace_ms is None or ms > self._pace_ms:
                 self._pace_ms = ms
             self._pace_wall = time.monotonic()

@@ -44,15 +44,20 @@ from .conftest import wait_for_stop
 SMALL = "order = 4\npast = 15\nfuture = 8\n"
 
 
-def _plan(excitation_s: float = 30.0, live_id: str | None = "", *, hover_s: float | None = None
-          ) -> object:
+def _plan(excitation_s: float = 30.0, live_id: str | None = "", *, hover_s: float | None = None,
+          land_s: float | None = None) -> object:
     """prbs-3axis with a shorter excitation, ``hover_s`` for its settle and recover phases
-    (3 and 2 s; shorter for the flights in real time) and, unless None, a [live_id] table."""
+    (3 and 2 s) and ``land_s`` for its landing (3 s; both shorter for the flights in real
+    time) and, unless None, a [live_id] table."""
     text = load_plan("prbs-3axis").text.replace("duration = 102.3", f"duration = {excitation_s}")
     if hover_s is not None:
         text, n = re.subn(r'(name = "(?:settle|recover)"\nkind = "hover"[^\n]*\nduration = )'
                           r'[\d.]+', rf"\g<1>{hover_s}", text)
         assert n == 2, "prbs-3axis changed: its settle and recover phases"
+    if land_s is not None:
+        text, n = re.subn(r'(name = "land"\nkind = "landing"[^\n]*\nduration = )[\d.]+',
+                          rf"\g<1>{land_s}", text)
+        assert n == 1, "prbs-3axis changed: its land phase"
     if live_id is not None:
         text += f"\n[live_id]\n{live_id}\n"
     return parse_plan(text=text, source="prbs-short", name="prbs-3axis")
@@ -129,14 +134,15 @@ def cli_in_step(monkeypatch):
 @pytest.fixture(scope="module")
 def thesis_flight(tmp_path_factory):
     """One flight at the thesis settings (the defaults: motors -> gyro, order 8, past 60,
-    future 17), 30 s of PRBS at 20x, with the Rerun view saved to a file."""
+    future 17), 30 s of PRBS flat out (held in step with the identification), with the Rerun
+    view saved to a file."""
     install_drivers()
     out = tmp_path_factory.mktemp("liveid")
     plan = _plan()
     lid = live_id_listener(plan)
     view = open_view(mode="save", name="live-id", rrd_path=out / "view.rrd")
     lid.observers.append(LiveIdView(rec=view.rec))
-    uri = "sim://7601?speed=20"
+    uri = "sim://7601?speed=inf"
     result = fly_plan(plan=plan, out=out, uri=uri, listeners=[view, lid], tick_hook=in_step(lid))
     wait_for_stop(uri)
     yield result, lid, out
@@ -309,7 +315,7 @@ class _Broken:
 @pytest.mark.parametrize("kind", ["slow", "failing"])
 def test_a_slow_or_failing_identification_never_touches_the_flight(sim_uri, tmp_path, kind):
     plan = _plan(20.0, SMALL + "update_period = 0.2")
-    uri = sim_uri()
+    uri = sim_uri(speed="inf")
     lid = LiveIdListener(config=plan.live_id, observers=[_Broken()],
                          engine=_engine(delay=1.0, uri=uri) if kind == "slow"
                          else _engine(fail=True))
@@ -363,7 +369,7 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
         if k == abort_at:
             raise RuntimeError("injected fault")
 
-    uri = sim_uri()
+    uri = sim_uri(speed="inf")
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid], tick_hook=hook)
     assert result.aborted and "injected fault" in result.cause
     wait_for_stop(uri)
@@ -386,7 +392,7 @@ def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     the final update of what was recorded up to the loss, and what this test checks holds for
     it all the same, so such a flight is accepted; only one that lost the link before the first
     update is flown again (once). Any other abort fails."""
-    plan = _plan(8.0, SMALL, hover_s=1.0)
+    plan = _plan(8.0, SMALL, hover_s=1.0, land_s=1.0)
     for attempt in range(2):
         lid = live_id_listener(plan)
         uri = flight_uri()
@@ -415,7 +421,7 @@ def test_live_id_over_the_udp_simulator(tmp_path):
     """``groundstation sim``'s UDP server (cflib's UDP driver, real time): the same checks. A
     link loss (a host stall on the wall clock) is accepted once updates came, as on SITL."""
     install_drivers()
-    plan = _plan(6.0, SMALL, hover_s=1.0)
+    plan = _plan(6.0, SMALL, hover_s=1.0, land_s=1.0)
     with UdpServer(port=free_udp_port(), seed=4) as server:
         lid = live_id_listener(plan)
         result = fly_plan(plan=plan, out=tmp_path, uri=server.uris[0], listeners=[lid])

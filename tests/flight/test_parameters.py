@@ -17,6 +17,7 @@ import groundstation.sim as gsim
 from groundstation.cli import main
 from groundstation.errors import LinkError
 from groundstation.flight import fly_plan
+from groundstation.flight.drivers import toc_cache_dir
 from groundstation.plan import load_plan, parse_plan
 
 from .checks import check_closed_with_stop
@@ -27,13 +28,18 @@ NAMES = ("pid_attitude.yaw_kd", "pid_rate.yaw_kp")
 
 
 def _plan(extra: str = SET, name: str = "hover-check"):
-    """``name`` with a 2 s hover (the firmware in the loop flies in real time) and ``extra``."""
+    """``name`` with a 2 s hover and a 1 s landing (the firmware in the loop flies in real
+    time) and ``extra``."""
     text = load_plan(name).text.replace("duration = 5.0 ", "duration = 2.0 ", 1)
+    text = text.replace("duration = 3.0 ", "duration = 1.0 ", 1)  # the landing
     return parse_plan(text=text + extra, source=f"{name}+parameters", name=name)
 
 
 def _read_back(uri: str) -> dict[str, float]:
-    with SyncCrazyflie(uri, cf=Crazyflie(rw_cache=None)) as scf:
+    """The values in the firmware, read over a second connection (its TOCs from the run's
+    cache, as the flight's connect took them: the values themselves are read at connect)."""
+    cache = toc_cache_dir()
+    with SyncCrazyflie(uri, cf=Crazyflie(rw_cache=None if cache is None else str(cache))) as scf:
         return {n: float(scf.cf.param.get_value(n)) for n in NAMES}
 
 

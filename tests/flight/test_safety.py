@@ -87,7 +87,9 @@ def test_rate_limit_violation_aborts(where, flight_uri, tmp_path, request):
                             "station")
     # Thrust above the simulated vehicle's hover (39153 PWM) so it is surely airborne:
     # a vehicle resting on the ground has no body rates.
-    edits = {"hover_thrust = 39000": "hover_thrust = 40500"}
+    # A 1 s settle instead of 3 s (SITL flies in real time): the PRBS trips the limit at once.
+    settle = 'kind = "hover"                 # level attitude, thrust = hover_thrust\nduration = '
+    edits = {"hover_thrust = 39000": "hover_thrust = 40500", f"{settle}3.0": f"{settle}1.0"}
     if where == "plan":  # the plan's [safety] max_rate_deg_s
         edits['[safety]\n'] = '[safety]\nmax_rate_deg_s = 10.0\n'
     plan = plan_variant("roll-only", **edits)
@@ -132,8 +134,10 @@ class _Listener:
 
 def test_failing_listener_is_dropped_and_the_flight_goes_on(flight_uri, tmp_path):
     bad, good = _Listener(fail_at=40), _Listener()
-    # a 2 s hover: 70 setpoints, the listener fails at the 40th (SITL flies in real time)
-    plan = plan_variant("hover-check", **{"duration = 5.0 ": "duration = 2.0 "})
+    # a 2 s hover and a 1 s landing: 50 setpoints (SITL flies in real time); the listener
+    # fails at its 40th call
+    plan = plan_variant("hover-check", **{"duration = 5.0 ": "duration = 2.0 ",
+                                          "duration = 3.0 ": "duration = 1.0 "})
     uri = flight_uri()
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[bad, good])
     assert not result.aborted

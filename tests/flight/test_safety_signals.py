@@ -11,17 +11,24 @@ import pytest
 
 from groundstation.errors import FlightAborted
 from groundstation.flight import fly_plan
-from groundstation.plan import load_plan
 
 from .checks import check_closed_with_stop, check_descent, check_setpoints, safety_events
-from .conftest import one_variant_on_sitl, wait_for_stop, wall_slack_s
+from .conftest import one_variant_on_sitl, plan_variant, wait_for_stop, wall_slack_s
+
+_SETTLE = 'kind = "hover"                 # level attitude, thrust = hover_thrust\nduration = '
+
+
+def _pitch_only():
+    """pitch-only with a 1 s settle instead of 3 s (SITL flies in real time); the signals
+    come 2 s into its PRBS."""
+    return plan_variant("pitch-only", **{f"{_SETTLE}3.0": f"{_SETTLE}1.0"})
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
     one_variant_on_sitl(request, first=sig == signal.SIGINT,
                         why="SIGTERM and SIGINT take one path, in the ground station")
-    plan, uri = load_plan("pitch-only"), flight_uri()
+    plan, uri = _pitch_only(), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     before = signal.getsignal(sig)
 
@@ -65,7 +72,7 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
 
 
 def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
-    plan, uri = load_plan("pitch-only"), flight_uri()
+    plan, uri = _pitch_only(), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
 
     def hook(k: int) -> None:

@@ -13,6 +13,7 @@ from cflib.crazyflie.log import LogConfig
 from cflib.crazyflie.syncCrazyflie import SyncCrazyflie
 
 from groundstation.flight.clock import Clock
+from groundstation.flight.drivers import toc_cache_dir
 
 __all__ = ["BLOCKS", "Recorder", "connect", "fly"]
 
@@ -25,9 +26,13 @@ BLOCKS = {
 
 
 @contextmanager
-def connect(uri: str) -> Iterator[SyncCrazyflie]:
-    """An open, fully connected link (all parameters read once)."""
-    cf = Crazyflie(rw_cache=None)
+def connect(uri: str, *, toc_cache: bool = False) -> Iterator[SyncCrazyflie]:
+    """An open, fully connected link (all parameters read once). The TOCs are fetched from
+    the vehicle unless ``toc_cache``: then cflib keeps them in the run's TOC cache, as the
+    ground station does (a second connect to the real firmware in the loop reads only the
+    parameter values: 0.8 s instead of 1.9 s), for tests whose subject is not the TOC."""
+    cache = toc_cache_dir() if toc_cache else None
+    cf = Crazyflie(rw_cache=None if cache is None else str(cache))
     fully = threading.Event()
     cf.fully_connected.add_callback(lambda uri: fully.set())
     with SyncCrazyflie(uri, cf=cf) as scf:

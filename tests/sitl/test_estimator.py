@@ -47,7 +47,7 @@ def test_attitude_estimate_follows_the_vehicle_beyond_90_deg_of_yaw():
         plan += [(1.5, 0.0, 0.0, 0.0, hover)]
         clock = clock_for_uri(v.uri)
         truth: list[tuple[str, float, float, float, float]] = []   # phase, roll, pitch, yaw, z
-        with connect(v.uri) as scf:
+        with connect(v.uri, toc_cache=True) as scf:
             cf = scf.cf
             rec = Recorder(cf, blocks=ESTIMATE, period_ms=10)
             cf.commander.send_setpoint(0, 0, 0, 0)  # release the thrust lock

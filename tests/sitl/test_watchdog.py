@@ -29,7 +29,7 @@ LOCKED = 0x40
 
 def observe_watchdog(uri: str, *, thrust: int) -> dict[str, float]:
     clock = clock_for_uri(uri)
-    with connect(uri) as scf:
+    with connect(uri, toc_cache=True) as scf:
         cf = scf.cf
         rec = Recorder(cf, blocks=BLOCK, period_ms=10)
         t = clock.now()
