@@ -13,8 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sysid.data import IOData
-from sysid.quirks._scaling import records
+from sysid.data import IOData, as_flights
 
 __all__ = ["AR_ORDER", "DRIFT_RATIO", "DRIFT_T", "drift_warnings", "trend_ratios"]
 
@@ -55,7 +54,7 @@ def trend_ratios(flights: Sequence[IOData]) -> tuple[np.ndarray, np.ndarray]:
     ratio, t : (records, m + l) arrays, columns as ``IOData.w``; 0 for a constant channel
     or a record of fewer than 20 samples.
     """
-    flights = records(flights)
+    flights = list(as_flights(flights))
     shape = (len(flights), flights[0].w.shape[1])
     ratio, t = np.zeros(shape), np.zeros(shape)
     for i, d in enumerate(flights):

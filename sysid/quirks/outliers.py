@@ -34,9 +34,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from sysid.data import IOData
+from sysid.data import IOData, as_flights
 from sysid.memory import predictor_memory
-from sysid.quirks._scaling import records
 
 __all__ = ["FALSE_ALARM", "MAX_LAG", "MIN_THRESHOLD", "SHOWN", "Outliers", "find_outliers",
            "outlier_masks", "outlier_threshold", "outlier_warnings"]
@@ -188,7 +187,7 @@ def _distances(flights: Sequence[IOData], *, lag: int | None, alpha: float
     """Each sample's distance (N, c) in robust standard deviations (NaN where untested: the
     first and last ``lag`` samples, records too short, data too few for the predictors) and
     the threshold, after the second fit."""
-    flights = records(flights)
+    flights = list(as_flights(flights))
     lag = _lag(flights, lag)
     out = [np.full(d.w.shape, np.nan) for d in flights]
     usable = [i for i, d in enumerate(flights) if d.n_samples >= 2 * lag + 2]

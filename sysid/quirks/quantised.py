@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from sysid.data import IOData, as_flights
-from sysid.quirks._scaling import scaled
 
 __all__ = ["QUANT_DISTINCT", "QUANT_NOISE", "Quantised", "find_quantised",
            "quantisation_warnings"]
@@ -66,8 +65,7 @@ def find_quantised(flights: Sequence[IOData], *, noise: float = QUANT_NOISE,
     -------
     list of :class:`Quantised`, in output order.
     """
-    recs, exp = scaled(flights)
-    m = recs[0].n_inputs
+    recs = as_flights(flights)
     out = []
     for j, name in enumerate(recs[0].output_names):
         xs = [d.y[:, j] for d in recs if d.n_samples]
@@ -89,7 +87,7 @@ def find_quantised(flights: Sequence[IOData], *, noise: float = QUANT_NOISE,
         share = step / np.sqrt(12.0) / sd
         if share >= noise:
             out.append(Quantised(name=name, column=j, levels=max(levels),
-                                 step=float(np.ldexp(step, exp[m + j])), noise=float(share)))
+                                 step=float(step), noise=float(share)))
     return out
 
 

@@ -73,9 +73,10 @@ def test_excitation_inputs_on_few_levels_and_short_continuous_records_are_not_fl
 
 def test_huge_or_tiny_magnitudes_raise_no_overflow_and_are_refused_in_one_line() -> None:
     """Data times 1e300 overflowed the squares of the data checks (RuntimeWarnings from
-    sysid.quirks) and ended in a false 'linear combination' refusal; the checks now work on
-    channels scaled by a power of two (the same outliers found), and an identification
-    refuses magnitudes whose sums of squares overflow or underflow, naming the channel."""
+    sysid.quirks) and ended in a false 'linear combination' refusal. Every check of the
+    records (sysid.data.as_flights) now refuses magnitudes whose sums of squares overflow or
+    underflow, naming the channel, and what it lets through (1e140, 1e-140) finds the same
+    outliers without a warning."""
     clean = _experiment(n=600, seed=2)
     y = np.array(clean.y)
     y[300, 1] += 30 * y[:, 1].std()
