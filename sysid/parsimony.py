@@ -57,7 +57,9 @@ alternative is taken when it scores better by more than one standard error of it
 :data:`UNRESOLVED_POINTS` and models of several orders score within it, the held-out data
 cannot rank models a few points apart, whatever the rule; when it is at least
 :data:`IMPRECISE_POINTS`, the held-out score itself says little even if one order ranks
-first. The selection says so (more or longer validation data is the remedy), unless fewer
+first; when even the best score is 0 % (no model simulates any held-out output better than
+its mean: every channel floored), nothing was ranked and the order is the rule's default.
+The selection says so (more or longer validation data is the remedy), unless fewer
 than half the blocks, each far out among the jackknife replicates (:data:`DOMINANT_Z` robust
 standard deviations), make at least half its variance (:func:`dominant_blocks`): then the data
 are not too few but a few stretches of them are odd (outliers, a burst of disturbance), and the
@@ -296,11 +298,20 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int,
     ``validation_given``: the held-out samples are validation flights the caller gave
     (:attr:`sysid.holdout.Plan.given_validation`), so the remedy asks for longer ones or
     more of them rather than for validation flights as if none had been given. None when
-    the score is precise enough, or ranks one order clearly above the rest."""
+    the score is precise enough, or ranks one order clearly above the rest. When even the best
+    score is 0 % (no model simulates any held-out output better than its mean), the warning
+    says that the choice was the rule's default and not a measurement."""
     se = score_se(ranked[0])
     remedy = ("the validation flights given are too short or too few: give longer ones or "
               "more of them" if validation_given else
               "give longer or more validation flights (sysid sweep --validate)")
+    if ranked[0].score <= 0.0:  # every channel of every model floored: nothing was ranked
+        return (f"no model of the grid simulates any of the {n_samples} held-out samples' "
+                f"outputs better than their mean (every score 0 %): the held-out data cannot "
+                f"rank the models and the smallest order was taken by default, not by "
+                f"measurement; the records may be too short for their channels or the held-out "
+                f"part unlike the rest: give horizons and an order (--past/--future/--order) "
+                f"and check the fit on other data, or {remedy}")
     elsewhere = "validate on other flights" + ("" if validation_given else
                                                  " (sysid sweep --validate)")
     if np.isfinite(se) and se >= UNRESOLVED_POINTS:

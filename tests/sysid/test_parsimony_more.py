@@ -1,6 +1,9 @@
-"""The ranking warning's remedy fits whether validation flights were given."""
+"""The ranking warning: its remedy fits whether validation flights were given, and it says when
+no model beat the held-out mean."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -56,3 +59,31 @@ def test_a_selection_on_given_validation_flights_says_so() -> None:
     (warned,) = [w for w in sel.warnings if "held-out samples" in w]
     assert "the 60 held-out samples" in warned and "--validate" not in warned
     assert "validation flights given are too short or too few" in warned
+
+
+def test_when_no_model_beats_the_held_out_mean_the_warning_says_nothing_was_ranked() -> None:
+    """Every held-out fit <= 0 % (every score floored to 0): the choice is the rule's default,
+    and the warning says so instead of a standard error of a score that measured nothing."""
+    worse = [_row(n, np.array([[1.2 + 0.1 * n]] * 12) / 12) for n in (2, 4)]
+    assert all(r.score == 0.0 for r in worse)
+    warned = ranking_warning(worse, n_samples=120)
+    assert "better than their mean (every score 0 %)" in warned
+    assert "not by measurement" in warned and "sysid sweep --validate" in warned
+    fine = [_row(n, np.full((12, 1), 0.01 / 12)) for n in (2, 4)]
+    assert ranking_warning(fine, n_samples=120) is None
+
+
+def test_a_selection_whose_held_out_part_is_unlike_the_rest_says_nothing_was_ranked() -> None:
+    """The plant's gain changes sign where the held-out part begins (the last 30 %), so every
+    model of the grid simulates it worse than its mean (as every model of DaISy destill's 60
+    samples of 8 channels did): the selection warns that nothing was ranked."""
+    rng = np.random.default_rng(3)
+    system = random_stable_system(n_states=3, n_inputs=1, n_outputs=2, rng=rng,
+                                  radius=(0.5, 0.9))
+    data = open_loop(system, n_samples=600, rng=rng, noise_std=0.05).data
+    y = data.y.copy()
+    y[420:] *= -1.0
+    meth = get_method("iem")
+    sel = select([[dataclasses.replace(data, y=y)]], method=meth, options=meth.options())
+    assert sel.best.score == 0.0
+    assert any("every score 0 %" in w for w in sel.warnings), sel.warnings
