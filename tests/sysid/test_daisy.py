@@ -52,3 +52,22 @@ def test_no_knobs_selection_on_daisy_sets(name, floor):
     sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True)
     assert sel.best.past >= 3 and sel.best.order >= 2, sel.grid
     assert protocol_fit(sel.model, val) >= floor, (sel.best, sel.grid)
+
+
+def test_other_sets_load_by_the_same_protocol(tmp_path, monkeypatch):
+    """``python -m bench daisy`` runs the protocol on other sets' files
+    (``BENCH_DAISY_EXTRA``): columns 1-based, means removed, first 2/3 identify."""
+    from . import daisy
+
+    table = np.column_stack([np.arange(1.0, 31.0), np.arange(30.0) ** 2, -np.arange(30.0)])
+    np.savetxt(tmp_path / "set.dat", table)
+    extra = daisy.parse_extra(f" mine={tmp_path / 'set.dat'}:2:1,3 ; ")
+    assert extra == {"mine": (tmp_path / "set.dat", [2], [1, 3])}
+    monkeypatch.setattr(daisy, "EXTRA", extra)
+    ident, val = daisy.load("mine")
+    assert (ident.n_samples, val.n_samples, ident.n_inputs, ident.n_outputs) == (20, 10, 1, 2)
+    np.testing.assert_allclose(ident.y[0], [1.0 - 15.5, 0.0 + 14.5])
+    np.testing.assert_allclose(ident.u[:, 0] + 0.0, table[:20, 1] - table[:, 1].mean())
+    for bad in ("mine=set.dat:2", "mine=set.dat:0:1", "set.dat:1:2", "mine=set.dat:a:1"):
+        with pytest.raises(ValueError, match="1-based"):
+            daisy.parse_extra(bad)
