@@ -219,8 +219,15 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
             feedback if feedback is not None else feedback_test(p.ident)
         if loop is not None and feedback is None:
             log.info("selection: %s", loop.describe())
+        skipped_d = ""
         if choose_feedthrough == "open-loop":  # a direct term only where no feedback was found
             choose_feedthrough = loop is not None and loop.feedback is False
+            if loop is not None and loop.feedback and not getattr(options, "feedthrough", True):
+                skipped_d = ("direct term not tried: the data read as closed loop "
+                             f"({loop.describe()}), where a direct term also fits the "
+                             "controller's instantaneous "
+                             "response; estimate one anyway with --feedthrough "
+                             "(feedthrough=True)")
         variants = ([dataclasses.replace(options, focus=f) for f in focus_order(options.focus)]
                     if choose_focus else [options])
         # the method choice's sweep (one pair of horizons over the orders) counted from the start
@@ -286,7 +293,8 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                     client=client, feedback=loop)
             except NoStableModel:
                 raise error from None
-            return dataclasses.replace(sel, method_note=f"method {alt.name}: {method.name}: "
+            return dataclasses.replace(sel, feedthrough_note=skipped_d or sel.feedthrough_note,
+                                       method_note=f"method {alt.name}: {method.name}: "
                                                         f"{error}; {alt.name} on the same grid "
                                                         "chose the model")
         chosen = pick_focus(selections) if choose_focus else selections[0]
@@ -311,6 +319,9 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                 final_model(q, row, warnings, method=alt, options=alt_opts)))
         # outliers and drift in every record the selection used (held-out parts included)
         quirks = data_warnings([*p.everything, *(p.val if p.given_validation else [])])
+        if skipped_d:
+            log.info("selection: %s", skipped_d)
+            chosen = dataclasses.replace(chosen, feedthrough_note=skipped_d)
         return dataclasses.replace(chosen, feedback=loop, warnings=(
             *quirks, *chosen.warnings, *biased_choices(chosen, loop, focus_chosen=choose_focus,
                                               feedthrough_chosen=tries_feedthrough(
