@@ -89,3 +89,17 @@ def test_residual_analysis_and_ic_run_on_real_flights(segments):
     assert res.crosscorr.shape == (41, 4, 4) and "controller.r_roll" in res.summary()
     ic = sysid.information_criteria(ident, orders=[2, 4, 8], past=20, future=20)
     assert set(ic.chosen.values()) <= {2, 4, 8} and np.isfinite(ic.bic).all()
+
+
+def test_the_logged_command_spike_is_an_outlier_on_both_channels(segments):
+    """log00's first hover: cmd_roll jumps from about 4 600 to 32 116 for one sample and back
+    (cmd_pitch to 15 273 at the same instant), in a command that swings by thousands from one
+    sample to the next; both are named. Its two predictions (from before, from after) are
+    0.8 times as far apart as the nearer is from the sample: closer to each other than to it,
+    as an outlier's are (a step's are not: test_quirks, DaISy cstr)."""
+    from sysid.quirks import find_outliers
+
+    found = {o.name: o.where for o in find_outliers(segments[0])}
+    assert found.get("controller.cmd_roll") == ((0, 531),), found
+    assert found.get("controller.cmd_pitch") == ((0, 531),), found
+    assert segments[0][0].u[531, 0] > 5 * np.abs(segments[0][0].u[526:531, 0]).max()
