@@ -1,7 +1,8 @@
 """Bounded fuzzing in the suite: a few hundred mutated inputs per target, seeded by the date.
 
-Each target gets damaged or crafted input (:mod:`tests.fuzz.harness`) and must give a valid
-result or a one-line error: never a traceback, never a hang (10 s per case, in a child process).
+Each target gets damaged or crafted input (:mod:`tests.fuzz.targets`, run by
+:mod:`tests.fuzz.harness`) and must give a valid result or a one-line error: never a traceback,
+never a hang (10 s per case, in a child process).
 The seed is printed (``pytest -s``) and in the failure message; replay a failure with
 ``python -m tests.fuzz.harness --target TARGET --seed SEED --cases N``. Bigger campaigns:
 ``make fuzz``.
