@@ -1,6 +1,7 @@
 """Quirks of the data that mislead a selection, each in its module: gross outliers
-(:mod:`sysid.quirks.outliers`), a drift, a linear trend (:mod:`sysid.quirks.drift`), and a
-quantised output (:mod:`sysid.quirks.quantised`). :func:`data_warnings` gives them as one-line
+(:mod:`sysid.quirks.outliers`), a drift, a linear trend (:mod:`sysid.quirks.drift`), a
+quantised output (:mod:`sysid.quirks.quantised`) and channels far from zero
+(:mod:`sysid.quirks.offsets`). :func:`data_warnings` gives them as one-line
 warnings, for a selection's report (:func:`sysid.auto.select` calls it on all its records).
 
 **Magnitudes**: the checks take the records through :func:`sysid.data.as_flights`, which
@@ -15,6 +16,7 @@ from collections.abc import Sequence
 
 from sysid.data import IOData, as_flights
 from sysid.quirks.drift import AR_ORDER, DRIFT_RATIO, DRIFT_T, drift_warnings, trend_ratios
+from sysid.quirks.offsets import OFFSET_SD, Offset, find_offsets, offset_warnings
 from sysid.quirks.outliers import (
     FALSE_ALARM,
     MAX_LAG,
@@ -34,15 +36,16 @@ from sysid.quirks.quantised import (
 )
 
 __all__ = ["AR_ORDER", "DRIFT_RATIO", "DRIFT_T", "FALSE_ALARM", "MAX_LAG", "MIN_THRESHOLD",
-           "QUANT_DISTINCT", "QUANT_NOISE", "Outliers", "Quantised", "data_warnings",
-           "drift_warnings", "find_outliers", "find_quantised", "outlier_masks",
-           "outlier_threshold", "outlier_warnings", "quantisation_warnings", "trend_ratios"]
+           "OFFSET_SD", "QUANT_DISTINCT", "QUANT_NOISE", "Offset", "Outliers", "Quantised",
+           "data_warnings", "drift_warnings", "find_offsets", "find_outliers", "find_quantised",
+           "offset_warnings", "outlier_masks", "outlier_threshold", "outlier_warnings",
+           "quantisation_warnings", "trend_ratios"]
 
 
 def data_warnings(flights: Sequence[IOData]) -> list[str]:
-    """The data's quirks that mislead a selection, one line each: outliers
-    (:func:`outlier_warnings`), then drifts (:func:`drift_warnings`), then quantised outputs
-    (:func:`quantisation_warnings`).
+    """The data's quirks that mislead a selection, one line each: offsets
+    (:func:`offset_warnings`), outliers (:func:`outlier_warnings`), then drifts
+    (:func:`drift_warnings`), then quantised outputs (:func:`quantisation_warnings`).
 
     Parameters
     ----------
@@ -53,4 +56,5 @@ def data_warnings(flights: Sequence[IOData]) -> list[str]:
     list of str, empty for clean data.
     """
     recs = list(as_flights(flights))
-    return [*outlier_warnings(recs), *drift_warnings(recs), *quantisation_warnings(flights)]
+    return [*offset_warnings(recs), *outlier_warnings(recs), *drift_warnings(recs),
+            *quantisation_warnings(flights)]

@@ -101,3 +101,32 @@ def test_huge_or_tiny_magnitudes_raise_no_overflow_and_are_refused_in_one_line()
                     call(arg)
             assert "\n" not in str(err.value)
     check_magnitudes([spiked])  # ordinary data pass
+
+
+def test_channels_far_from_zero_are_named_with_the_mean_removal_as_remedy() -> None:
+    """An input around an operating point (hover thrust: 40 000 counts +- 2 000) and an
+    output with a bias: named, with their means and how many standard deviations out; the
+    same data with the means removed, or a step from rest (mean 0.5, SD 0.5), are not."""
+    from sysid.quirks import find_offsets, offset_warnings
+
+    rng = np.random.default_rng(2)
+    system = random_stable_system(n_states=3, n_inputs=2, n_outputs=2, rng=rng,
+                                  radius=(0.5, 0.9))
+    data = open_loop(system, n_samples=1500, rng=rng, noise_std=0.05).data
+    u = data.u * np.array([2000.0, 1.0]) + np.array([40_000.0, 0.0])
+    y = data.y + np.array([0.0, 10.0 * data.y[:, 1].std()])
+    raw = sysid.IOData(u=u, y=y, dt=0.01, input_names=["thrust", "roll"],
+                       output_names=["gyro.x", "acc.z"], input_units=["PWM", "deg"],
+                       output_units=["deg/s", "g"])
+    found = find_offsets([raw])
+    assert [(o.kind, o.name) for o in found] == [("input", "thrust"), ("output", "acc.z")]
+    assert 19 < found[0].ratio < 21 and 9 < found[1].ratio < 11
+    (line,) = offset_warnings([raw])
+    assert f"input thrust {found[0].mean:.4g} PWM ({found[0].ratio:.1f} SD)" in line
+    assert "output acc.z" in line
+    assert "--detrend mean" in line and "\n" not in line
+    assert line in data_warnings([raw])
+    centred = sysid.IOData(u=u - u.mean(axis=0), y=y - y.mean(axis=0), dt=0.01)
+    assert find_offsets([centred]) == []
+    steps = np.repeat([[0.0, 0.0], [1.0, 1.0]], 750, axis=0)  # both inputs step at rest
+    assert find_offsets([sysid.IOData(u=steps, y=system.simulate(steps), dt=0.01)]) == []
