@@ -115,9 +115,10 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     (docs/sysid.md).
 
     The values and models are those of --method (the registry of sysid identify), and no
-    order is scored or suggested beyond what it identifies at these horizons. The gap rule
-    picks the n maximising log10(s_n / s_n+1) among the first --show values. It is the
-    suggestion when clear: n >= 2 and a drop of at least a factor of 2 (0.3 decades). A
+    order is scored or suggested beyond what it identifies at these horizons; an order it
+    fails to identify there is listed with its reason and neither scored nor suggested. The
+    gap rule picks the n maximising log10(s_n / s_n+1) among the first --show values. It is
+    the suggestion when clear: n >= 2 and a drop of at least a factor of 2 (0.3 decades). A
     largest gap right after s_1 is degenerate (one dominant direction), a smaller one no cut:
     BIC's order is suggested then. Validation on held-out data (sysid identify without
     --order) judges better than either. Without --past/--future the horizons are the largest

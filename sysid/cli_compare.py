@@ -27,6 +27,7 @@ from sysid.cli_support import (
     fit_table,
     fits_json,
     load_flights,
+    pole_kind,
     write_rrd,
 )
 from sysid.model import load_model
@@ -57,10 +58,11 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
 
     The model's channel names select the session channels and its dt sets the grid. Without
     --horizon/--window-s the whole window is simulated from a least-squares initial state,
-    unless the model integrates (a pole at |z| >= 0.995): whole-flight simulation of an
-    integrator only measures its drift, so it is then simulated over 2 s windows (at least 10
-    output values per state of the initial state fitted on each). A fit that
-    diverged is "diverged" in tables and null in --json.
+    unless the model has a pole at |z| >= 0.995 (an integrator, or an unstable or lightly
+    damped mode): whole-flight simulation then only measures its drift or growth, so it is
+    simulated over 2 s windows (at least 10 output values per state of the initial state
+    fitted on each), and a note on stderr names the pole. A fit that diverged is "diverged"
+    in tables and null in --json.
     Each experiment of a session (e.g. its airborne-N phases) is its own row.
 
     \b
@@ -70,7 +72,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     check_rrd(rrd, inputs=(model_path, *sessions))
     model = load_model(model_path)
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
-                    outputs=model.output_names)
+                           outputs=model.output_names, verb="compare the model on")
     modes: list[tuple[str, dict[str, Any]]] = []
     longest = max(d.n_samples for d in flights)  # beyond it: the whole record is simulated
     if window_s is not None:
@@ -84,9 +86,10 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     if not modes:
         modes = [default_compare_mode(model)]
         if "windows" in modes[0][0]:
-            radius = float(np.max(np.abs(model.poles())))
+            poles = model.poles()
+            pole = complex(poles[int(np.argmax(np.abs(poles)))])
             output_console(stderr=True).print(
-                f"model has a pole at |z| = {radius:.4f} (integrating or nearly): "
+                f"model has a pole at |z| = {abs(pole):.4f} ({pole_kind(pole)}): "
                 f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
                 "another mode", style="dim")
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
@@ -143,7 +146,7 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
     check_rrd(rrd, inputs=(model_path, *sessions))
     model = load_model(model_path)
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
-                           outputs=model.output_names)
+                           outputs=model.output_names, verb="analyse the residuals on")
     res = residuals(model, flights, max_lag=max_lag, confidence=confidence)
     if rrd is not None:
         write_rrd(path=rrd, name=f"resid {model_path.name}", model=model, residuals=res)

@@ -110,7 +110,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     checks = []
     if validate:
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
-                           inputs=model.input_names, outputs=model.output_names)
+                           inputs=model.input_names, outputs=model.output_names,
+                           verb="validate the model on")
         v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
                                   n_states=model.n_states, n_outputs=model.n_outputs)
         checks = [(f"validation: simulation, {v_win:.3g} s windows",

@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
+from rich.markup import escape
 
 from cfcommon.cli import output_table
 from sysid.auto import default_grid
@@ -20,13 +22,18 @@ __all__ = ["IC_MAX_ORDER", "order_command"]
 IC_MAX_ORDER = 12
 
 
+def _values(values: np.ndarray) -> list[float | None]:
+    """Criteria for JSON: ``null`` for a failed order (NaN)."""
+    return [None if np.isnan(v) else float(v) for v in values]
+
+
 def order_command(session: Path, *, method: str, past: int | None, future: int | None,
                   show: int, as_json: bool, **opts: Any) -> None:
     """Singular values, information criteria and the suggested order of ``session``."""
-    flights = load_flights([session], opts=opts)
+    flights = load_flights([session], opts=opts, verb="choose the order from")
     meth = get_method(method)
     if past is None or future is None:  # the default grid refuses records too short for it
-        grid = default_grid(flights)
+        grid = default_grid(flights, give="horizons (--past/--future)")
         past = grid["pasts"][-1] if past is None else past
         future = grid["futures"][-1] if future is None else future
     limit = meth.max_order(past=past, future=future, n_inputs=flights[0].n_inputs,
@@ -45,8 +52,10 @@ def order_command(session: Path, *, method: str, past: int | None, future: int |
                                    "gap_clear": hint.gap_clear},
                                "information_criteria": {
                                    "orders": ic.orders.tolist(), "n_params": ic.n_params.tolist(),
-                                   "aic": ic.aic.tolist(), "aicc": ic.aicc.tolist(),
-                                   "bic": ic.bic.tolist(), "chosen": ic.chosen}}, indent=1))
+                                   "aic": _values(ic.aic), "aicc": _values(ic.aicc),
+                                   "bic": _values(ic.bic), "chosen": ic.chosen,
+                                   "failed": {str(n): why for n, why in ic.failed.items()}}},
+                              indent=1))
         return
     con = console()
     table = output_table("n", "singular value", "log10 gap to next", console=con,
@@ -58,14 +67,22 @@ def order_command(session: Path, *, method: str, past: int | None, future: int |
         table.add_row(str(i + 1), f"{value:.4g}", gap,
                       style="bold" if i + 1 == hint.order else None)
     con.print(table)
-    table = output_table("n", "params", "AIC", "AICc", "BIC", console=con,
+    columns = ("n", "params", "AIC", "AICc", "BIC") + (("note",) if ic.failed else ())
+    table = output_table(*columns, console=con,
                          title="information criteria (one-step errors; * = smallest)")
     for i, n in enumerate(ic.orders):
+        if int(n) in ic.failed:  # the reason is text, not markup ([...] in it)
+            table.add_row(str(n), str(ic.n_params[i]), "-", "-", "-",
+                          escape(f"failed: {ic.failed[int(n)]}"))
+            continue
         cells = [f"{v[i]:.1f}" + (" *" if ic.chosen[k] == n else "")
                  for k, v in (("aic", ic.aic), ("aicc", ic.aicc), ("bic", ic.bic))]
-        table.add_row(str(n), str(ic.n_params[i]), *cells,
+        table.add_row(str(n), str(ic.n_params[i]), *cells, *([""] if ic.failed else []),
                       style="bold" if n == hint.order else None)
     con.print(table)
+    if ic.failed:
+        con.print(f"{len(ic.failed)} of {ic.orders.size} orders could not be identified by "
+                  f"{meth.name} at these horizons (note); the criteria compare the others")
     con.print(f"largest gap ({hint.gap_decades:.2f} decades) after s_{hint.by_rule['gap']}; "
               f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
     con.print(f"suggested order: {hint.order}, by {hint.reason}")

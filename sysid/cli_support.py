@@ -32,6 +32,7 @@ from sysid.errors import DataError, MissingDependencyError, ParameterError, SysI
 from sysid.model import StateSpaceModel
 from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
 from sysid.session_io import AUTO, SessionFileError, Window, load_sessions, parse_window
+from sysid.stability import NEAR_BAND
 from sysid.validate import simulation_window
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
     "parse_grid",
     "parse_window",
     "parse_windows",
+    "pole_kind",
     "pole_table",
     "poles_rich_table",
     "require_viz",
@@ -159,15 +161,17 @@ def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
 
 
 def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
-                inputs: Sequence[str] | None = None,
-                outputs: Sequence[str] | None = None) -> list[list[IOData]]:
-    """The experiments of each session, as the session options select them."""
+                inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
+                verb: str = "identify from") -> list[list[IOData]]:
+    """The experiments of each session, as the session options select them; ``verb`` is
+    what they are for (:func:`sysid.session_io.load_experiments`)."""
     common, own = parse_windows(opts["windows"])
     try:
         return load_sessions(
             list(paths), inputs=inputs or split_names(opts["inputs"]),
             outputs=outputs or split_names(opts["outputs"]), window=common, windows=own,
-            dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"])
+            dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"],
+            verb=verb)
     except DataError as exc:  # a channel the session lacks: say which option chooses them
         role = next((r for r in ("inputs", "outputs") if f"for the {r}" in str(exc)), None)
         if role is None or (role == "inputs" and inputs) or (role == "outputs" and outputs):
@@ -176,10 +180,11 @@ def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
 
 
 def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],
-                 inputs: Sequence[str] | None = None,
-                 outputs: Sequence[str] | None = None) -> list[IOData]:
+                 inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
+                 verb: str = "identify from") -> list[IOData]:
     """Every experiment of the sessions, in order (:func:`load_groups` flattened)."""
-    return [e for g in load_groups(paths, opts=opts, inputs=inputs, outputs=outputs) for e in g]
+    return [e for g in load_groups(paths, opts=opts, inputs=inputs, outputs=outputs,
+                                   verb=verb) for e in g]
 
 
 # ------------------------------------------------------------------------------- output
@@ -309,3 +314,13 @@ def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
                                    n_outputs=model.n_outputs)
         return (f"simulation, {window:.3g} s windows", {"window": window})
     return ("simulation", {})
+
+
+def pole_kind(pole: complex) -> str:
+    """What a pole on or near the unit circle is, in a few words: "integrating or nearly"
+    within :data:`sysid.stability.NEAR_BAND` of ``z = 1`` (the band ``stability="auto"``
+    treats as an integrator's estimate), else "unstable" outside the unit circle, else
+    "lightly damped" (a slow oscillation, or a mode near ``z = -1``)."""
+    if abs(pole - 1.0) <= NEAR_BAND * (1.0 + 1e-9):  # the band edge, to rounding
+        return "integrating or nearly"
+    return "unstable" if abs(pole) > 1.0 else "lightly damped"

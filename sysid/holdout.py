@@ -53,9 +53,9 @@ from sysid.memory import MAX_LAG as MEMORY_MAX_LAG
 from sysid.memory import predictor_memory
 from sysid.validate import simulation_window
 
-__all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "HOLDOUT_FRACTION", "MIN_COLUMNS_PER_ROW", "ORDERS",
-           "PAST_X", "SCORE_WINDOW_X", "Plan", "default_grid", "holdout", "max_blocks",
-           "memory_future", "plan", "short_record_future"]
+__all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "GIVE_HORIZONS", "HOLDOUT_FRACTION",
+           "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "SCORE_WINDOW_X", "Plan", "default_grid",
+           "holdout", "max_blocks", "memory_future", "plan", "short_record_future"]
 
 #: Share of each experiment kept for validation when only one session is given.
 HOLDOUT_FRACTION = 0.3
@@ -159,27 +159,37 @@ def short_record_future(flights: Sequence[IOData], grid: dict[str, list[int]], *
     return top if top > grid["futures"][-1] else None
 
 
-def default_grid(flights: Sequence[IOData]) -> dict[str, list[int]]:
-    """Pasts, futures and orders for ``flights`` (module docstring), in samples."""
-    return _grid(flights)[0]
+#: What the refusal of records too short for the default grid asks for, as ``identify``
+#: spells it (``give=`` of :func:`default_grid`).
+GIVE_HORIZONS = "horizons and an order (--past/--future/--order)"
 
 
-def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int, int]:
+def default_grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None = None,
+                 give: str = GIVE_HORIZONS) -> dict[str, list[int]]:
+    """Pasts, futures and orders for ``flights`` (module docstring), in samples.
+
+    Records too short for past 2, future 2 are refused in one line (:class:`DataError`)
+    that asks for ``give`` (the caller's options for horizons), longer records or fewer
+    channels. ``groups``: the experiments of each session that :func:`holdout` split into
+    ``flights`` (identification), so the refusal names the samples given and those the
+    held-out part leaves; None when ``flights`` are all the samples given."""
+    return _grid(flights, groups=groups, give=give)[0]
+
+
+def _grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None = None,
+          give: str = GIVE_HORIZONS) -> tuple[dict[str, list[int]], bool, int, int]:
     """The default grid, whether the data cut it short of the memory's range, the memory,
     and the largest ``past + future`` the grid may grow to (three Hankel columns per row, or
-    the largest pair of a grid that needed fewer)."""
+    the largest pair of a grid that needed fewer). ``groups`` and ``give`` as
+    :func:`default_grid`."""
     ell = flights[0].n_outputs
     room = max_blocks(flights)
     fat = max_blocks(flights, columns_per_row=MIN_COLUMNS_PER_ROW)
     if room < 4 <= fat:  # past 2, future 2 only with fewer columns per row
         room = 4
     if room < 4:
-        c = flights[0].n_inputs + ell
-        need = 4 * c * MIN_COLUMNS_PER_ROW + 3
-        raise DataError(f"{max(d.n_samples for d in flights)} identification samples are too few "
-                        f"to choose horizons for {c} channels (need about {need:.0f}); give "
-                        "horizons and an order (--past/--future/--order), longer records or "
-                        "fewer channels")
+        need = round(4 * (flights[0].n_inputs + ell) * MIN_COLUMNS_PER_ROW + 3)
+        raise DataError(_too_few(flights, groups=groups, need=need, give=give))
     memory = predictor_memory(flights)
     lag = max(memory.lag, 1)
     f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
@@ -201,6 +211,34 @@ def _grid(flights: Sequence[IOData]) -> tuple[dict[str, list[int]], bool, int, i
         grid["orders"] = _orders(extra, ell)
         room = max(room, pasts[-1] + extra)
     return grid, capped, lag, room
+
+
+def _too_few(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None,
+             need: int, give: str) -> str:
+    """The one-line refusal of identification records too short for past 2, future 2 (about
+    ``need`` samples for the longest), naming what was given and what the held-out rule
+    left of it when ``flights`` were split from ``groups``."""
+    c = flights[0].n_inputs + flights[0].n_outputs
+    n = max(d.n_samples for d in flights)
+    remedy = f"give {give}, longer records or fewer channels"
+    groups = [list(g) for g in groups or () if g]
+    if not groups:
+        return (f"{n} identification samples are too few to choose horizons for {c} channels "
+                f"(need about {need}); {remedy}")
+    if len(groups) > 1:
+        first = "session" if len(groups) == 2 else f"{len(groups) - 1} sessions"
+        return (f"{n} identification samples (the first {first}'s; the last session "
+                f"validates) are too few to choose horizons for {c} channels (need about "
+                f"{need}); {remedy}")
+    given = max(d.n_samples for d in groups[0])
+    keep = 1.0 - HOLDOUT_FRACTION
+    total = next(k for k in range(need, 10 * need + 10) if round(k * keep) >= need)
+    what = (f"the {given} samples given leave" if len(groups[0]) == 1 else
+            f"the longest of the {len(groups[0])} records, {given} samples, leaves")
+    return (f"{what} {n} for identification after the held-out {100 * HOLDOUT_FRACTION:.0f} % "
+            f"(validation): too few to choose horizons for {c} channels (need about {need} for "
+            f"identification, so about {total} in all); {remedy}, or validation records of "
+            "their own (then every sample identifies)")
 
 
 def _orders(future: int, n_outputs: int) -> list[int]:
@@ -236,11 +274,13 @@ class Plan:
 
 def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = None,
          futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
-         validation: Sequence[IOData] | None = None) -> Plan:
+         validation: Sequence[IOData] | None = None, give: str = GIVE_HORIZONS) -> Plan:
     """Split the data (held-out rule, or ``validation``) and choose the grid; given
     ``pasts``/``futures``/``orders`` replace the default grid's (orders not given go as high as
     the largest future allows). Data whose magnitudes would overflow the identification's
-    sums of squares are refused first, in one line (:func:`sysid.data.check_magnitudes`)."""
+    sums of squares are refused first, in one line (:func:`sysid.data.check_magnitudes`).
+    Identification data too short for the default grid are refused naming the samples given
+    and those the held-out part leaves, and asking for ``give`` (:func:`default_grid`)."""
     everything = list(as_flights([e for g in groups for e in g]))
     if validation:
         ident, val = everything, list(validation)
@@ -255,7 +295,8 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
     if pasts and futures:  # no default grid: only the memory, for the score's window
         auto, capped, memory, room = {}, False, max(predictor_memory(ident).lag, 1), None
     else:
-        auto, capped, memory, room = _grid(ident)
+        auto, capped, memory, room = _grid(ident, groups=None if validation else groups,
+                                           give=give)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"]}
     grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow

@@ -5,13 +5,13 @@ it (:func:`suggest_order`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
 from sysid.data import IOData, as_flights
-from sysid.errors import ParameterError
+from sysid.errors import OrderError, ParameterError, SysIdError
 from sysid.factor import build_products
 from sysid.finish import check_flags
 from sysid.kalman import stable_predictor
@@ -47,9 +47,13 @@ def singular_values(data: IOData | Sequence[IOData], *, past: int, future: int,
 class InformationCriteria:
     """Result of :func:`information_criteria`: one entry per order, arrays ``(n_orders,)``.
 
-    ``log_det`` is :math:`\\log\\det\\hat\\Sigma` of the one-step prediction errors,
-    ``n_params`` the count ``d`` used, ``n_samples`` the total ``N``; ``chosen`` maps
-    ``"aic"``, ``"aicc"``, ``"bic"`` to the order with the smallest value.
+    ``orders`` are the orders asked for, ascending; ``log_det`` is
+    :math:`\\log\\det\\hat\\Sigma` of the one-step prediction errors, ``aic``, ``aicc``,
+    ``bic`` the criteria, ``n_params`` the count ``d`` (defined for every order), ``n_samples``
+    the total ``N``. ``failed`` maps each order the method could not identify to its one-line
+    reason (e.g. PARSIM-K's unstable predictor); such an order holds NaN in ``log_det``,
+    ``aic``, ``aicc`` and ``bic``. ``chosen`` maps ``"aic"``, ``"aicc"``, ``"bic"`` to the
+    order with the smallest value among the orders that did not fail.
     """
 
     orders: np.ndarray
@@ -60,6 +64,12 @@ class InformationCriteria:
     bic: np.ndarray
     n_samples: int
     chosen: dict[str, int]
+    failed: dict[int, str] = field(default_factory=dict)
+
+    @property
+    def scored(self) -> np.ndarray:
+        """The orders that were identified and scored (``orders`` without ``failed``)."""
+        return np.array([n for n in self.orders if int(n) not in self.failed], dtype=int)
 
 
 def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[int], past: int,
@@ -82,6 +92,11 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
     plus ``l m`` if D is estimated (``feedthrough``), plus ``n`` per flight for the initial
     state the predictor estimates. A model whose predictor ``A - KC`` is unstable is scored
     with its steady-state Kalman gain (:func:`sysid.stable_predictor`).
+
+    An order the method cannot identify (a :class:`SysIdError`, e.g. PARSIM-K's predictor
+    ``A_K`` with a pole outside the unit circle) does not end the call: it is listed in
+    ``failed`` with its reason and holds NaN, and ``chosen`` ignores it. When every order
+    fails, :class:`OrderError` says so in one line with the first three orders' reasons.
     """
     meth = get_method(method)
     opts = meth.options(**options)
@@ -92,21 +107,22 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
     products = build_products(flights, past=past, future=future, scale=True)
     m, ell = flights[0].n_inputs, flights[0].n_outputs
     n_total = sum(d.n_samples for d in flights)
-    log_det, n_params = [], []
+    feed = bool(getattr(opts, "feedthrough", False))
+    log_det, failed = [], {}
     for n in orders:
-        with quiet_models():  # a warning per order would flood the log
-            model = meth.identify(flights, order=n, past=past, future=future, options=opts,
-                                  products=products)
-        if not model.predictor_is_stable:
-            model = stable_predictor(model)
-        with np.errstate(over="ignore", invalid="ignore"):
-            err = np.vstack([d.y - predict(model, u=d.u, y=d.y, horizon=1)[0] for d in flights])
-        cov = err.T @ err / n_total
-        sign, ld = np.linalg.slogdet(cov) if np.isfinite(cov).all() else (0.0, np.inf)
-        log_det.append(ld if sign > 0 else np.inf)
-        feed = bool(getattr(opts, "feedthrough", False))
-        n_params.append(n * (2 * ell + m) + (ell * m if feed else 0) + n * len(flights))
-    ld_arr, d_arr = np.array(log_det), np.array(n_params, dtype=float)
+        try:
+            log_det.append(_log_det(meth, flights, order=n, past=past, future=future,
+                                    options=opts, products=products, n_total=n_total))
+        except (SysIdError, np.linalg.LinAlgError) as exc:
+            failed[n] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            log_det.append(np.nan)
+    if len(failed) == len(orders):
+        reasons = [f"order {n}: {why}" for n, why in failed.items()]
+        more = f"; and {len(reasons) - 3} more" if len(reasons) > 3 else ""
+        raise OrderError(f"{meth.name} identified none of the orders {_span(orders)} at past "
+                         f"{past}, future {future} ({'; '.join(reasons[:3])}{more})")
+    n_params = [n * (2 * ell + m) + (ell * m if feed else 0) + n * len(flights) for n in orders]
+    ld_arr, d_arr = np.array(log_det, dtype=float), np.array(n_params, dtype=float)
     const = n_total * ell * (np.log(2 * np.pi) + 1)
     aic = n_total * ld_arr + 2 * d_arr + const
     with np.errstate(divide="ignore"):
@@ -117,7 +133,36 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
     return InformationCriteria(
         orders=np.array(orders), n_params=d_arr.astype(int), log_det=ld_arr, aic=aic,
         aicc=crit["aicc"], bic=bic, n_samples=n_total,
-        chosen={k: orders[int(np.argmin(v))] for k, v in crit.items()})
+        chosen={k: orders[_argmin(v)] for k, v in crit.items()}, failed=failed)
+
+
+def _log_det(meth: Method, flights: Sequence[IOData], *, order: int, past: int, future: int,
+             options: Any, products: Any, n_total: int) -> float:
+    """``log det`` of the one-step error covariance of the order-``order`` model (``inf``
+    when it is not positive definite or not finite)."""
+    with quiet_models():  # a warning per order would flood the log
+        model = meth.identify(flights, order=order, past=past, future=future, options=options,
+                              products=products)
+    if not model.predictor_is_stable:
+        model = stable_predictor(model)
+    with np.errstate(over="ignore", invalid="ignore"):
+        err = np.vstack([d.y - predict(model, u=d.u, y=d.y, horizon=1)[0] for d in flights])
+    cov = err.T @ err / n_total
+    sign, ld = np.linalg.slogdet(cov) if np.isfinite(cov).all() else (0.0, np.inf)
+    return float(ld) if sign > 0 else np.inf
+
+
+def _span(orders: Sequence[int]) -> str:
+    """``1..12`` for consecutive orders, else ``2, 4, 8``."""
+    if len(orders) > 2 and list(orders) == list(range(orders[0], orders[-1] + 1)):
+        return f"{orders[0]}..{orders[-1]}"
+    return ", ".join(map(str, orders))
+
+
+def _argmin(values: np.ndarray) -> int:
+    """Index of the smallest value among those that are not NaN (failed orders)."""
+    scored = np.flatnonzero(~np.isnan(values))
+    return int(scored[np.argmin(values[scored])])
 
 
 #: Smallest singular-value gap, decades (a factor of 2), that :func:`suggest_order` takes
@@ -155,7 +200,8 @@ def suggest_order(sv: np.ndarray, ic: InformationCriteria, *, show: int | None =
     gap of at least ``min_gap`` decades (a factor of 2). A largest gap right after the first
     value is degenerate (one dominant direction, e.g. the thrust's scale, says nothing about
     the order of the rest) and a smaller gap is no cut between signal and noise; the
-    suggestion is then BIC's order (AIC over-fits long records). Validation on held-out data
+    suggestion is then BIC's order (AIC over-fits long records), as it is when the gap's
+    order is one the method failed to identify (``ic.failed``). Validation on held-out data
     (:func:`sysid.auto.select`) is the better judge of either.
     """
     sv = np.asarray(sv, dtype=float)
@@ -176,14 +222,21 @@ def suggest_order(sv: np.ndarray, ic: InformationCriteria, *, show: int | None =
     clear = gap_order >= 2 and decades >= min_gap and not capped
     by_rule = {"gap": gap_order, **{k: int(v) for k, v in ic.chosen.items()}}
     bic = by_rule["bic"]
+    scored = ic.scored
     edge = (" (the largest order scored: the best may lie beyond)"
-            if bic == int(ic.orders[-1]) and ic.orders.size > 1 else "")
+            if scored.size > 1 and bic == int(scored[-1]) else "")
     if capped:
         why = (f"the singular values after s_{max_order} are zero because these horizons "
                f"allow at most {max_order} (the rank cap), not because of the data: the order "
                "may be higher; use a longer past")
         return OrderSuggestion(order=bic, rule="bic", by_rule=by_rule, gaps=gaps,
                                gap_decades=decades, gap_clear=False,
+                               reason=f"BIC{edge}; gap rule not used: {why}")
+    if clear and gap_order in ic.failed:
+        why = (f"the singular values drop by {decades:.2f} decades after s_{gap_order}, but "
+               f"order {gap_order} could not be identified ({ic.failed[gap_order]})")
+        return OrderSuggestion(order=bic, rule="bic", by_rule=by_rule, gaps=gaps,
+                               gap_decades=decades, gap_clear=True,
                                reason=f"BIC{edge}; gap rule not used: {why}")
     if clear:
         reason = (f"the singular values drop by {decades:.2f} decades after s_{gap_order}"

@@ -12,7 +12,9 @@ No other ``sysid`` module imports :mod:`cfsession`; none imports :mod:`groundsta
 3. **Clock alignment.** Phases are on the host clock. The offset
    :math:`\\hat c = \\operatorname{median}_i (t^{host}_i - \\tau_i)` over every selected log row is
    robust to latency spikes; a host-time window :math:`[t_0, t_1)` becomes the firmware window
-   :math:`[t_0 - \\hat c,\\ t_1 - \\hat c)`.
+   :math:`[t_0 - \\hat c,\\ t_1 - \\hat c)`. A window that reaches the end of the session
+   (the last phase, e.g. an imported log's one phase ``log``; ``T1`` at or after the end)
+   runs to the last sample, included, as ``"all"`` does: no next phase owns that instant.
 4. **Grid.** The grid period ``dt`` defaults to the logged period of the selected streams
    (the slowest one when they differ). A stream logged faster than the grid is first
    low-passed by the anti-alias filter of ``scipy.signal.decimate`` (Chebyshev I, order 8,
@@ -153,8 +155,11 @@ def _phase(session: Session, name: str, *, hint: str = "") -> tuple[float, float
                            ) from None
 
 
-def host_windows(session: Session, window: Window) -> list[tuple[str, tuple[float, float] | None]]:
-    """The experiments a window selects: ``(label, host-time (t0, t1) or None)`` each."""
+def host_windows(session: Session, window: Window, *, verb: str = "identify from"
+                 ) -> list[tuple[str, tuple[float, float] | None]]:
+    """The experiments a window selects: ``(label, host-time (t0, t1) or None)`` each.
+    ``verb`` says what they are for in the refusal of an ``"auto"`` window that finds none
+    ("no excitation or airborne-N phase to identify from", "... to compare the model on")."""
     if window is None:
         return [("all", None)]
     if isinstance(window, PhaseRelative):
@@ -173,7 +178,7 @@ def host_windows(session: Session, window: Window) -> list[tuple[str, tuple[floa
         if airborne:
             return airborne
         names = sorted({p.name for p in phases})
-        raise DataError(f"{session.path}: no excitation or airborne-N phase to identify from "
+        raise DataError(f"{session.path}: no excitation or airborne-N phase to {verb} "
                         f"(phases are {names}); pass a window: a phase, T0:T1, NAME@T0:T1 "
                         "seconds or all")
     try:
@@ -223,6 +228,7 @@ def load_experiments(
     window: Window = AUTO,
     dt: float | None = None,
     detrend: str | None = "mean",
+    verb: str = "identify from",
 ) -> list[IOData]:
     """Every experiment ``window`` selects in one session, each an :class:`IOData` on a
     uniform ``dt`` grid (module docstring). ``source`` is the path, with ``#label`` (the
@@ -236,6 +242,9 @@ def load_experiments(
         dt: grid period in seconds; None (default) is the logged period of the selected
             streams (the slowest when they differ).
         detrend: ``"mean"``, ``"linear"`` or None, per experiment.
+        verb: what the experiments are for, as the refusal of an ``"auto"`` window with
+            neither excitation nor airborne phases words it (:func:`host_windows`):
+            ``"identify from"`` (default), ``"compare the model on"``, ...
     """
     if detrend not in _DETREND:
         raise ParameterError(f"detrend={detrend!r}; use 'mean', 'linear' or None")
@@ -276,13 +285,15 @@ def load_experiments(
                     "dt >= %g", session.path, dt, slowest / dt, slowest, slowest)
     first = max(s.t[0] for s in streams)
     last = min(s.t[-1] for s in streams)
-    spans = host_windows(session, window)
+    spans = host_windows(session, window, verb=verb)
+    end = session.duration  # where the last phase ends: no phase starts at that instant
     out = []
     for label, host in spans:
         start, stop = first, last
         if host is not None:
             start = max(first, host[0] - offset)
-            stop = min(last, host[1] - offset - 1e-6)  # phases are [start, end)
+            if host[1] < end:  # phases are [start, end): the next one owns its first instant
+                stop = min(last, host[1] - offset - 1e-6)
         if stop < start + dt:
             span = ("all samples" if host is None else
                     f"window {label} (host [{host[0]:.3f}, {host[1]:.3f}) s)")

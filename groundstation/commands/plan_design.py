@@ -62,7 +62,8 @@ def _measured(model: Any, sessions: tuple[Path, ...]
     for path in sessions:
         try:
             raw = load_experiments(path, inputs=model.input_names, outputs=model.output_names,
-                                   window="auto", dt=model.dt, detrend=None)
+                                   window="auto", dt=model.dt, detrend=None,
+                                   verb="validate the model on")
             at += [saturated(d.u) for d in raw]
             inputs += [d.u for d in raw]
             data = [detrend_data(d)[0] for d in raw]

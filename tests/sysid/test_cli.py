@@ -267,6 +267,11 @@ def test_order_with_horizons_given_needs_no_default_grid(tmp_path) -> None:
                          n_drop=0, phases=phases)
     refused = run("order", short.path)
     assert refused.exit_code == 2 and "--past/--future" in refused.output
+    # each command names its own options: `order` has no --order, `sweep` takes ranges
+    assert "give horizons (--past/--future), longer" in refused.stderr, refused.output
+    refused = run("sweep", short.path)
+    assert refused.exit_code == 2 and "after the held-out 30 %" in refused.stderr
+    assert "(--pasts/--futures, and --orders)" in refused.stderr, refused.output
     res = run("order", short.path, "--past", "1", "--future", "2", "--json")
     assert res.exit_code == 0, res.output
     report = json.loads(res.stdout)

@@ -72,6 +72,32 @@ def test_compare_simulates_integrating_models_over_windows_and_json_has_null(fli
                      res.stdout), res.stdout
 
 
+@pytest.mark.parametrize(("pole", "kind"), [(1.0, "integrating or nearly"),
+                                          (1.06, "integrating or nearly"),
+                                          (1.1672, "unstable"),
+                                          (-0.998, "lightly damped")])
+def test_compare_words_the_pole_that_chose_windows(flight, tmp_path, pole, kind) -> None:
+    """The note on stderr when compare falls back to windows said "integrating or nearly" for
+    any pole at |z| >= 0.995; a pole at |z| = 1.1672 is unstable, not integrating. Near z = 1
+    (within stability's NEAR_BAND) it is an integrator's estimate; beyond, outside the unit
+    circle, unstable; inside but away from z = 1, lightly damped."""
+    base = sysid.load_model(_identified(flight, tmp_path))
+    path = tmp_path / "pole.h5"
+    base.replace(A=_with_pole(base.A, pole)).save(path)
+    res = run("compare", path, flight.path)
+    assert res.exit_code == 0, res.output
+    assert f"model has a pole at |z| = {abs(pole):.4f} ({kind}): simulation, 2 s windows" in (
+        " ".join(res.stderr.split())), res.stderr
+
+
+def _with_pole(a: np.ndarray, pole: float) -> np.ndarray:
+    """An A of the same size with real poles ``pole``, 0.5, 0.4, ... (random real basis)."""
+    n = a.shape[0]
+    basis = np.random.default_rng(0).standard_normal((n, n)) + 3 * np.eye(n)
+    lam = np.r_[pole, 0.5 - 0.1 * np.arange(n - 1)]
+    return basis @ np.diag(lam) @ np.linalg.inv(basis)
+
+
 def _identified(flight, tmp_path):
     out = tmp_path / "base.h5"
     res = run("identify", flight.path, *FAST, "--out", out)

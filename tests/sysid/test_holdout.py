@@ -46,8 +46,32 @@ def test_a_short_record_whose_memory_is_unmeasured_still_compares_orders() -> No
 
 def test_records_too_short_for_past_2_future_2_are_still_refused() -> None:
     """38 samples leave 27 to identify: past 1, future 2 (order 2 at most) only; refused in
-    one line that names the horizons to give."""
+    one line that names the horizons to give. The refusal said "27 identification samples
+    are too few" of a record of 38: it names both, the held-out share that makes the
+    difference, and what is needed in all; each caller's data read right."""
     data, _ = _erie_like(38)
-    with pytest.raises(sysid.DataError, match=r"27 identification samples are too few.*"
-                                              r"--past/--future/--order"):
+    with pytest.raises(sysid.DataError) as err:
         plan([[data]])
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(
+        "the 38 samples given leave 27 for identification after the held-out 30 % "
+        "(validation): too few to choose horizons for 7 channels (need about 31 for "
+        "identification, so about 44 in all); give horizons and an order "
+        "(--past/--future/--order)"), msg
+    assert round(44 * 0.7) >= 31 > round(43 * 0.7)  # 44 in all is enough, 43 is not
+    second = sysid.IOData(u=data.u[:4], y=data.y[:4], dt=data.dt)  # 3 identify: no column
+    with pytest.raises(sysid.DataError, match="the longest of the 2 records, 38 samples, "
+                                              "leaves 27 for identification"):
+        plan([[data, second]])  # one session, two experiments
+    # all the samples given identify: the count needs no explanation
+    ident = sysid.IOData(u=data.u[:27], y=data.y[:27], dt=data.dt)
+    with pytest.raises(sysid.DataError, match=r"^27 identification samples are too few to "
+                                              r"choose horizons for 7 channels \(need about 31\)"):
+        default_grid([ident])
+    with pytest.raises(sysid.DataError, match=r"^27 identification samples are too few"):
+        plan([[ident]], validation=[data])
+    with pytest.raises(sysid.DataError, match=r"^27 identification samples \(the first "
+                                              r"session's; the last session validates\)"):
+        plan([[ident], [data]])
+    with pytest.raises(sysid.DataError, match=r"give horizons \(--past/--future\), longer"):
+        default_grid([ident], give="horizons (--past/--future)")

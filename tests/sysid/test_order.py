@@ -102,3 +102,87 @@ def test_the_rank_cap_of_a_short_past_is_not_a_gap() -> None:
     assert hint.gap_decades < 5 and hint.by_rule["gap"] < 4
     assert "rank cap" in hint.reason and "longer past" in hint.reason
     assert "\n" not in hint.reason
+
+
+def test_orders_a_method_cannot_identify_are_marked_not_fatal() -> None:
+    """PARSIM-K refuses an order whose predictor A_K has a pole outside the unit circle. Such an
+    order used to end ``information_criteria`` (and ``sysid order``) with that one error, the
+    other orders' criteria lost; it is now listed in ``failed`` with its reason, holds NaN, and
+    the smallest-criterion choices are among the orders that were scored. When every order
+    fails the error is one line naming them."""
+    import sysid
+    from sysid.errors import OrderError
+    from tests.sysid.systems import pbsid_example1_closed_loop
+
+    data = pbsid_example1_closed_loop(rng=np.random.default_rng(0), n_samples=1500).data
+    ic = sysid.information_criteria(data, orders=range(1, 11), past=3, future=6,
+                                    method="parsim-k")
+    bad = sorted(ic.failed)
+    assert bad and bad[0] > 1 and set(bad) < set(range(1, 11))  # some, not all
+    for n, why in ic.failed.items():
+        assert "\n" not in why and f"order {n} has a pole" in why, why
+    mask = np.isin(ic.orders, bad)
+    for values in (ic.log_det, ic.aic, ic.aicc, ic.bic):
+        assert values.shape == (10,) and np.isnan(values[mask]).all()
+        assert np.isfinite(values[~mask]).all()
+    assert ic.n_params.shape == (10,) and (ic.n_params > 0).all()  # defined for every order
+    assert ic.scored.tolist() == [n for n in range(1, 11) if n not in ic.failed]
+    for name, values in (("aic", ic.aic), ("aicc", ic.aicc), ("bic", ic.bic)):
+        assert ic.chosen[name] == ic.orders[~mask][np.argmin(values[~mask])]
+    assert ic.chosen["bic"] == 4  # the true order
+    with pytest.raises(OrderError) as err:
+        sysid.information_criteria(data, orders=[9, 10], past=3, future=6, method="parsim-k")
+    msg = str(err.value)
+    assert "\n" not in msg and "none of the orders 9, 10" in msg
+    assert "order 9: " in msg and "order 10: " in msg
+
+
+def test_a_gap_at_an_order_that_failed_defers_to_bic() -> None:
+    """The gap rule would suggest an order the method could not identify: BIC's order is
+    suggested instead, and the reason says why."""
+    sv = np.array([10.0, 8.0, 6.0, 5.0, 0.1, 0.09, 0.08, 0.07])  # 1.7 decades after s_4
+    base = _ic(5)
+    bic = base.bic.copy()
+    bic[3] = np.nan
+    ic = InformationCriteria(orders=base.orders, n_params=base.n_params, log_det=base.log_det,
+                             aic=base.aic, aicc=base.aicc, bic=bic, n_samples=1000,
+                             chosen=base.chosen, failed={4: "PARSIM-K: the predictor A_K of "
+                                                            "order 4 has a pole at |z| = 1.08"})
+    hint = suggest_order(sv, ic)
+    assert (hint.order, hint.rule, hint.by_rule["gap"]) == (5, "bic", 4)
+    assert "order 4 could not be identified (PARSIM-K" in hint.reason and "\n" not in hint.reason
+
+
+def test_cli_order_lists_failed_orders_and_prints_the_rest(session, monkeypatch) -> None:
+    """``sysid order --method parsim-k`` at horizons where some orders' predictors are
+    unstable (here 5, 7, 8 of 1..8) printed only ``error: PARSIM-K: the predictor A_K of
+    order 5 ...``, whose advice (a lower order) the command has no option for. It prints the
+    singular values and the table, failed orders marked with their reason and never starred;
+    JSON holds ``null`` and the reasons. Only when every order fails is it one error line."""
+    args = ["order", str(session.path), "--past", "5", "--future", "3", "--method", "parsim-k"]
+    res = CliRunner().invoke(main, [*args, "--json"])
+    assert res.exit_code == 0, res.output
+    ic = json.loads(res.stdout)["information_criteria"]
+    assert ic["orders"] == list(range(1, 9)) and ic["failed"]
+    for n, why in ic["failed"].items():
+        assert f"order {n} has a pole" in why
+        assert all(ic[k][int(n) - 1] is None for k in ("aic", "aicc", "bic"))
+        assert int(n) not in ic["chosen"].values()
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    rows = {line.split()[0]: line for line in res.stdout.splitlines()
+            if line.split() and line.split()[0].isdigit()}
+    for n in ic["failed"]:
+        assert "failed: PARSIM-K: the predictor A_K of order" in rows[n] and "*" not in rows[n]
+    assert f"{len(ic['failed'])} of 8 orders could not be identified" in res.stdout
+    assert "suggested order:" in res.stdout
+
+    def fail(*_args, order, **_kwargs):
+        raise sysid_errors.OrderError(f"PARSIM-K: the predictor A_K of order {order} has a pole")
+
+    from sysid import errors as sysid_errors
+    monkeypatch.setattr("sysid.order._log_det", fail)
+    res = CliRunner().invoke(main, args)
+    err = res.stderr.strip()
+    assert res.exit_code == 2 and err.startswith("error: parsim-k identified none of the orders "
+                                                 "1..8") and "\n" not in err, res.output

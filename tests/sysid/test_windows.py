@@ -145,3 +145,77 @@ def test_identify_with_no_knobs_on_imported_airborne_segments(files, tmp_path) -
     text = CliRunner().invoke(main, ["compare", str(out), str(files["imported2"]),
                                      "--horizon", "1"])
     assert text.exit_code == 0 and "imp2.h5#airborne-2" in text.stdout, text.output
+
+
+def test_a_session_without_default_phases_is_refused_in_each_commands_words(files,
+                                                                            tmp_path) -> None:
+    """A log with only a "log" phase: each command refuses the default window saying what it
+    would have done (compare said "no ... phase to identify from", and compare identifies
+    nothing); the phases and the --window forms follow."""
+    model = tmp_path / "m.h5"
+    res = CliRunner().invoke(main, ["identify", str(files["recorded"]), "--order", "4",
+                                    "--past", "10", "--future", "5", "--out", str(model)])
+    assert res.exit_code == 0, res.output
+    log = str(files["log"])
+    for args, verb in ((["identify", log, "--order", "4"], "identify from"),
+                       (["order", log], "choose the order from"),
+                       (["compare", str(model), log], "compare the model on"),
+                       (["resid", str(model), log], "analyse the residuals on"),
+                       (["identify", str(files["recorded"]), "--order", "4", "--past", "10",
+                         "--future", "5", "--validate", log], "validate the model on")):
+        res = CliRunner().invoke(main, args)
+        err = " ".join(res.stderr.split())
+        assert res.exit_code == 2 and f"no excitation or airborne-N phase to {verb} " \
+            "(phases are ['log']); pass a window" in err, (args, res.output)
+    with pytest.raises(DataError, match="phase to compare the model on"):
+        load_experiments(files["log"], verb="compare the model on")
+
+
+def _log_session(path, *, phases: list[tuple[float, str, str]], n: int = 2048):
+    """An imported-like session written by the project's writer: two 100 Hz streams whose
+    host time is their firmware time (as ``groundstation import`` writes them), ``phases``
+    ``(host time, name, kind)``; returns the sample times."""
+    t = 1.0 + 0.01 * np.arange(n)
+    specs = [log_block_spec(name="cmd", variables=[("ctl.u", "float")], period_s=0.01),
+             log_block_spec(name="out", variables=[("ctl.y", "float")], period_s=0.01)]
+    rng = np.random.default_rng(5)
+    with SessionWriter(path, streams=[*specs, *standard_streams()], metadata={}) as w:
+        for pid, (start, name, kind) in enumerate(phases):
+            w.phase(t=start, phase_id=pid, name=name, kind=kind)
+        for spec in ("cmd", "out"):
+            values = rng.standard_normal(n)
+            w.extend(spec, [(float(t[k]), round(1000 * t[k]), float(values[k]))
+                            for k in range(n)])
+        w.close(duration_s=float(t[-1] - t[0]))
+    return t
+
+
+def test_a_window_to_the_end_of_the_log_keeps_its_last_sample(tmp_path) -> None:
+    """An imported log without airborne segments has one phase, ``log``, over the whole log
+    (docs/session-format.md). Phases are [start, end) and the last one ends at the last
+    sample, so ``--window log`` dropped that sample (2048 -> 2047) where ``all`` kept it. A
+    window that reaches the end of the session now runs to its last sample; a phase that
+    another follows still ends before the next one's first instant."""
+    kw = {"inputs": ["cmd"], "outputs": ["out"], "dt": None, "detrend": None}
+    path = tmp_path / "log.h5"
+    t = _log_session(path, phases=[(1.0, "log", "imported")])
+    whole = load_experiments(path, window=None, **kw)[0]
+    assert whole.n_samples == 2048
+    log = load_experiments(path, window="log", **kw)[0]
+    assert log.n_samples == 2048
+    np.testing.assert_array_equal(log.y, whole.y)
+    rest = load_experiments(path, window=PhaseRelative("log", 10.0), **kw)[0]
+    assert rest.n_samples == 2048 - 1000  # from 10 s into the phase to the end, last included
+    assert load_experiments(path, window=(float(t[0]), float(t[-1]) + 5.0), **kw)[0].n_samples \
+        == 2048
+    # [start, end) between phases: the sample at the boundary is the next phase's only
+    split = tmp_path / "split.h5"
+    t = _log_session(split, phases=[(1.0, "ground-0", "ground"),
+                                    (float(t[1000]), "airborne-1", "airborne")])
+    ground = load_experiments(split, window="ground-0", **kw)[0]
+    air = load_experiments(split, window="airborne-1", **kw)[0]
+    assert (ground.n_samples, air.n_samples) == (1000, 1048)
+    both = load_experiments(split, window=None, **kw)[0]
+    np.testing.assert_array_equal(np.vstack([ground.y, air.y]), both.y)
+    inner = load_experiments(split, window=(float(t[10]), float(t[20])), **kw)[0]
+    assert inner.n_samples == 10  # T0:T1 inside the log: [T0, T1)
