@@ -115,6 +115,10 @@ def _moesp_sv(products: DataProducts, options: MOESPOptions) -> np.ndarray:
     return np.linalg.svd(l4 / np.sqrt(products.n_columns), compute_uv=False)
 
 
+def _parsim_sv(products: DataProducts, options: ParsimOptions) -> np.ndarray:
+    return parsim_k_singular_values(products)
+
+
 @dataclass(frozen=True)
 class Method:
     """One identification method: its function, options and grid behaviour."""
@@ -186,7 +190,7 @@ METHODS: dict[str, Method] = {
                        sv_function=_moesp_sv, shares_futures=False,
                        description="PO-MOESP (open loop; biased under feedback)"),
     "parsim-k": Method(name="parsim-k", function=parsim_k, options_type=ParsimOptions,
-                       sv_function=lambda products, options: parsim_k_singular_values(products),
+                       sv_function=_parsim_sv,  # module level: workers receive it pickled
                        shares_futures=False,
                        description="PARSIM-K (closed loop, predictor form; as SIPPY's)"),
 }
