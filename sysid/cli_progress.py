@@ -1,8 +1,9 @@
 """Progress of long ``sysid`` commands (sweep, batch) on stderr.
 
 On a terminal: a bar with counts, elapsed time and ETA. Not on a terminal (a log file, CI): one
-plain line each time another tenth of the work is done (and at the end), with the ETA, so logs
-stay short and readable. Quiet (``--json``) prints nothing.
+plain line each time another tenth of the work is done, with the ETA, and one saying "done" when
+the work has ended (not at 100 % of a total that may still grow), so logs stay short and
+readable. Quiet (``--json``) prints nothing.
 """
 
 from __future__ import annotations
@@ -45,25 +46,24 @@ def progress(label: str, *, total: int, quiet: bool = False,
             yield lambda done, total=None: bar.update(task, completed=done, total=total)
         return
     t0 = time.monotonic()
-    shown, ended = 0, False
+    shown, last = 0, [0, total]
+
+    def line(done: int, tail: str) -> None:
+        print(f"{label}: {done}/{total} ({100 * done / max(total, 1):.0f} %), "
+              f"{time.monotonic() - t0:.0f} s, {tail}", file=out, flush=True)
 
     def update(done: int, new_total: int | None = None) -> None:
-        nonlocal shown, ended, total
+        nonlocal shown, total
         if new_total is not None and new_total != total:  # count on against the new total
-            total, ended = new_total, False
+            total = new_total
             shown = min(shown, int(done / max(total, 1) / STEP + 1e-9) - 1)
+        last[:] = [done, total]
         step = int(done / max(total, 1) / STEP + 1e-9)
-        if done >= total:
-            if ended:
-                return
-            ended = True
-        elif step <= shown:
+        if done >= total or step <= shown:  # "done" only when the work ends: it may grow
             return
         shown = step
-        elapsed = time.monotonic() - t0
-        eta = elapsed / done * (total - done) if done else float("nan")
-        tail = "done" if done >= total else f"eta {eta:.0f} s"
-        print(f"{label}: {done}/{total} ({100 * done / max(total, 1):.0f} %), "
-              f"{elapsed:.0f} s, {tail}", file=out, flush=True)
+        eta = (time.monotonic() - t0) / done * (total - done) if done else float("nan")
+        line(done, f"eta {eta:.0f} s")
 
     yield update
+    line(last[0], "done")

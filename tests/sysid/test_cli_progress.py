@@ -24,6 +24,17 @@ def test_plain_lines_every_tenth_when_not_a_terminal() -> None:
     assert lines[-1].startswith("sweep: 200/200 (100 %)") and lines[-1].endswith("done")
 
 
+def test_work_that_fails_does_not_say_done() -> None:
+    out = io.StringIO()
+    try:
+        with progress("sweep", total=10, stream=out) as update:
+            update(10)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        pass
+    assert "done" not in out.getvalue()
+
+
 def test_a_bar_with_eta_on_a_terminal_and_nothing_when_quiet() -> None:
     out = _Tty()
     with progress("batch", total=4, stream=out) as update:
@@ -48,6 +59,9 @@ def test_work_that_grows_counts_against_the_new_total() -> None:
     lines = out.getvalue().splitlines()
     assert lines[-1].startswith("sweep: 150/150 (100 %)") and lines[-1].endswith("done")
     assert not any(line.startswith("sweep: 150/100") for line in lines)
+    # "done" only once the work has ended, not at the first total's 100 % (first-day audit:
+    # "264/264 (100 %) done", then "265/315 (84 %)")
+    assert [line for line in lines if line.endswith("done")] == [lines[-1]]
     bar = _Tty()
     with progress("sweep", total=10, stream=bar) as update:
         update(12, 20)
