@@ -29,6 +29,7 @@ from cfsession.reader import (
     Session,
     StreamData,
     open_session,
+    warn_problems,
 )
 from cfsession.reader import (
     Stream as Stream,  # the former name of StreamData, kept for callers
@@ -55,4 +56,5 @@ __all__ = [
     "open_session",
     "resolve_channels",
     "standard_streams",
+    "warn_problems",
 ]

@@ -8,7 +8,8 @@ died (its superblock still flagged open for writing) is read into memory, at mos
 in the ordinary mode; the file on disk is not changed, and :attr:`Session.problems` says the data
 end at the last flush. Rows that were allocated but never written (NaN ``host_time``) are
 dropped; a stream whose chunks cannot all be read is read as far as it goes and listed in
-:attr:`Session.problems`.
+:attr:`Session.problems`. So is the damage an importer found in the log it imported (root
+attribute ``source_problems``). :func:`warn_problems` repeats them as warnings.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from cfsession.schema import (
     setpoints_spec,
 )
 
-__all__ = ["Event", "Gap", "PhaseWindow", "Session", "StreamData", "open_session"]
+__all__ = ["Event", "Gap", "PhaseWindow", "Session", "StreamData", "open_session",
+           "warn_problems"]
 
 log = logging.getLogger(__name__)
 
@@ -295,6 +297,33 @@ def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
             del meta[key]
     if isinstance(meta.get("summary"), str):
         meta["summary"] = meta["summary"].rstrip()
+    problems.extend(_source_problems(meta))
+
+
+_MAX_SOURCE_PROBLEMS = 20
+"""At most this many of an imported log's problems are listed (the rest counted)."""
+
+
+def _source_problems(meta: dict[str, Any]) -> list[str]:
+    """The damage an importer found in the log it read (root attribute ``source_problems``, a
+    JSON list of sentences), each prefixed ``imported log:``; a uSD import whose CRC did not
+    match (``crc_ok`` 0) from before that attribute gets a sentence of its own."""
+    raw = meta.get("source_problems")
+    texts: list[str] = []
+    if isinstance(raw, str) and raw.strip():
+        try:
+            texts = json.loads(raw)
+        except (ValueError, RecursionError):
+            texts = ["root attribute 'source_problems' is damaged"]
+        if not isinstance(texts, list) or not all(isinstance(t, str) for t in texts):
+            texts = ["root attribute 'source_problems' is damaged"]
+    if not texts and meta.get("crc_ok") in (0, False):
+        texts = ["its CRC did not match (imported with --allow-damaged); the CRC cannot "
+                 "locate the damage, so any value may be wrong"]
+    out = [f"imported log: {t[:500]}" for t in texts[:_MAX_SOURCE_PROBLEMS]]
+    if len(texts) > _MAX_SOURCE_PROBLEMS:
+        out.append(f"imported log: {len(texts) - _MAX_SOURCE_PROBLEMS} more problems")
+    return out
 
 
 def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
@@ -360,6 +389,15 @@ def open_session(path: str | os.PathLike[str]) -> Session:
     if not meta.get("closed_cleanly", 0) or not clean_superblock:
         problems.append("writer did not close the file (crash or kill): data up to the last flush")
     return Session(p, meta, streams, problems)
+
+
+def warn_problems(session: Session, logger: logging.Logger | None = None) -> None:
+    """Log each of ``session.problems`` (what ``groundstation info`` lists) as one warning
+    naming the file, ``FILE: problem: ...``: every command that reads a session on to
+    something else (identification, a replay, an export) repeats them, so damaged or
+    crash-truncated data is never used in silence."""
+    for problem in session.problems:
+        (logger or log).warning("%s: problem: %s", session.path, problem)
 
 
 Stream = StreamData

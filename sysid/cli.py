@@ -152,7 +152,9 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
                    "times the data's memory, at least 20 samples; see docs/sysid.md).")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),
               help="Candidates listed (and in --json).")
-@model_options(out_help="Save the selected model, identified again on all the session's data.")
+@model_options(out_help="Save the selected model, identified again on all the session's data "
+                        "(or the model the sweep scored, when that refit has a pole outside "
+                        "the unit circle or fails: the saved line says which).")
 def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None,
               orders: str | None, workers: int, scheduler: str | None,
               validate: tuple[Path, ...], horizon: int | None, window_s: float | None,
@@ -171,8 +173,10 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
     focus and the focus whose choice scores best is taken. The report lists the best --top
     candidates with their fits, warns when the choice is at the edge of the grid or when the
     held-out data are too few to rank the models, and --out saves the chosen model identified
-    again on all the data. Models that cannot be identified are counted with their reasons;
-    when none can, or none is stable, the command exits with 2.
+    again on all the data (unless that fails or tips a pole outside the unit circle: then the
+    model the sweep scored, as a warning and the saved line say). Models that cannot be
+    identified are counted with their reasons; when none can, or none is stable, the command
+    exits with 2.
 
     \b
     Example:

@@ -30,11 +30,13 @@ from sysid.cli_support import (
     pole_kind,
     write_rrd,
 )
-from sysid.model import load_model
+from sysid.data import IOData
+from sysid.errors import DataError
+from sysid.model import StateSpaceModel, load_model
 from sysid.residuals import residuals
-from sysid.validate import compare
+from sysid.validate import MIN_WINDOW_SAMPLES, SAMPLES_PER_STATE, compare, min_fit_samples
 
-__all__ = ["compare_cmd", "resid"]
+__all__ = ["check_fit_samples", "compare_cmd", "resid"]
 
 
 @click.command("compare")
@@ -61,8 +63,10 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     unless the model has a pole at |z| >= 0.995 (an integrator, or an unstable or lightly
     damped mode): whole-flight simulation then only measures its drift or growth, so it is
     simulated over 2 s windows (at least 10 output values per state of the initial state
-    fitted on each), and a note on stderr names the pole. A fit that diverged is "diverged"
-    in tables and null in --json.
+    fitted on each; at most the shortest record, which the table's title then says), and a
+    note on stderr names the pole. A record (--window), or a --window-s, with fewer samples
+    than that floor (20, and 10 output values per state) is refused: the initial state
+    alone would fit it. A fit that diverged is "diverged" in tables and null in --json.
     Each experiment of a session (e.g. its airborne-N phases) is its own row.
 
     \b
@@ -73,18 +77,22 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     model = load_model(model_path)
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                            outputs=model.output_names, verb="compare the model on")
+    check_fit_samples(model, flights, window_s=window_s)
     modes: list[tuple[str, dict[str, Any]]] = []
     longest = max(d.n_samples for d in flights)  # beyond it: the whole record is simulated
+    shortest = min(d.n_samples for d in flights)
     if window_s is not None:
-        whole = " (longer than the records: each simulated whole)" if (
-            round(window_s / model.dt) >= longest) else ""
+        win = round(window_s / model.dt)
+        whole = (" (longer than the records: each simulated whole)" if win >= longest else
+                 " (longer than some records: those simulated whole)" if win >= shortest
+                 else "")
         modes.append((f"simulation, {window_s:g} s windows{whole}", {"window": window_s}))
     if horizon is not None:
         whole = (f" (beyond the {longest}-sample records: simulation)"
                  if horizon >= longest else "")
         modes.append((f"{horizon}-step prediction{whole}", {"horizon": horizon}))
     if not modes:
-        modes = [default_compare_mode(model)]
+        modes = [default_compare_mode(model, n_samples=shortest)]
         if "windows" in modes[0][0]:
             poles = model.poles()
             pole = complex(poles[int(np.argmax(np.abs(poles)))])
@@ -114,6 +122,29 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
         con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
     if with_residuals:
         click.echo(residuals(model, flights).summary())
+
+
+def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
+                      window_s: float | None = None) -> None:
+    """Refuse records, or --window-s windows, too short for a fit to mean anything: every
+    mode fits an initial state of ``model.n_states`` parameters to each record (each window),
+    and on fewer than :func:`sysid.validate.min_fit_samples` samples (the rule of the default
+    windows) that state alone fits them, so every score comes out near 100 %."""
+    need = min_fit_samples(n_states=model.n_states, n_outputs=model.n_outputs)
+    why = (f"the initial state of a {model.n_states}-state model on {model.n_outputs} "
+           f"output(s) needs at least {need} ({SAMPLES_PER_STATE} output values per state, "
+           f"at least {MIN_WINDOW_SAMPLES} samples)")
+    short = [d for d in flights if d.n_samples < need]
+    if short:
+        first = short[0]
+        others = f" (and {len(short) - 1} other record(s))" if len(short) > 1 else ""
+        raise DataError(f"{experiment_label(first.source)} has {first.n_samples} samples in "
+                        f"its window{others}, too few to score a model on: {why}; choose a "
+                        f"longer --window ({need * model.dt:.3g} s at least)")
+    if window_s is not None and round(window_s / model.dt) < need:
+        raise DataError(f"--window-s {window_s:g} is {round(window_s / model.dt)} samples of "
+                        f"{model.dt:g} s, too few to score a model on: {why} per window; use "
+                        f"--window-s {need * model.dt:.3g} or longer")
 
 
 @click.command("resid")

@@ -4,12 +4,14 @@ by validation unless given (:mod:`sysid.auto`), reported with its poles and fits
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import click
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 
 from cfcommon.cli import check_output
 from sysid.cli_options import (
@@ -30,10 +32,22 @@ from sysid.cli_support import (
     poles_rich_table,
     write_rrd,
 )
-from sysid.cli_sweep import choose, print_selection, selection_json
+from sysid.cli_sweep import choose, print_selection, saved_line, selection_json
+from sysid.data import IOData
 from sysid.validate import compare, simulation_window
 
-__all__ = ["identify"]
+__all__ = ["identify", "samples_line"]
+
+
+def samples_line(flights: Sequence[IOData], *, dt: float) -> str:
+    """How much data the model was identified from: the samples in total and, with several
+    experiments, each one's (a session read only as far as its damage shows here too)."""
+    total = sum(d.n_samples for d in flights)
+    line = f"identified from {total} samples ({total * dt:.1f} s at dt {dt:g} s)"
+    if len(flights) == 1:
+        return f"{line} of {flights[0].source}"
+    each = ", ".join(f"{d.source} {d.n_samples}" for d in flights)
+    return f"{line} in {len(flights)} experiments: {each}"
 
 
 @click.command("identify")
@@ -141,6 +155,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
             "model": str(out) if out else None}, indent=1))
         return
     con = console()
+    con.print(escape(samples_line(flights, dt=model.dt)))
     if selection is not None:
         print_selection(con, selection)
     con.print(poles_rich_table(
@@ -166,4 +181,4 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                             title=f"fit on {', '.join(p.name for p in validate)} [%]",
                             names=model.output_names, rows=[(k, r.fit) for k, r in checks]))
     if out is not None:
-        con.print(f"model saved to {out}")
+        con.print(saved_line(out, model))

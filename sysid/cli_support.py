@@ -303,16 +303,21 @@ JSON_OPTION = click.option("--json", "as_json", is_flag=True, help="Print the re
 INTEGRATING_RADIUS = 0.995
 
 
-def default_compare_mode(model: StateSpaceModel) -> tuple[str, dict[str, Any]]:
+def default_compare_mode(model: StateSpaceModel, *, n_samples: int | None = None
+                         ) -> tuple[str, dict[str, Any]]:
     """``(label, compare keywords)`` when the user chose no mode: whole-record simulation, or
     windowed simulation (:func:`sysid.validate.simulation_window`, 2 s) for a model with a pole
     at ``|z| >= INTEGRATING_RADIUS`` (simulating a whole flight through an integrator measures
-    only its drift)."""
+    only its drift). ``n_samples``: the shortest record, which caps the window (as
+    ``identify`` caps it); the label then says so."""
     radius = float(np.max(np.abs(model.poles()), initial=0.0))
     if radius >= INTEGRATING_RADIUS:
-        window = simulation_window(dt=model.dt, n_states=model.n_states,
-                                   n_outputs=model.n_outputs)
-        return (f"simulation, {window:.3g} s windows", {"window": window})
+        sized = {"dt": model.dt, "n_states": model.n_states, "n_outputs": model.n_outputs}
+        window = simulation_window(**sized, n_samples=n_samples)
+        full = simulation_window(**sized)
+        capped = (f" (the shortest record: shorter than {full:.3g} s)"
+                  if round(window / model.dt) < round(full / model.dt) else "")
+        return (f"simulation, {window:.3g} s windows{capped}", {"window": window})
     return ("simulation", {})
 
 

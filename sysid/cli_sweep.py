@@ -48,11 +48,13 @@ from sysid.data import IOData
 from sysid.errors import DataError, HorizonError
 from sysid.holdout import GIVE_HORIZONS
 from sysid.methods import Method, Options
+from sysid.model import StateSpaceModel
+from sysid.refit import saved_as
 from sysid.sweep import SweepRow
 from sysid.variants import ALTERNATIVE
 
 __all__ = ["MAX_SWEEP_MODELS", "check_sweep_horizons", "choose", "print_selection",
-           "selection_json", "sweep_command"]
+           "saved_line", "selection_json", "sweep_command"]
 
 #: Largest sweep grid accepted (models); the thesis' coarse-to-fine search was 756 models.
 MAX_SWEEP_MODELS = 100_000
@@ -243,7 +245,7 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
             if len(failures) > 3:
                 con.print(f"  ... and {len(failures) - 3} other reasons (--json lists all)")
         if out is not None and sel is not None:
-            con.print(f"model saved to {out} (identified again on all the data)")
+            con.print(saved_line(out, sel.model))
     if rrd is not None and sel is None:
         click.echo(f"warning: --rrd {rrd} not written: "
                    f"{'no stable model' if ok else 'no model'} to show", err=True)
@@ -255,6 +257,13 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
         raise DataError(f"none of the {len(ok)} identified models is stable"
                         + (" with either focus" if choose_focus else "")
                         + "; widen the grid or pick other channels")
+
+
+def saved_line(out: Path, model: StateSpaceModel) -> str:
+    """"model saved to OUT (what it is)": identified again on all the data, or the model the
+    sweep scored when that refit was not kept (:func:`sysid.refit.saved_as`)."""
+    what = saved_as(model)
+    return f"model saved to {out}" + (f" ({what})" if what else "")
 
 
 def check_sweep_horizons(flights: Sequence[IOData], *, pasts: Any, futures: Any) -> None:

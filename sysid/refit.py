@@ -7,6 +7,10 @@ data tip a pole outside the unit circle (a near-integrating plant whose extra 30
 one estimated mode out; seen on simulated flights at |z| = 1.1-1.4), the model the sweep scored
 is returned instead, and a warning says so. The stability step's own warnings about the
 model identified again are said only when it is the one returned.
+
+Either way the model returned says which it is in ``provenance["selection"]``
+(:func:`saved_as` words it for "model saved to ..."): ``identified_again`` (bool) and ``data``,
+what it was identified on.
 """
 
 from __future__ import annotations
@@ -27,7 +31,10 @@ from sysid.sweep import SweepRow
 if TYPE_CHECKING:  # sysid.auto imports this module
     from sysid.auto import Plan
 
-__all__ = ["final_model"]
+__all__ = ["PROVENANCE_KEY", "final_model", "saved_as"]
+
+#: The provenance entry saying what a selection's model is (module docstring).
+PROVENANCE_KEY = "selection"
 
 
 def final_model(p: Plan, best: SweepRow, warnings: list[str], *, method: Method,
@@ -42,11 +49,36 @@ def final_model(p: Plan, best: SweepRow, warnings: list[str], *, method: Method,
     except (DataError, OrderError) as exc:  # all the data cannot hold what the grid's could
         warnings.append(f"identified again on all the data it failed ({exc}): kept the model "
                         f"the sweep scored ({_share(p)})")
-        return _scored_model(p, best, method=method, options=options)
+        return _stamped(_scored_model(p, best, method=method, options=options),
+                        again=False, data=_share(p))
     kept = _stable_choice(p, best, model, warnings, method=method, options=options)
     for record in held if kept is model else ():
         logging.getLogger(record.name).handle(record)
-    return kept
+    return _stamped(kept, again=kept is model, data=(
+        _all(p) if kept is model else _share(p)))
+
+
+def saved_as(model: StateSpaceModel) -> str:
+    """What a selection's model is, for the line that names where it was saved: "identified
+    again on all the data", or "the model the sweep scored, identified on 3581 of the 5116
+    samples" when the refit was not kept; "" for a model no selection stamped."""
+    entry = model.provenance.get(PROVENANCE_KEY)
+    if not isinstance(entry, dict) or not isinstance(entry.get("data"), str):
+        return ""
+    if entry.get("identified_again"):
+        return f"identified again on {entry['data']}"
+    return f"the model the sweep scored, {entry['data']}"
+
+
+def _stamped(model: StateSpaceModel, *, again: bool, data: str) -> StateSpaceModel:
+    return model.replace(provenance={**model.provenance, PROVENANCE_KEY: {
+        "identified_again": again, "data": data}})
+
+
+def _all(p: Plan) -> str:
+    """What the model identified again was identified on, for a message."""
+    return ("all the identification sessions' data" if p.given_validation else
+            "all the data")
 
 
 @contextlib.contextmanager

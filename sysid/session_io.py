@@ -33,6 +33,11 @@ to its end); ``"all"``. The result has ``u (N, m)``, ``y (N, l)``, the channel
    names (``"motor.m1"``, ``"gyro.x"``) and units of the session.
 
 Several flights (:func:`load_sessions`) stay separate experiments: never joined end to end.
+
+A damaged or crash-truncated session is read as far as it goes; each of its problems
+(:attr:`cfsession.Session.problems`, what ``groundstation info`` lists) is logged as a warning
+naming the file by :func:`load_experiments`, which every command and function here reads
+sessions through.
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from cfsession import Session, open_session
+from cfsession import Session, open_session, warn_problems
 from cfsession.channels import Channel, session_specs
 from cfsession.channels import resolve_channels as _resolve
 from cfsession.errors import ChannelError, SessionError
@@ -251,6 +256,7 @@ def load_experiments(
     if dt is not None and not dt > 0:
         raise ParameterError(f"dt={dt}; pass the grid period in seconds (> 0)")
     session = open_session(path)
+    warn_problems(session, log)  # the one place sysid reads sessions: damage is never silent
     ins = resolve_channels(session, inputs, role="input")
     outs = resolve_channels(session, outputs, role="output")
     chans = ins + outs

@@ -60,6 +60,7 @@ __all__ = [
     "compare",
     "estimate_x0",
     "fit_percent",
+    "min_fit_samples",
     "observability_matrix",
     "predict",
     "simulate_windows",
@@ -77,15 +78,23 @@ MIN_WINDOW_SAMPLES = 20
 SAMPLES_PER_STATE = 10
 
 
+def min_fit_samples(*, n_states: int = 0, n_outputs: int = 1) -> int:
+    """Fewest samples a fit with its own initial state means something on (a simulation
+    window, or a whole record): :data:`MIN_WINDOW_SAMPLES`, and :data:`SAMPLES_PER_STATE`
+    output values per initial-state parameter (``n_states`` fitted on ``n_outputs``
+    channels). Fewer, and the initial state alone fits the samples: every score near 100 %."""
+    return max(MIN_WINDOW_SAMPLES, math.ceil(SAMPLES_PER_STATE * n_states / max(n_outputs, 1)))
+
+
 def simulation_window(*, dt: float, n_samples: int | None = None, n_states: int = 0,
                       n_outputs: int = 1, samples: int | None = None) -> float:
     """Seconds of the default simulation window: :data:`SIMULATION_WINDOW_S` (or ``samples``
-    samples, when given), at least :data:`MIN_WINDOW_SAMPLES` samples of ``dt`` and
-    :data:`SAMPLES_PER_STATE` output values per initial-state parameter (``n_states`` fitted on
-    ``n_outputs`` channels each window), at most the record (``n_samples``, if known)."""
+    samples, when given), at least :func:`min_fit_samples` samples of ``dt``
+    (:data:`MIN_WINDOW_SAMPLES`, and :data:`SAMPLES_PER_STATE` output values per
+    initial-state parameter: ``n_states`` fitted on ``n_outputs`` channels each window), at
+    most the record (``n_samples``, if known)."""
     base = round(SIMULATION_WINDOW_S / dt) if samples is None else samples
-    samples = max(base, MIN_WINDOW_SAMPLES,
-                  math.ceil(SAMPLES_PER_STATE * n_states / max(n_outputs, 1)))
+    samples = max(base, min_fit_samples(n_states=n_states, n_outputs=n_outputs))
     return (samples if n_samples is None else min(samples, n_samples)) * dt
 
 log = logging.getLogger(__name__)

@@ -86,6 +86,69 @@ def _parse(argv: list[str]) -> None:
     cmd.make_context(ctx.info_name, list(rest), parent=ctx.parent)
 
 
+def help_examples() -> list[tuple[str, list[str]]]:
+    """``(command, argv)`` of every command line in the --help of every sub-command of both
+    CLIs (a line ending in a backslash continues; ``| jq ...`` and comments cut off)."""
+    out = []
+
+    def walk(cmd: click.Command, ctx: click.Context) -> None:
+        if isinstance(cmd, click.Group):
+            for name in cmd.list_commands(ctx):
+                sub = cmd.get_command(ctx, name)
+                walk(sub, click.Context(sub, parent=ctx, info_name=name))
+            return
+        line = ""
+        for text in (cmd.help or "").splitlines():
+            text = text.strip()
+            if not line and text.split(" ", 1)[0] not in MAINS:
+                continue
+            line = f"{line} {text}".strip()
+            if line.endswith("\\"):
+                line = line[:-1]
+                continue
+            argv = shlex.split(line, comments=True)
+            out.append((ctx.command_path, argv[:argv.index("|")] if "|" in argv else argv))
+            line = ""
+
+    for name, main in MAINS.items():
+        walk(main, click.Context(main, info_name=name))
+    return out
+
+
+HELP = help_examples()
+
+
+def test_the_help_shows_commands():
+    assert {"groundstation demo", "groundstation info", "sysid batch"} <= {c for c, _ in HELP}
+
+
+@pytest.mark.parametrize(("where", "argv"), [
+    *((d, a) for d, a in ALL if any("*" in x for x in a)),
+    *((f"{c} --help", a) for c, a in HELP if any("*" in x for x in a))],
+    ids=lambda v: v if isinstance(v, str) else " ".join(v)[:60])
+def test_a_pattern_in_an_example_still_runs_when_it_matches_several_files(where, argv):
+    """`groundstation info demo-out/prbs-3axis-*.h5` (demo's --help) and the README's
+    `info sessions/hover-check-*.h5` failed with "Got unexpected extra argument" as soon as
+    two files matched (the demo records two; every flight is a new file): a pattern belongs
+    only where the command takes several files."""
+    several = [name for arg in argv
+               for name in ([arg.replace("*", "1", 1), arg.replace("*", "2", 1)]
+                            if "*" in arg else [arg])]
+    _parse(several)
+
+
+def test_the_docs_say_what_ctrl_c_does():
+    """Ctrl-C prints `error: interrupted (Ctrl-C)` and exits 130 on both CLIs
+    (cfcommon.cli.OneLineErrorGroup); docs/sysid.md said a sweep printed click's `Aborted!`
+    and exited 1."""
+    for doc in DOCS:
+        assert "Aborted!" not in doc.read_text(), doc.name
+    text = " ".join((ROOT / "docs" / "sysid.md").read_text().split())
+    assert ("Ctrl-C stops a parallel sweep at once: pending pairs are cancelled and the "
+            "workers (which ignore SIGINT themselves) terminated; the command prints "
+            "`error: interrupted (Ctrl-C)` and exits with 130") in text
+
+
 def test_the_docs_show_commands():
     names = {argv[1] for _, argv in ALL}
     assert {"fly", "info", "replay", "export", "identify", "compare", "order", "sweep"} <= names
@@ -105,6 +168,8 @@ def scratch(tmp_path_factory):
     for name, seed in (("A", 1), ("B", 2)):
         write_flight(d / "sessions" / f"prbs-3axis-{name}.h5", system=system, seed=seed)
     write_session(d / "flight.h5")
+    # the README's name for "the file fly printed" (a flight's file is named by its start)
+    write_session(d / "sessions" / "hover-check-20261122T100000Z.h5")
     return d
 
 

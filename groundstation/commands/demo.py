@@ -115,10 +115,10 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
       4. print the poles and the fits on flight 2: 2 s windowed simulation and k-step prediction
 
     \b
-    Example:
+    Examples (then a session by the name the demo printed: each run records new ones):
       groundstation demo --out demo-out --speed 20
-      groundstation info demo-out/prbs-3axis-*.h5
-      groundstation replay demo-out/prbs-3axis-*.h5 --rrd flight.rrd
+      groundstation info demo-out/prbs-3axis-20261122T100000Z.h5
+      groundstation replay demo-out/prbs-3axis-20261122T100000Z.h5 --rrd flight.rrd
     """
     from sysid import compare
     from sysid.cli_support import poles_rich_table

@@ -17,6 +17,8 @@
   metadata, key ``unit``); needs ``pyarrow``.
 
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``).
+A damaged or crash-truncated session is exported as far as it reads, and each of its problems
+(those ``groundstation info`` lists) is logged as a warning naming the file.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from __future__ import annotations
 import csv
 import importlib
 import json
+import logging
 import os
 import re
 from pathlib import Path
@@ -32,12 +35,14 @@ from typing import Any, Literal
 import click
 import numpy as np
 
-from cfsession import Session, open_session
+from cfsession import Session, open_session, warn_problems
 from groundstation.errors import GroundStationError
 
 __all__ = ["command", "export_csv", "export_mat", "export_parquet"]
 
 Format = Literal["csv", "mat", "parquet"]
+
+log = logging.getLogger(__name__)
 
 
 def _columns(session: Session, name: str) -> dict[str, list[Any] | np.ndarray]:
@@ -234,6 +239,8 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
 
     target = _target(session, to, out, force)
     s = open_session(session)
+    if to != "mat":  # mat: u and y are read through sysid.session_io, which warns
+        warn_problems(s, log)
     if to == "mat":
         try:
             win = parse_window(window)

@@ -35,7 +35,7 @@ from groundstation.flight.liveid import (
     check_live_id,
     planned_streams,
 )
-from groundstation.plan import LiveIdConfig, Plan, load_plan
+from groundstation.plan import MAX_RATE_RANGE_DEG_S, LiveIdConfig, Plan, load_plan
 from groundstation.plan.variants import advance_prbs, reseed_prbs
 from groundstation.recorder import check_folder, check_tag
 
@@ -243,9 +243,11 @@ def _speed_in_uri() -> None:
               show_default=True, help="Live view: Rerun viewer, web viewer, or none.")
 @click.option("--port", "web_port", type=click.IntRange(0, 65535), default=9090,
               show_default=True, help="Web viewer port on 127.0.0.1 (--view serve; 0: any).")
-@click.option("--max-rate", type=FiniteFloat(min=1.0), default=None,
-              help="Abort when a gyro axis exceeds this, deg/s [default: the plan's "
-                   "safety.max_rate_deg_s, else 1000].")
+@click.option("--max-rate", type=FiniteFloat(min=MAX_RATE_RANGE_DEG_S[0],
+                                             max=MAX_RATE_RANGE_DEG_S[1]), default=None,
+              help=f"Abort when a gyro axis exceeds this, deg/s ({MAX_RATE_RANGE_DEG_S[0]:g} "
+                   f"to {MAX_RATE_RANGE_DEG_S[1]:g}, as the plan's safety.max_rate_deg_s) "
+                   "[default: the plan's value, else 1000].")
 @click.option("--timeout", "timeout_s", type=FiniteFloat(min=0.5), default=10.0,
               show_default=True,
               help="Seconds the vehicle may stay silent while connecting (a connection that "

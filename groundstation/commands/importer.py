@@ -130,7 +130,8 @@ def _describe(path: Path, job: ImportJob) -> str:
 @click.option("--force", is_flag=True,
               help="Replace session files that exist (once the new one is complete).")
 @click.option("--allow-damaged", is_flag=True,
-              help="Salvage the records of a uSD log whose CRC does not match.")
+              help="Import a damaged uSD log anyway: a CRC mismatch keeps every record as "
+                   "read, a record cut short is dropped; the session lists the damage.")
 def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: bool) -> None:
     """Import uSD-card deck logs and cfclient "log to file" CSVs as session files.
 
@@ -139,7 +140,9 @@ def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: 
     folders of CSVs (cfclient's logdata/) or a mix; other files in it are skipped and listed.
     Firmware times are kept. The airborne segments found from the logged thrust and height
     become phases airborne-1, airborne-2, ... (docs/session-format.md); a log without any has
-    one phase "log". A failed import leaves no file behind.
+    one phase "log". A failed import leaves no file behind; with several logs, the others
+    are still imported, each failure (an existing session without --force, a damaged log) gets
+    its line, and the exit status is 2.
 
     \b
     Examples:
@@ -151,13 +154,12 @@ def command(paths: tuple[Path, ...], out_dir: Path, force: bool, allow_damaged: 
     if out_dir.exists() and not out_dir.is_dir():
         raise SessionError(f"{out_dir}: not a folder; --out takes a folder")
     check_folder(out_dir)  # created, and writable: else one line, before any work
-    if not force:
-        for job in jobs:
-            if (target := out_dir / f"{job.stem}.h5").exists() or target.is_symlink():
-                raise SessionError(f"{target}: already exists; pass --force to replace it")
     failed: list[str] = []
     for job in jobs:
         out = out_dir / f"{job.stem}.h5"
+        if not force and (out.exists() or out.is_symlink()):  # its line; the others go on
+            failed.append(f"{out}: already exists; pass --force to replace it")
+            continue
         try:
             if job.kind == "usd":
                 usd_to_session(source=job.files[0], out=out, allow_damaged=allow_damaged,

@@ -2,7 +2,9 @@
 
 The session's streams are declared to :class:`groundstation.live.RerunView` with the specs
 they were recorded with, then each stream is sent as one block (``send_columns`` per channel),
-so a 5-minute flight replays in well under a second.
+so a 5-minute flight replays in well under a second. A damaged or crash-truncated session is
+replayed as far as it reads, and each of its problems (those ``groundstation info`` lists) is
+logged as a warning naming the file.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import click
 
 from cfcommon.cli import check_output
 from cfcommon.rerun import serve_until_interrupted
-from cfsession import Session, open_session
+from cfsession import Session, open_session, warn_problems
 from cfsession.schema import Field, StreamSpec
 from groundstation.live import RerunView, open_view
 
@@ -75,6 +77,7 @@ def command(session: Path, rrd: Path | None, mode: str | None, web_port: int) ->
     if rrd is not None:  # before any work: never the session itself, never a missing folder
         check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=[session], overwrite=True)
     s = open_session(session)
+    warn_problems(s, log)  # replayed as far as it reads: say what is missing
     t0 = time.perf_counter()
     view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd,
                      web_port=web_port)

@@ -55,6 +55,8 @@ class CsvLog:
     timestamps_s: np.ndarray
     values: dict[str, np.ndarray] = field(default_factory=dict)
     ctypes: dict[str, str] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    """What was found damaged and done about it (a last line cut short, dropped)."""
 
 
 def block_name_of(path: Path) -> str:
@@ -106,11 +108,13 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
         raise CsvFormatError(str(exc)) from None
     rows: list[list[float]] = []
     linenos: list[int] = []
+    problems: list[str] = []
     for i, line in enumerate(lines[1:], start=2):
         row = _parse(line, path=path, lineno=i, width=len(header))
         if row is None:
             if i == len(lines):
-                log.warning("%s: last line %d is incomplete (client killed?); dropped", path, i)
+                problems.append(f"last line {i} is incomplete (client killed?); dropped")
+                log.warning("%s: %s", path, problems[-1])
                 break
             raise CsvFormatError(
                 f"{path}: line {i} has {len(line.split(','))} columns (or empty ones), the "
@@ -147,4 +151,4 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
             f"{data[j - 1, 0]:.0f} ms on line {linenos[j - 1]}; the file is not one "
             "recording in time order (fix or delete those lines)")
     return CsvLog(path=path, name=block_name_of(path), timestamps_s=stamps_ms / 1000.0,
-                  values=values, ctypes=ctypes)
+                  values=values, ctypes=ctypes, problems=problems)

@@ -195,8 +195,11 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
     """Write ``blocks`` as one session at ``out`` (module docstring); returns the path.
 
     ``metadata`` needs ``source_format`` and ``source_files``; ``source_mtime_ns`` (the source
-    file's modification time) is recorded as ``source_mtime_iso``. With ``force`` an existing
-    ``out`` is replaced (only once the new session is complete).
+    file's modification time) is recorded as ``source_mtime_iso``; ``source_problems`` (a list
+    of sentences: the damage the source's reader found and what it did about it) is kept as a
+    root attribute, which the session reader lists in ``Session.problems``, and each is a
+    warning event. With ``force`` an existing ``out`` is replaced (only once the new session is
+    complete).
     """
     out = Path(out)
     blocks = [b for b in blocks if len(b.timestamps_s)]
@@ -237,6 +240,9 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
             w.event(t=t_first, source="import",
                     text=f"imported from {meta.get('source_format', 'a log')}: "
                          f"{_files_text(files)}")
+            for problem in meta.get("source_problems", []):
+                w.event(t=t_first, level="warning", source="import",
+                        text=f"damaged source: {problem}")
             w.event(t=t_first, source="import", text=how)
             for spec, b in zip(specs, blocks, strict=True):
                 ds = np.zeros(len(b.timestamps_s), dtype=spec.dtype)
@@ -279,10 +285,11 @@ def usd_to_session(*, source: str | os.PathLike[str], out: str | os.PathLike[str
         blocks.append(ImportedBlock(name, ev.timestamps_s, ev.values, ctypes,
                                     source_event=ev.name))
     src = Path(source)
-    crc = "CRC ok" if usd.crc_ok else "CRC MISMATCH, damaged records dropped"
+    crc = "CRC ok" if usd.crc_ok else "CRC MISMATCH"  # what was done: usd.problems
     meta = {"source_format": f"crazyflie uSD-card deck log, format {usd.version} ({crc})",
             "source_files": [str(src.resolve())], "crc_ok": int(usd.crc_ok),
-            "source_mtime_ns": src.stat().st_mtime_ns}
+            "source_mtime_ns": src.stat().st_mtime_ns,
+            **({"source_problems": usd.problems} if usd.problems else {})}
     return write_imported_session(blocks=blocks, out=out, metadata=meta, force=force)
 
 
@@ -293,8 +300,10 @@ def csv_to_session(*, sources: Sequence[str | os.PathLike[str]],
         raise SessionError(f"{out}: no CSV files given; pass the block CSVs of one flight")
     logs: list[CsvLog] = [read_cfclient_csv(p) for p in sources]
     blocks = [ImportedBlock(c.name, c.timestamps_s, c.values, c.ctypes) for c in logs]
+    problems = [f"{c.path.name}: {p}" for c in logs for p in c.problems]
     meta = {"source_format": "cfclient log-to-file CSV",
             "source_files": [str(Path(p).resolve()) for p in sources],
-            "source_mtime_ns": min(Path(p).stat().st_mtime_ns for p in sources)}
+            "source_mtime_ns": min(Path(p).stat().st_mtime_ns for p in sources),
+            **({"source_problems": problems} if problems else {})}
     return write_imported_session(blocks=blocks, out=out, metadata=meta, force=force)
 

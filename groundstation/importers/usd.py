@@ -56,12 +56,15 @@ class UsdEvent:
 
 @dataclass
 class UsdLog:
-    """A decoded uSD log: format ``version``, whether the CRC matched, and its events by name."""
+    """A decoded uSD log: format ``version``, whether the CRC matched, its events by name, and
+    ``problems``: what was found damaged and what was done about it, one sentence each
+    (empty for an intact log)."""
 
     path: Path
     version: int
     crc_ok: bool
     events: dict[str, UsdEvent]
+    problems: list[str] = field(default_factory=list)
 
 
 def _cstring(data: bytes, idx: int, *, path: Path, what: str) -> tuple[str, int]:
@@ -79,8 +82,12 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     """Decode the uSD log at ``path``.
 
     A CRC mismatch or a truncated last record raises :class:`UsdFormatError`, unless
-    ``allow_damaged`` is set: then the records that decode are returned (with ``crc_ok`` False)
-    and a warning is logged.
+    ``allow_damaged`` is set: then the records that decode are returned (with ``crc_ok`` False),
+    each problem is logged as a warning and listed in :attr:`UsdLog.problems`. The CRC covers
+    the whole file and cannot say where it is damaged, so every record is kept as read (a
+    damaged value is returned as whatever it decodes to); only damage the record layout itself
+    locates (a last record cut short, a record of no declared event) drops records: those from
+    that byte on.
     """
     path = Path(path)
     try:
@@ -93,12 +100,14 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     (stored_crc,) = struct.unpack_from("<I", data, len(data) - 4)
     computed = zlib.crc32(body) & 0xFFFFFFFF
     crc_ok = computed == stored_crc
+    problems: list[str] = []
     if not crc_ok:
-        msg = (f"{path}: CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x}); "
-               "the file is damaged or truncated")
+        msg = f"CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x})"
         if not allow_damaged:
-            raise UsdFormatError(msg + _SALVAGE)
-        log.warning(msg)
+            raise UsdFormatError(f"{path}: {msg}; the file is damaged or truncated{_SALVAGE}")
+        _problem(path, problems, f"{msg}: the file is damaged or truncated, and a CRC over the "
+                 "whole file cannot say where; every record that decodes is kept as read, so "
+                 "any value may be wrong")
     version, n_types = struct.unpack_from("<HH", data, 1)
     if version not in (1, 2):
         raise UsdFormatError(f"{path}: uSD log version {version} is not supported (1 or 2)")
@@ -139,17 +148,17 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     end = len(body)
     while idx < end:
         if idx + head.size > end:
-            _damaged(path, f"last record truncated at byte {idx}", allow_damaged)
+            _damaged(path, f"last record truncated at byte {idx}", allow_damaged, problems)
             break
         event_id, stamp = head.unpack_from(body, idx)
         layout = layouts.get(event_id)
         if layout is None:
             _damaged(path, f"record at byte {idx} has unknown event id {event_id}",
-                     allow_damaged)
+                     allow_damaged, problems, rest=end - idx)
             break
         rec = layout[1]
         if idx + head.size + rec.size > end:
-            _damaged(path, f"last record truncated at byte {idx}", allow_damaged)
+            _damaged(path, f"last record truncated at byte {idx}", allow_damaged, problems)
             break
         rows[event_id].append(rec.unpack_from(body, idx + head.size))
         stamps[event_id].append(stamp)
@@ -162,10 +171,19 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         events[name] = UsdEvent(event_id=event_id, name=name,
                                 timestamps_s=np.asarray(stamps[event_id], dtype=np.float64) * scale,
                                 values=values)
-    return UsdLog(path=path, version=version, crc_ok=crc_ok, events=events)
+    return UsdLog(path=path, version=version, crc_ok=crc_ok, events=events, problems=problems)
 
 
-def _damaged(path: Path, what: str, allow: bool) -> None:
+def _problem(path: Path, problems: list[str], text: str) -> None:
+    problems.append(text)
+    log.warning("%s: %s", path, text)
+
+
+def _damaged(path: Path, what: str, allow: bool, problems: list[str], *,
+             rest: int | None = None) -> None:
+    """Damage the record layout locates: refused, or (``allow``) the records from there on
+    dropped (``rest`` bytes of them when more than the one record), said and listed."""
     if not allow:
         raise UsdFormatError(f"{path}: {what}{_SALVAGE}")
-    log.warning("%s: %s; keeping the records before it", path, what)
+    dropped = "dropped" if rest is None else f"the {rest} bytes from there dropped"
+    _problem(path, problems, f"{what}; {dropped}, the records before it kept")

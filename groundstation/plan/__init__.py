@@ -32,6 +32,7 @@ import numpy as np
 from groundstation.errors import PlanError
 from groundstation.plan.altitude import AltitudeHoldConfig
 from groundstation.plan.schedule import (
+    MAX_RATE_RANGE_DEG_S,
     SETPOINT_CHANNELS,
     UNITS,
     Phase,
@@ -52,6 +53,7 @@ from groundstation.plan.settings import LiveIdConfig, read_live_id, read_paramet
 from groundstation.plan.toml import TomlSource, TomlTable
 
 __all__ = [
+    "MAX_RATE_RANGE_DEG_S",
     "SETPOINT_CHANNELS",
     "SHIPPED_PLANS_DIR",
     "UNITS",

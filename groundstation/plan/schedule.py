@@ -23,7 +23,8 @@ import numpy as np
 from groundstation.errors import PlanError
 from groundstation.plan.altitude import AltitudeHoldConfig
 
-__all__ = ["SETPOINT_CHANNELS", "UNITS", "Phase", "Safety", "Schedule", "VehicleLimits"]
+__all__ = ["MAX_RATE_RANGE_DEG_S", "SETPOINT_CHANNELS", "UNITS", "Phase", "Safety", "Schedule",
+           "VehicleLimits"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,11 @@ class VehicleLimits:
 
     def __post_init__(self) -> None:
         _require_finite(self, "vehicle")
+
+
+MAX_RATE_RANGE_DEG_S = (10.0, 5000.0)
+"""The gyro-rate abort's accepted range, deg/s: ``[safety] max_rate_deg_s`` and ``fly
+--max-rate`` alike (below, a hover's noise aborts; above, no tumble ever would)."""
 
 
 @dataclass(frozen=True)

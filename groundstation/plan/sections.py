@@ -16,7 +16,13 @@ import numpy as np
 
 import groundstation.plan.excitation as ex
 from groundstation.plan.altitude import AltitudeHoldConfig
-from groundstation.plan.schedule import SETPOINT_CHANNELS, UNITS, Safety, VehicleLimits
+from groundstation.plan.schedule import (
+    MAX_RATE_RANGE_DEG_S,
+    SETPOINT_CHANNELS,
+    UNITS,
+    Safety,
+    VehicleLimits,
+)
 from groundstation.plan.toml import TomlSource, TomlTable
 
 __all__ = [
@@ -154,7 +160,8 @@ def read_safety(t: TomlTable, *, vehicle: VehicleLimits, rate_hz: float) -> Safe
     t.allow({"on_abort", "descent_duration", "descent_thrust", "max_rate_deg_s"})
     max_rate = t.get("max_rate_deg_s", float, default=None, unit="deg/s")
     if max_rate is not None:
-        max_rate = t.number("max_rate_deg_s", lo=10.0, hi=5000.0, unit="deg/s")
+        lo, hi = MAX_RATE_RANGE_DEG_S
+        max_rate = t.number("max_rate_deg_s", lo=lo, hi=hi, unit="deg/s")
     if t.choice("on_abort", ("descend", "stop"), default="stop") == "stop":
         return Safety(max_rate_deg_s=max_rate)
     ticks = t.ticks("descent_duration", rate_hz=rate_hz, hi=10.0)

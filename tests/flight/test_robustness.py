@@ -16,9 +16,10 @@ import groundstation.recorder as recorder_mod
 import groundstation.sim as gsim
 from cfsession import open_session, standard_streams
 from groundstation.cli import main
-from groundstation.errors import LinkError, SessionError
+from groundstation.commands.fly import command as fly_command
+from groundstation.errors import LinkError, PlanError, SessionError
 from groundstation.flight import fly_plan
-from groundstation.plan import load_plan
+from groundstation.plan import MAX_RATE_RANGE_DEG_S, find_plan, load_plan, parse_plan
 from groundstation.plan.schedule import Schedule
 from groundstation.recorder import Recorder, session_path
 
@@ -53,6 +54,36 @@ def test_fly_refuses_non_finite_options(args, sim_uri, tmp_path):
                                     str(tmp_path / "s"), *args])
     assert "finite" in one_line_error(res)
     assert never_connected(uri) and not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize(("value", "words"), [("1e9", "above 5000"), ("6000", "above 5000"),
+                                            ("5", "below 10"), ("9.99", "below 10")])
+def test_fly_max_rate_has_the_plan_keys_range(value, words, sim_uri, tmp_path):
+    """--max-rate 1e9 flew with the gyro-rate abort off in effect, while the plan key
+    safety.max_rate_deg_s refuses anything outside 10..5000 deg/s: one range for both."""
+    uri = sim_uri()
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out",
+                                    str(tmp_path / "s"), "--max-rate", value])
+    line = one_line_error(res)
+    assert "--max-rate" in line and words in line, line
+    assert never_connected(uri) and not (tmp_path / "s").exists()
+
+
+def test_fly_max_rate_range_is_the_plan_keys_and_help_says_it():
+    lo, hi = MAX_RATE_RANGE_DEG_S
+    option = next(p for p in fly_command.params if p.name == "max_rate")
+    assert (option.type.min, option.type.max) == (lo, hi) == (10.0, 5000.0)
+    text = find_plan("hover-check").read_text()
+    for value, ok in ((lo, True), (hi, True), (hi + 1, False), (lo - 0.5, False)):
+        edited = text.replace("[safety]\n", f"[safety]\nmax_rate_deg_s = {value!r}\n", 1)
+        if ok:
+            assert parse_plan(text=edited).compile().safety.max_rate_deg_s == value
+        else:
+            with pytest.raises(PlanError, match="max_rate_deg_s"):
+                parse_plan(text=edited)
+    res = CliRunner().invoke(main, ["fly", "--help"])
+    assert "FLOAT >=10 <=5000" in res.output and "(10 to 5000, as the plan's" in " ".join(
+        res.output.split()), res.output
 
 
 def test_fly_speed_says_where_the_speed_goes(sim_uri, tmp_path):

@@ -189,3 +189,30 @@ def test_two_sources_with_one_name_are_refused_before_any_work(tmp_path):
                                   "--out", str(tmp_path / "o")])
     assert res.exit_code == 2 and "would both become log00.h5" in res.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_existing_sessions_are_each_one_line_and_the_missing_ones_are_imported(tmp_path):
+    """A card imported before, one session since deleted: it is imported again; each existing
+    one is refused on its own line (never written over without --force); exit 2."""
+    card = tmp_path / "card"
+    card.mkdir()
+    n = 20
+    for i, name in enumerate(("log00", "log01", "log02")):
+        (card / name).write_bytes(usd_bytes(stamps_us=10_000 * np.arange(n),
+                                            a=np.full(n, i, np.float32), b=np.zeros(n, np.uint16)))
+    out = tmp_path / "o"
+    first = CliRunner().invoke(gs, ["import", str(card), "--out", str(out)])
+    assert first.exit_code == 0, first.output
+    (out / "log01.h5").unlink()
+    kept = {p: p.read_bytes() for p in (out / "log00.h5", out / "log02.h5")}
+    again = CliRunner().invoke(gs, ["import", str(card), "--out", str(out)])
+    assert again.exit_code == 2 and "Traceback" not in again.output
+    assert again.stderr.splitlines() == [
+        f"error: {out / 'log00.h5'}: already exists; pass --force to replace it",
+        f"error: {out / 'log02.h5'}: already exists; pass --force to replace it"]
+    assert again.stdout.startswith(f"{out / 'log01.h5'}: acc+motor {n} rows")
+    assert open_session(out / "log01.h5")["acc+motor"].data["x"].tolist() == [1.0] * n
+    assert all(p.read_bytes() == b for p, b in kept.items())  # untouched
+    forced = CliRunner().invoke(gs, ["import", str(card), "--out", str(out), "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert sorted(p.name for p in out.iterdir()) == ["log00.h5", "log01.h5", "log02.h5"]

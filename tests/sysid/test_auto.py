@@ -11,6 +11,7 @@ import pytest
 import sysid
 from sysid.auto import NoStableModel, default_grid, holdout, select
 from sysid.methods import get_method
+from sysid.refit import saved_as
 from sysid.sweep import SweepResult, SweepRow
 from tests.sysid.systems import (
     closed_loop,
@@ -94,6 +95,9 @@ def test_a_short_hover_identifies_with_no_knobs(caplog) -> None:
     assert top[0].score >= top[-1].score and sel.best in sel.result.rows
     # the model returned is identified again on all the data, at the chosen horizons
     assert sel.model.provenance["n_samples"] == [650]
+    assert sel.model.provenance["selection"] == {"identified_again": True,
+                                                 "data": "all the data"}
+    assert saved_as(sel.model) == "identified again on all the data"
     assert (sel.model.provenance["past"], sel.model.provenance["future"]) == (
         sel.best.past, sel.best.future)
     assert not [r for r in caplog.records if r.name.startswith("sysid.iem")]  # grid is quiet
@@ -232,10 +236,16 @@ def test_the_chosen_model_stays_stable_when_all_the_data_tip_a_pole_out(seed, ke
     assert sel.best.stable and sel.model.is_stable
     # the refit's "pole kept" is not said of a model that was not kept
     assert not [r for r in caplog.records if r.name == "sysid.stability" and "kept" in r.message]
-    assert (sel.model is sel.best.model) == keep_models  # the kept one, not identified again
+    if keep_models:  # the kept one, not identified again
+        np.testing.assert_array_equal(sel.model.A, sel.best.model.A)
     assert abs(abs(sel.model.poles()[0]) - 0.9) < 0.03  # the identification part's plant
     assert sel.model.provenance["n_samples"][0] < 700   # identified on that part only
     assert any("kept the stable model the sweep scored" in w for w in sel.warnings)
+    # and the model says so: "model saved to X" must not add "identified again on all the data"
+    assert sel.model.provenance["selection"] == {
+        "identified_again": False, "data": "identified on 700 of the 1000 samples"}
+    assert saved_as(sel.model) == ("the model the sweep scored, identified on 700 of the 1000 "
+                                   "samples")
     # the model returned is the one scored (its poles to numerical precision)
     np.testing.assert_allclose(np.sort_complex(sel.model.poles()),
                                np.sort_complex(sel.best.poles), atol=1e-9)
@@ -298,5 +308,6 @@ def test_a_refit_on_all_the_data_that_fails_keeps_the_scored_model_and_says_so()
     sel = select([[d]], method=broken, options=broken.options(), orders=[1], pasts=[10],
                  futures=[6])
     assert sel.model.provenance["n_samples"][0] < d.n_samples  # the identification part
+    assert sel.model.provenance["selection"]["identified_again"] is False
     assert any(w.startswith("identified again on all the data it failed (the predictor")
                and "kept the model the sweep scored" in w for w in sel.warnings), sel.warnings

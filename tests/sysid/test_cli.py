@@ -127,6 +127,67 @@ def test_sweep_saves_the_selected_model(flights, tmp_path) -> None:
     assert again.exit_code == 2 and "already exists" in again.stderr
 
 
+def _refusing_all_the_data(monkeypatch, module: str) -> None:
+    """``module``'s method refuses the whole excitation (as PARSIM-K's predictor can, with a
+    pole at 1): the refit on all the data fails and the model the sweep scored is kept."""
+    import dataclasses
+
+    from sysid import cli_options
+
+    def refusing(name, **kwargs):
+        meth, options = cli_options.method_options(name, **kwargs)
+
+        def identify(data, **kw):
+            flights = [data] if isinstance(data, sysid.IOData) else list(data or [])
+            if sum(f.n_samples for f in flights) == N_EXC:
+                raise sysid.OrderError("the predictor A_K of order 4 has a pole at |z| = 1")
+            return meth.function(data, **kw)
+
+        return dataclasses.replace(meth, function=identify), options
+
+    monkeypatch.setattr(f"{module}.method_options", refusing)
+
+
+@pytest.mark.parametrize("command", ["sweep", "identify"])
+@pytest.mark.parametrize("refit_fails", [False, True])
+def test_the_saved_line_says_what_the_saved_model_is(flights, tmp_path, monkeypatch, command,
+                                                     refit_fails) -> None:
+    """"model saved to X (identified again on all the data)" followed a warning that the
+    refit was not kept: the line (and the model's provenance) now say which model it is."""
+    if refit_fails:
+        _refusing_all_the_data(monkeypatch, "sysid.cli" if command == "sweep"
+                               else "sysid.cli_identify")
+    out = tmp_path / "m.h5"
+    res = run(command, flights[0].path, "--method", "iem", "--focus", "prediction",
+              "--pasts", "10", "--futures", "10", "--orders", "4", "--out", out) \
+        if command == "sweep" else run(command, flights[0].path, "--method", "iem", "--focus",
+                                       "prediction", "--past", "10", "--future", "10",
+                                       "--out", out)
+    assert res.exit_code == 0, res.output
+    model = sysid.load_model(out)
+    saved = [ln for ln in res.stdout.splitlines() if ln.startswith("model saved to")]
+    if refit_fails:
+        assert "kept the model the sweep scored" in " ".join(res.stdout.split())
+        assert model.provenance["n_samples"][0] < N_EXC
+        assert model.provenance["selection"]["identified_again"] is False
+        assert saved == [f"model saved to {out} (the model the sweep scored, identified on "
+                         f"{model.provenance['selection']['data'].split()[2]} of the {N_EXC} "
+                         "samples)"], res.stdout
+    else:
+        assert model.provenance["n_samples"] == [N_EXC]
+        assert model.provenance["selection"] == {"identified_again": True,
+                                                 "data": "all the data"}
+        assert saved == [f"model saved to {out} (identified again on all the data)"]
+
+
+def test_identify_with_every_setting_given_saves_without_a_selection(flights, tmp_path):
+    out = tmp_path / "m.h5"
+    res = run("identify", flights[0].path, *FAST, "--out", out)
+    assert res.exit_code == 0, res.output
+    assert f"model saved to {out}\n" in res.stdout
+    assert "selection" not in sysid.load_model(out).provenance
+
+
 def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> None:
     """On one closed-loop session both commands run sysid.auto.select (held-out split, default
     grid, both focus choices): the same past, future, order and focus, and the model the

@@ -90,6 +90,85 @@ def test_compare_words_the_pole_that_chose_windows(flight, tmp_path, pole, kind)
         " ".join(res.stderr.split())), res.stderr
 
 
+@pytest.fixture(scope="module")
+def integrating(flight, tmp_path_factory):
+    """The identified 4-state model with an integrator (compare's default: windows)."""
+    tmp = tmp_path_factory.mktemp("integrating")
+    base = sysid.load_model(_identified(flight, tmp))
+    path = tmp / "int.h5"
+    base.replace(A=_with_integrator(base.A)).save(path)
+    return path
+
+
+def _one_error_line(res) -> str:
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.output
+    return lines[0]
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    # 2 samples against a 4-state initial state scored 100.0 % on every channel, exit 0
+    (["--window", "10:10.04"], ["f.h5 has 2 samples", "needs at least 20", "--window"]),
+    (["--window", "10:10.3"], ["f.h5 has 15 samples", "needs at least 20"]),
+    (["--window", "10:10.3", "--horizon", "1"], ["f.h5 has 15 samples"]),
+    (["--window-s", "0.1"], ["--window-s 0.1 is 5 samples", "needs at least 20",
+                             "--window-s 0.4 or longer"]),
+])
+def test_compare_refuses_records_and_windows_too_short_to_score(flight, integrating, args,
+                                                                 words) -> None:
+    """Every mode fits an initial state per record (per window): on fewer samples than the
+    default window's floor (sysid.validate.min_fit_samples) that state alone fits them."""
+    line = _one_error_line(run("compare", integrating, flight.path, *args))
+    assert all(w in line for w in words), line
+
+
+def test_compare_counts_ten_output_values_per_state(flight, integrating, tmp_path) -> None:
+    """12 states seen through one output need 120 samples: 2 s (100) of a record is refused,
+    though more than the 20-sample floor and the 2 s default."""
+    base = sysid.load_model(integrating)
+    n = 12
+    lam = np.r_[1.0, np.linspace(0.2, 0.9, n - 1)]
+    model = sysid.StateSpaceModel(A=np.diag(lam), B=np.ones((n, base.n_inputs)),
+                                  C=np.ones((1, n)), dt=base.dt,
+                                  input_names=base.input_names,
+                                  output_names=base.output_names[-1:])
+    path = tmp_path / "wide.h5"
+    model.save(path)
+    line = _one_error_line(run("compare", path, flight.path, "--window", "10:12"))
+    assert "has 100 samples" in line and "12-state model on 1 output(s) needs at least 120" in (
+        line), line
+    res = run("compare", path, flight.path, "--window", "10:12.4")
+    assert res.exit_code == 0, res.output
+    assert "simulation, 2.4 s windows:" in res.stdout, res.stdout
+
+
+def test_compare_titles_the_window_it_used(flight, integrating) -> None:
+    """A record shorter than the default 2 s caps the window, and the title says the window
+    used (it said "2 s windows" over 0.6 s); a --window-s beyond some records says so."""
+    res = run("compare", integrating, flight.path, "--window", "10:10.6")
+    assert res.exit_code == 0, res.output
+    title = "simulation, 0.6 s windows (the shortest record: shorter than 2 s)"
+    assert f"{title}: fit [%]" in res.stdout, res.stdout
+    assert title in " ".join(res.stderr.split())
+    res = run("compare", integrating, flight.path, "--window", "10:10.6", "--json")
+    assert json.loads(res.stdout)["modes"][0]["mode"] == title
+    res = run("compare", integrating, flight.path, "--window", "10:11", "--window-s", "2")
+    assert "2 s windows (longer than the records: each simulated whole)" in res.stdout
+
+
+def test_compare_says_when_a_window_is_longer_than_some_records(flight, integrating,
+                                                                tmp_path) -> None:
+    other = tmp_path / "short.h5"
+    other.write_bytes(flight.path.read_bytes())
+    res = run("compare", integrating, flight.path, other, "--window-s", "2",
+              "--window", "short.h5=10:11")
+    assert res.exit_code == 0, res.output
+    assert "2 s windows (longer than some records: those simulated whole)" in res.stdout
+
+
 def _with_pole(a: np.ndarray, pole: float) -> np.ndarray:
     """An A of the same size with real poles ``pole``, 0.5, 0.4, ... (random real basis)."""
     n = a.shape[0]

@@ -221,6 +221,19 @@ def test_default_simulation_window_is_2_s_with_a_floor_in_samples():
     assert simulation_window(dt=0.02, n_states=12, n_outputs=1) == pytest.approx(2.4)
 
 
+def test_min_fit_samples_is_the_floor_of_the_default_window():
+    """The one rule for "enough samples to fit an initial state on": what `sysid compare`
+    refuses below and what the default window never goes under."""
+    from sysid.validate import min_fit_samples, simulation_window
+
+    assert min_fit_samples() == 20
+    assert min_fit_samples(n_states=10, n_outputs=4) == 25
+    assert min_fit_samples(n_states=12, n_outputs=1) == 120
+    for n, outputs in ((1, 1), (10, 4), (12, 1), (40, 6)):
+        assert simulation_window(dt=1.0, n_states=n, n_outputs=outputs, samples=1) == (
+            min_fit_samples(n_states=n, n_outputs=outputs))
+
+
 @pytest.mark.parametrize("mode", [{"window": 0.5}, {}, {"horizon": 3}])
 def test_fits_do_not_depend_on_the_units_of_a_channel(mode) -> None:
     """The initial state is fitted with every channel weighted as the fit weights it: logging

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import socket
 
+import h5py
 import numpy as np
 from click.testing import CliRunner
 
+from cfsession import open_session
 from groundstation.cli import main
 from groundstation.plan import load_plan
 from tests.viz.rrd import load
@@ -23,6 +26,27 @@ def test_replay_rrd(tmp_path):
     ents = load(out)
     assert len(ents["/gyro/z"].scalars()) == N_LOG
     assert [s[0] for s in ents["/phase"].rows["StateChange:state"]][-1] == "land (landing)"
+
+
+def test_replay_of_a_damaged_session_warns_each_problem_naming_the_file(tmp_path, caplog):
+    """Replayed as far as it reads (the rows before the damage), never in silence."""
+    session = write_session(tmp_path / "flight.h5")
+    with h5py.File(session, "r") as f:
+        info = f["gyro/data"].id.get_chunk_info(2)
+    raw = bytearray(session.read_bytes())
+    raw[info.byte_offset: info.byte_offset + info.size] = b"\xff" * info.size
+    session.write_bytes(bytes(raw))
+    with h5py.File(session, "r+") as f:  # and its writer died
+        f.attrs["closed_cleanly"] = 0
+    problems = open_session(session).problems
+    assert len(problems) == 2
+    out = tmp_path / "flight.rrd"
+    with caplog.at_level(logging.WARNING, logger="groundstation.commands.replay"):
+        res = CliRunner().invoke(main, ["replay", str(session), "--rrd", str(out)])
+    assert res.exit_code == 0, res.output
+    assert [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING] == [
+        f"{session}: problem: {p}" for p in problems]
+    assert 0 < len(load(out)["/gyro/z"].scalars()) < N_LOG
 
 
 def test_replay_errors_are_one_line(tmp_path):
