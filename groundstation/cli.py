@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import signal
 
 import click
 
@@ -69,6 +70,11 @@ def main(verbose: int) -> None:
       groundstation info sessions/prbs-3axis-20261122T100000Z.h5
       groundstation demo
     """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        # A script's background job starts with SIGINT ignored; a flight honours it once
+        # flying (groundstation.flight.realtime), so it must not be lost while connecting
+        # either: an operator's interrupt before take-off would then let the whole plan fly.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     # cflib logs link failures with full tracebacks; we report them in one line (see -vv).

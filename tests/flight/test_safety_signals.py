@@ -104,3 +104,20 @@ def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
     assert 5 <= len(descent) <= 7  # of the 20 planned: stopped at the next deadline
     texts = [e.text for e in safety_events(s)]
     assert sum("during the abort" in t for t in texts) == 1, texts
+
+
+def test_an_interrupt_is_honoured_from_the_start_when_launched_with_sigint_ignored():
+    """A script's background job (``groundstation fly ... &``) starts with SIGINT ignored:
+    the flight's handler overrode that once flying, but a ``kill -INT`` while connecting was
+    lost and the whole plan was flown (first-day audit). The command restores the default
+    interrupt before any work."""
+    from click.testing import CliRunner
+
+    from groundstation.cli import main
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        CliRunner().invoke(main, ["info", "--help"])
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
