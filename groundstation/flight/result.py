@@ -61,13 +61,15 @@ def block_summary(*, fw_ms: Sequence[int], period_s: float,
 
 
 def setpoint_summary(*, sent_t: Sequence[float], period_s: float, scheduled: int,
-                     planned: int) -> dict[str, Any]:
-    """Setpoints sent (flight times ``sent_t``, s), scheduled and planned, and the jitter of
-    the send period against ``period_s`` in ms (p50, p99, max)."""
+                     planned: int, stopped: bool = False) -> dict[str, Any]:
+    """Setpoints sent on the grid (flight times ``sent_t``, s: the plan's, the thrust-lock
+    release, an abort's descent), scheduled and planned, whether the stop setpoint (sent and
+    recorded apart, repeated until delivered) was delivered, and the jitter of the send period
+    against ``period_s`` in ms (p50, p99, max)."""
     dt = np.diff(np.asarray(sent_t, dtype=float))
     jitter = np.abs(dt - period_s) * 1000.0 if len(dt) else np.zeros(1)
     return {"sent": len(sent_t), "scheduled": scheduled, "planned": planned,
-            "period_s": period_s,
+            "stopped": stopped, "period_s": period_s,
             "jitter_ms": {"p50": round(float(np.percentile(jitter, 50)), 3),
                           "p99": round(float(np.percentile(jitter, 99)), 3),
                           "max": round(float(jitter.max()), 3)}}

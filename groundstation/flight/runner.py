@@ -307,7 +307,8 @@ class _Runner:
             "blocks": blocks,
             "setpoints": setpoint_summary(sent_t=self.out.sent_t, period_s=self.schedule.period,
                                           scheduled=self.n_scheduled,
-                                          planned=len(self.schedule)),
+                                          planned=len(self.schedule),
+                                          stopped=self.out.stopped),
         }
 
 

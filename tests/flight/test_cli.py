@@ -10,6 +10,7 @@ from click.testing import CliRunner
 
 from cfsession import open_session
 from groundstation.cli import main
+from groundstation.commands.fly import summary_lines
 
 
 def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
@@ -21,6 +22,11 @@ def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
     s = open_session(summary["file"])
     assert s.closed_cleanly and summary["file"].startswith(str(tmp_path))
     assert s.json_meta("summary")["setpoints"] == summary["setpoints"]
+    # every recorded setpoint row is counted: the plan's and the unlock on the grid, the stop
+    # apart (the summary said "+1 unlock/abort" for two extra rows: first-day audit)
+    sp = summary["setpoints"]
+    assert sp["stopped"] and len(s["setpoints"]) == sp["sent"] + 1
+    assert "then the stop" in summary_lines(summary)[-2]
 
 
 def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
