@@ -32,7 +32,13 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-__all__ = ["FiniteFloat", "OneLineErrorGroup", "check_output", "output_console", "output_table"]
+__all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "FiniteFloat", "OneLineErrorGroup",
+           "check_output", "output_console", "output_table"]
+
+#: The channels both command lines take from a session by default: ``sysid``'s commands and
+#: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from).
+DEFAULT_INPUTS = "motors"
+DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
 

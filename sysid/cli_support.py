@@ -20,6 +20,8 @@ from rich.console import Console
 from rich.table import Table
 
 from cfcommon.cli import (
+    DEFAULT_INPUTS,
+    DEFAULT_OUTPUTS,
     FiniteFloat,
     OneLineErrorGroup,
     check_output,
@@ -126,9 +128,9 @@ WINDOW_HELP = ("Window: auto (the excitation phase, else the airborne-N phases, 
 def session_options(func: Callable) -> Callable:
     """Options shared by every command that reads sessions."""
     opts = [
-        click.option("--inputs", default="motors", show_default=True, help=(
+        click.option("--inputs", default=DEFAULT_INPUTS, show_default=True, help=(
                      "Input channels: STREAM, STREAM.FIELD or group.variable, comma-separated.")),
-        click.option("--outputs", default="acc.z,gyro", show_default=True,
+        click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
                      help="Output channels, as --inputs (default: what the motors drive "
                           "directly; see docs/sysid.md)."),
         click.option("--window", "windows", multiple=True, default=("auto",),

@@ -4,9 +4,10 @@
   precision, text decoded as UTF-8, an event's continued text joined into one row) and
   ``metadata.json``; ``pandas.read_csv`` reads each.
 * ``mat``: one MATLAB file holding what ``iddata`` needs, ``u`` (N x m), ``y`` (N x l), ``Ts``
-  (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit`` (cell arrays), built as
-  ``sysid`` builds its data (resampled on a uniform grid, not detrended; ``--inputs``,
-  ``--outputs``, ``--window``, ``--dt``), plus every stream as ``streams.STREAM.FIELD`` (column
+  (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit`` (cell arrays): the data
+  ``sysid identify`` identifies from, with its default channels and the logged period
+  (resampled on a uniform grid, not detrended; ``--inputs``, ``--outputs``, ``--window``, one
+  experiment, ``--dt``), plus every stream as ``streams.STREAM.FIELD`` (column
   vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata``::
 
       s = load('flight.mat');
@@ -35,6 +36,7 @@ from typing import Any, Literal
 import click
 import numpy as np
 
+from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS
 from cfsession import Session, open_session, warn_problems
 from groundstation.errors import GroundStationError
 
@@ -112,7 +114,7 @@ def _cell(values: Any) -> np.ndarray:
 
 
 def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list[str],
-               window: Any, dt: float) -> Path:
+               window: Any, dt: float | None) -> Path:
     """One ``.mat`` file: iddata's ``u``, ``y``, ``Ts``, names and units, and every stream."""
     from scipy.io import savemat
 
@@ -216,16 +218,17 @@ class _Choice(click.Choice):
               help="Output folder (csv, parquet) or .mat file [default: next to SESSION, "
                    "SESSION-csv/, SESSION-parquet/ or SESSION.mat].")
 @click.option("--force", is_flag=True, help="Replace an existing output.")
-@click.option("--inputs", default="motors", show_default=True,
-              help="mat: iddata inputs u (streams, stream.field or group.variable).")
-@click.option("--outputs", default="acc,gyro", show_default=True,
-              help="mat: iddata outputs y.")
+@click.option("--inputs", default=DEFAULT_INPUTS, show_default=True,
+              help="mat: iddata inputs u (streams, stream.field or group.variable), as sysid.")
+@click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
+              help="mat: iddata outputs y, as sysid.")
 @click.option("--window", default="excitation", show_default=True,
-              help="mat: phase name or kind, T0:T1 (session seconds), or 'all'.")
-@click.option("--dt", type=click.FloatRange(min=0, min_open=True), default=0.02,
-              show_default=True, help="mat: sample time Ts of u and y, s.")
+              help="mat: phase name or kind, T0:T1 (session seconds), or 'all' (one "
+                   "experiment: iddata holds one).")
+@click.option("--dt", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="mat: sample time Ts of u and y, s [default: the logged period, as sysid].")
 def command(session: Path, to: Format, out: Path | None, force: bool, inputs: str,
-            outputs: str, window: str, dt: float) -> None:
+            outputs: str, window: str, dt: float | None) -> None:
     """Write SESSION for pandas, MATLAB or Arrow users.
 
     \b
