@@ -183,7 +183,7 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
         lines.append(f"  {name:<8} {b['received']:6d} / {b['expected']:6d} packets "
                      f"({share:.1f} %), {b['dropped']} dropped")
     extra = sp.get("sent", 0) - sp.get("scheduled", 0)
-    stop = ", then the stop" if sp.get("stopped") else ", NO stop delivered"
+    stop = {True: ", then the stop", False: ", NO stop delivered"}.get(sp.get("stopped"), "")
     lines.append(f"  setpoints {sp.get('scheduled', 0)} of {sp.get('planned', 0)} planned sent "
                  f"(+{extra} unlock/descent{stop}); period jitter p50 {jit.get('p50', 0):.1f} ms, "
                  f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms "

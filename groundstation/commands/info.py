@@ -72,6 +72,8 @@ def describe(session: Session) -> dict[str, Any]:
         "events": len(session.events()),
         **({"parameters": params} if (params := flown_parameters(session)) else {}),
         **({"live_id": live_id(session)} if "live_id" in session else {}),
+        **({"summary": summary} if isinstance(summary := session.json_meta("summary", None),
+                                              dict) else {}),
     }
 
 
@@ -142,6 +144,17 @@ def _live_id_text(d: dict[str, Any]) -> list[str]:
         lines.append(f"  excitation ended at {c['at_s']:.1f} s, {c['skipped_s']:.1f} s early: "
                      f"{c['reason']}")
     return lines
+
+
+def _summary_text(summary: dict[str, Any]) -> list[str]:
+    """The fly command's summary lines for a stored summary; one line if it is malformed (a
+    file from elsewhere)."""
+    from groundstation.commands.fly import summary_lines
+
+    try:
+        return [f"  {line}" for line in summary_lines(summary)[1:]]
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return ["  (the stored summary is malformed)"]
 
 
 def _fields_text(fields: dict[str, str]) -> str:
@@ -238,6 +251,11 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
+    if "summary" in d:
+        out.print("flight summary, stored when the flight ended (counts to its end: a stream "
+                  "silent after a link loss counts as dropped there):")
+        for line in _summary_text(d["summary"]):
+            out.print(escape(line))
     if d.get("parameters"):
         out.print("firmware parameters for the flight: " + escape(", ".join(
             f"{k} = {v['value']:g} (was {v['was']:g})" for k, v in d["parameters"].items())))

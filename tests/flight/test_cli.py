@@ -110,3 +110,20 @@ def test_fly_without_a_radio_is_one_line_with_the_fix(tmp_path):
     assert lines[0].startswith("error: cannot connect to radio://0/80/2M/E7E7E7E7E7")
     assert "Crazyradio" in lines[0] or "USB" in lines[0] or "libusb" in lines[0]
     assert not list(tmp_path.glob("*.h5"))
+
+
+def test_info_shows_the_summary_stored_at_the_end_of_the_flight(sim_uri, tmp_path):
+    """docs/flying.md points to `groundstation info FILE` for the stored summary; it showed
+    neither in its table nor in --json (first-day audit)."""
+    from groundstation.commands import info
+
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(), "--out",
+                                    str(tmp_path), "--json"])
+    path = json.loads(res.stdout)["file"]
+    shown = CliRunner().invoke(main, ["info", path, "--width", "200"])
+    assert shown.exit_code == 0, shown.output
+    assert "flight summary, stored when the flight ended" in shown.output
+    assert "100 of 100 planned sent (+1 unlock/descent, then the stop)" in shown.output
+    described = json.loads(CliRunner().invoke(main, ["info", path, "--json"]).stdout)
+    assert described["summary"]["setpoints"]["stopped"] is True
+    assert info._summary_text({"setpoints": 3}) == ["  (the stored summary is malformed)"]
