@@ -126,8 +126,11 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
                            inputs=model.input_names, outputs=model.output_names,
                            verb="validate the model on")
+        # the window of the identification rows (one report, one window), capped by the
+        # validation records: `sysid compare --window-s` with it gives the same figures
         v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
-                                  n_states=model.n_states, n_outputs=model.n_outputs)
+                                  n_states=model.n_states, n_outputs=model.n_outputs,
+                                  samples=round(window_s / model.dt))
         checks = [(f"validation: simulation, {v_win:.3g} s windows",
                    compare(model, val, window=v_win, warn=False)),
                   ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]

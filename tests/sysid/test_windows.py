@@ -139,8 +139,12 @@ def test_identify_with_no_knobs_on_imported_airborne_segments(files, tmp_path) -
     assert sel["candidates"][0]["score_percent"] >= sel["candidates"][-1]["score_percent"]
     assert rep["stable"] and sel["chosen"]["score_percent"] > 50
     assert rep["dt_s"] == pytest.approx(0.02)  # the logged rate
+    # one report, one window: the validation rows use the identification rows' (the
+    # selection's score window; they were 2 s beside 1.07 s: first-day audit)
+    win = rep["simulation_window_s"]
+    assert win != pytest.approx(2.0)  # the memory sets it here
     assert [m["mode"] for m in rep["validation"]] == [
-        "validation: simulation, 2 s windows", "validation: 1-step prediction"]
+        f"validation: simulation, {win:.3g} s windows", "validation: 1-step prediction"]
     assert min(rep["validation"][1]["fit_percent"].values()) > 50
     text = CliRunner().invoke(main, ["compare", str(out), str(files["imported2"]),
                                      "--horizon", "1"])
