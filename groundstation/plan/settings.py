@@ -59,7 +59,8 @@ def read_live_id(t: TomlTable) -> LiveIdConfig:
     t.allow(set(LiveIdConfig.__dataclass_fields__))
     inputs = _channel_names(t, "inputs", d.inputs)
     outputs = _channel_names(t, "outputs", d.outputs)
-    both = sorted(set(inputs) & set(outputs))
+    both = sorted({y for y in outputs for x in inputs  # "motors" holds "motors.m1"
+                   if y == x or y.startswith(f"{x}.") or x.startswith(f"{y}.")})
     if both:
         raise t.src.error((*t.path, "outputs"), f"{both} is both an input and an output; "
                           "pick one")

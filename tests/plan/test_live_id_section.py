@@ -41,6 +41,9 @@ def test_values_are_read(base_text):
     ('outputs = ["gyro x"]', "outputs", "is not a channel name"),
     ('outputs = ["gyro.x", "gyro.x"]', "outputs", "named twice"),
     ('inputs = ["gyro"]', "live_id", "both an input and an output"),
+    # a whole stream holds its fields: plan check passed this, fly refused it (audit)
+    ('outputs = ["motors.m1"]\ninputs = ["motors"]', "outputs", "both an input and an output"),
+    ('inputs = ["gyro.x"]', "live_id", "both an input and an output"),
     ("order = 0", "order", "out of range"),
     ("order = 4.5", "order", "is not an integer"),
     ("past = 0", "past", "out of range"),
