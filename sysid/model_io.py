@@ -77,11 +77,12 @@ def _units(model: StateSpaceModel) -> dict[str, tuple[list[str], list[str]]]:
             "noise_cov": (yu, yu)}
 
 
-def save(model: StateSpaceModel, path: Path) -> Path:
+def save(model: StateSpaceModel, path: str | os.PathLike[str]) -> Path:
     """Write ``model`` to ``path`` in the format its suffix names (one-line
     :class:`ModelFileError` when it cannot be written). It is written beside ``path`` and
     renamed onto it when complete: a model file is whole or absent (Ctrl-C, a full disk), and
     one it replaces stays as it was until then."""
+    path = Path(path)
     suffix = path.suffix.lower()
     writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat, ".json": _save_json}
     if suffix not in writers:
@@ -120,11 +121,12 @@ def _os_reason(exc: OSError) -> str:
 
 
 # ------------------------------------------------------------------------------- loading
-def load(path: Path) -> StateSpaceModel:
+def load(path: str | os.PathLike[str]) -> StateSpaceModel:
     """Read a model file written by :func:`save`; anything else is one
     :class:`ModelFileError` line (see the module docstring)."""
     from sysid.model import StateSpaceModel
 
+    path = Path(path)
     if path.is_dir():
         raise ModelFileError(f"model file {str(path)!r} is a folder; pass a model file "
                              "(.h5, .json or .mat)")

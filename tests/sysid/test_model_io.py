@@ -34,6 +34,8 @@ def test_round_trip_is_exact(tmp_path, suffix, noise):
     assert (back.input_names, back.output_names) == (("thrust",), ("z",))
     assert (back.input_units, back.output_units) == (("N",), ("m",))
     assert back.provenance == m.provenance
+    # a path as a string, as sysid.model.load_model takes it (it was an AttributeError: audit)
+    assert np.array_equal(load(str(save(m, str(tmp_path / f"s{suffix}")))).A, m.A)
 
 
 @pytest.mark.parametrize("suffix", [".h5", ".json", ".mat"])
