@@ -138,7 +138,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         model.save(out)
     if rrd is not None:
         write_rrd(path=rrd, name=f"identify {sessions[0].name}", model=model,
-                  comparisons=[sim, pred, *(r for _, r in checks)],
+                  comparisons=[sim, pred], validation=[r for _, r in checks],
                   sweep=selection.result if selection else None)
     poles = pole_table(model)
     method = str(model.provenance.get("method", method))  # the selection may choose it

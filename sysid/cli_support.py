@@ -274,16 +274,18 @@ def check_rrd(rrd: Path | None, *, inputs: Sequence[Path]) -> Path | None:
 
 def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
                comparisons: Sequence[CompareResult] = (), sweep: Any = None,
-               residuals: Any = None) -> None:
+               residuals: Any = None, validation: Sequence[CompareResult] = ()) -> None:
     """Write ``model`` (its singular values, poles), comparisons and a sweep to ``path`` with
-    :func:`sysid.viz.log_identification`; one-line error when :mod:`sysid.viz` is missing or
-    the file cannot be written."""
+    :func:`sysid.viz.log_identification`; comparisons on validation records go in
+    ``validation`` (entities of their own, ``/sysid/validation/<mode>``). One-line error when
+    :mod:`sysid.viz` is missing or the file cannot be written."""
     viz = require_viz()
     try:
         rec, _ = viz.open_recording(name=name, mode="save", rrd_path=path)
         try:
             viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
-                                   sweep=sweep, residuals=residuals)
+                                   sweep=sweep, residuals=residuals,
+                                   validation=list(validation))
         finally:
             rec.disconnect()
     except (OSError, RuntimeError) as exc:

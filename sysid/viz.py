@@ -21,6 +21,8 @@ entity                               content
 ``<p>/<mode>/exp<e>/<y>/model``      simulated or k-step predicted output; the series name
                                      carries the fit, ``model (fit 93.21 %)``
 ``<p>/<mode>/summary``               :meth:`sysid.CompareResult.summary` text
+``<p>/validation/<mode>/...``        the same for the validation data (``exp<e>`` its
+                                     experiments), apart from the identification data's
 ``<p>/sweep/poles/order_<n>``        poles of every order-n model of a horizon sweep, drawn
                                      translucent so dense regions look darker (Figure 5.2)
 ``<p>/residuals/<y>/...``            residual correlations and bands (:func:`log_residuals`)
@@ -28,7 +30,8 @@ entity                               content
 
 ``<mode>`` is ``simulation``, ``windowed_simulation`` or ``prediction_<k>_step``; a channel name
 ``<y>`` is one escaped path part (:func:`cfcommon.rerun.entity_path`). Model-vs-data series use
-the timeline ``t`` (seconds, :math:`t_k = k\\,\\Delta t` from each record's start).
+the timeline ``t`` (seconds, :math:`t_k = k\\,\\Delta t` from each record's start), so
+each data set has entities of its own: one entity never holds two records' samples.
 Pole positions are stored as :math:`(\\Re p, \\Im p)`; a static transform on ``<p>/poles`` and
 ``<p>/sweep/poles`` flips the 2-D view's downward y axis so the imaginary axis points up.
 The fit is the NRMSE fit of :func:`sysid.fit_percent`:
@@ -76,6 +79,8 @@ _CIRCLE = np.column_stack([np.cos(_ANGLE), np.sin(_ANGLE)])
 _FLIP_Y = rr.Transform3D(scale=[1.0, -1.0, 1.0])
 _NO_LEGEND = rrb.PlotLegend(visible=False)
 _GREY, _RED, _BLUE = (150, 150, 150), (230, 80, 40), (40, 120, 230)
+VALIDATION = "validation"
+"""Entity-path level of the comparisons on validation data: ``<prefix>/validation/<mode>``."""
 ZOOM = ((0.7, 1.1), (-0.2, 0.2))
 """Re and Im ranges of the zoomed pole view: a quadrotor's poles crowd near z = 1."""
 
@@ -192,7 +197,11 @@ def log_compare(
     """Measured vs simulated or predicted outputs, one entity pair per experiment and channel.
 
     ``dt`` is the sample period (s); ``units`` (l,) label the series (default: none). The fit
-    of experiment e, channel j (``result.fits[e, j]``) is in the model series' name.
+    of experiment e, channel j (``result.fits[e, j]``) is in the model series' name. The
+    entities are ``<prefix>/<mode>/...``: a second result of the same mode under the same
+    prefix (another data set) would add its samples to the first's and replace its names
+    and summary, so each data set needs its own prefix (:func:`log_identification`'s
+    ``validation``).
     """
     slug = mode_slug(result)
     names = _names(result)
@@ -244,11 +253,14 @@ def identification_blueprint(
     comparisons: Sequence[tuple[str, Sequence[str], int]] = (),
     sweep: bool = False, singular_values: bool = True, poles: bool = True,
     residuals: tuple[Sequence[str], Sequence[str]] | None = None,
+    validation: Sequence[tuple[str, Sequence[str], int]] = (),
 ) -> rrb.Blueprint:
     """Default layout: singular values and poles (whole plane, and zoomed near z = 1) on top,
     the sweep's pole clouds when there was a sweep; below, one tab per comparison
     ``(mode slug, output names, number of experiments)`` with one plot per output channel (all
-    experiments), and a residual tab for ``residuals`` ``(output names, input names)``: per
+    experiments), then one per ``validation`` comparison (same form, entities under
+    ``<prefix>/validation``, tab and fit text named ``validation ...``), and a residual tab
+    for ``residuals`` ``(output names, input names)``: per
     output its autocorrelation and its cross-correlation with each input, with their
     confidence bands; next to them the order, the pole table, the fit and residual summaries.
     Only what is asked for gets a panel (none says "No data available"). The time panel shows
@@ -285,15 +297,18 @@ def identification_blueprint(
     if poles:
         texts.append(rrb.TextDocumentView(origin=_path(prefix, "poles", "table"),
                                           name="pole table"))
-    texts += [rrb.TextDocumentView(origin=_path(prefix, slug, "summary"), name=f"{slug} fit")
-              for slug, _, _ in comparisons]
+    sets = [(_path(prefix), "", comparisons),
+            (_path(prefix, VALIDATION), f"{VALIDATION} ", validation)]
+    texts += [rrb.TextDocumentView(origin=_path(base, slug, "summary"),
+                                   name=f"{label}{slug} fit")
+              for base, label, comps in sets for slug, _, _ in comps]
     if sweep:
         texts.append(rrb.TextDocumentView(origin=_path(prefix, "sweep", "table"), name="sweep"))
     tabs = [rrb.Grid(*[rrb.TimeSeriesView(
-                origin=_path(prefix, slug), name=panel_title(name),
+                origin=_path(base, slug), name=panel_title(name),
                 contents=[f"$origin{entity_path(f'exp{e}', name)}/**" for e in range(n_exp)])
-                       for name in names], name=slug.replace("_", " "))
-            for slug, names, n_exp in comparisons]
+                       for name in names], name=label + slug.replace("_", " "))
+            for base, label, comps in sets for slug, names, n_exp in comps]
     if residuals is not None:
         tabs.append(rrb.Grid(*_residual_views(prefix=prefix, outputs=residuals[0],
                                               inputs=residuals[1]), name="residuals"))
@@ -301,7 +316,7 @@ def identification_blueprint(
                                           name="residuals"))
     side = rrb.Tabs(*texts)
     bottom = rrb.Horizontal(rrb.Tabs(*tabs), side, column_shares=[3, 1]) if tabs else side
-    timeline = "lag" if residuals is not None and not comparisons else "t"
+    timeline = "lag" if residuals is not None and not (comparisons or validation) else "t"
     return rrb.Blueprint(rrb.Vertical(rrb.Grid(*top), bottom) if top else bottom,
                          rrb.TimePanel(timeline=timeline))
 
@@ -329,13 +344,24 @@ def log_identification(
     residuals: ResidualResult | None = None,
     singular_values: np.ndarray | None = None,
     prefix: str = "sysid",
+    validation: Sequence[CompareResult] = (),
 ) -> None:
     """Everything about one identified model, with a default layout.
 
     Singular values default to ``model.provenance["singular_values"]`` (order = the model's);
     each comparison (from :func:`sysid.compare` with data sampled at ``model.dt``) gets its own
     tab; a sweep adds its pole clouds; a residual analysis (:func:`sysid.residuals`) its tab.
+    ``comparisons`` are on one data set (the identification data), ``validation`` on another
+    (held-out records), logged under ``<prefix>/validation`` with tabs of their own: the same
+    mode on both keeps both. Within each, the modes must differ (a :class:`ParameterError`
+    otherwise): the same mode twice would write over itself.
     """
+    for what, comps in (("comparisons", comparisons), ("validation", validation)):
+        slugs = [mode_slug(r) for r in comps]
+        twice = sorted({s for s in slugs if slugs.count(s) > 1})
+        if twice:
+            raise ParameterError(f"{what}: {', '.join(twice)} given more than once; one "
+                                 "result per mode (another data set goes in validation)")
     sv = singular_values if singular_values is not None else \
         model.provenance.get("singular_values")
     if sv is not None:
@@ -344,13 +370,18 @@ def log_identification(
     units = list(model.output_units) if model.output_units else None
     for res in comparisons:
         log_compare(rec=rec, result=res, dt=model.dt, units=units, prefix=prefix)
+    for res in validation:
+        log_compare(rec=rec, result=res, dt=model.dt, units=units,
+                    prefix=_path(prefix, VALIDATION))
     if sweep is not None:
         log_sweep_poles(rec=rec, result=sweep, prefix=prefix)
     if residuals is not None:
         log_residuals(rec=rec, result=residuals, prefix=prefix, layout=False)
-    tabs = {mode_slug(r): (_names(r), len(r.y_measured)) for r in comparisons}
+    def tabs(comps: Sequence[CompareResult]) -> list[tuple[str, tuple[str, ...], int]]:
+        return [(mode_slug(r), _names(r), len(r.y_measured)) for r in comps]
+
     rec.send_blueprint(identification_blueprint(
-        prefix=prefix, comparisons=[(slug, *v) for slug, v in tabs.items()],
+        prefix=prefix, comparisons=tabs(comparisons), validation=tabs(validation),
         sweep=sweep is not None, singular_values=sv is not None,
         residuals=_residual_names(residuals) if residuals is not None else None))
 

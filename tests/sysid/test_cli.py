@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
 
 import numpy as np
@@ -311,6 +312,74 @@ def test_rrd_reports_are_written(flights, tmp_path) -> None:
     res = run("sweep", flights[0].path, "--pasts", "20", "--futures", "10", "--orders", "3,4",
               "--rrd", tmp_path / "sw.rrd")
     assert res.exit_code == 0 and "/sysid/sweep/poles/order_4" in load(tmp_path / "sw.rrd")
+
+
+def _rrd_fits(ents, base: str, names) -> dict[str, dict[str, float]]:
+    """``{mode slug: {channel: fit}}`` of the summary texts under ``base``; each model
+    series' name (one experiment: its fit is the overall fit) must say the same."""
+    out = {}
+    for slug in ("windowed_simulation", "prediction_1_step"):
+        text = ents[f"{base}/{slug}/summary"].static["TextDocument:text"][0]
+        fits = {n: float(f) for n, f in re.findall(r"^  (\S+):\s+(\S+) %$", text, re.M)}
+        assert list(fits) == list(names), text
+        for n, f in fits.items():
+            label = ents[f"{base}/{slug}/exp0/{n}/model"].static["SeriesLines:names"][0]
+            assert f"(fit {f:.2f} %)" in label, (label, f)
+        out[slug] = fits
+    return out
+
+
+def test_identify_validate_rrd_keeps_both_data_sets(flights, tmp_path) -> None:
+    """`identify --validate --rrd`: the identification comparisons stay under /sysid/<mode>,
+    the validation ones go under /sysid/validation/<mode>; each entity holds one flight's
+    samples, and the summaries and series names carry the fits the command prints. (The
+    validation results were written over the identification ones: two flights' samples on
+    one `t` timeline, names and summaries of the validation fit only.)"""
+    from tests.viz.rrd import load
+
+    args = [flights[0].path, *FAST, "--validate", flights[1].path]
+    res = run("identify", *args, "--json", "--rrd", tmp_path / "j.rrd")
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    names = list(report["fit_percent"]["1-step"])
+    want = {"/sysid": {"windowed_simulation": report["fit_percent"]["simulation"],
+                       "prediction_1_step": report["fit_percent"]["1-step"]},
+            "/sysid/validation": {"windowed_simulation": report["validation"][0]["fit_percent"],
+                                  "prediction_1_step": report["validation"][1]["fit_percent"]}}
+    assert report["validation"][0]["mode"].startswith("validation: simulation")
+    ents = load(tmp_path / "j.rrd", sort_by=None)
+    for base, modes in want.items():
+        got = _rrd_fits(ents, base, names)
+        for slug, fits in modes.items():
+            np.testing.assert_allclose([got[slug][n] for n in names], [fits[n] for n in names],
+                                       atol=0.005 + 1e-9, err_msg=f"{base}/{slug}")
+    # the two data sets' fits differ: neither was written over the other
+    assert want["/sysid"] != want["/sysid/validation"]
+    # each entity holds one flight: its samples, once each on `t`
+    data = [sysid.session_io.load_session(f.path, outputs=["acc.z", "gyro"]) for f in flights]
+    series = {e: ent for e, ent in ents.items() if "Scalars:scalars" in ent.rows}
+    assert len(series) == 2 * 2 * 2 * len(names)  # data sets x modes x (measured, model)
+    for e, ent in series.items():
+        d = data[1] if e.startswith("/sysid/validation/") else data[0]
+        t = ent.times["t"]
+        assert len(t) == d.n_samples and len(np.unique(t)) == len(t), e
+        if e.endswith("/measured"):
+            y = d.y[:, d.output_names.index(e.split("/")[-2])]
+            np.testing.assert_allclose(ent.scalars()[np.argsort(t)], y, atol=1e-9, err_msg=e)
+    # the text output prints the same fits, to its one decimal
+    res = run("identify", *args, "--rrd", tmp_path / "t.rrd")
+    assert res.exit_code == 0, res.output
+    ents = load(tmp_path / "t.rrd", sort_by=None)
+    lines = res.stdout.splitlines()
+    for base, rows in (("/sysid", ("simulation, ", "1-step prediction")),
+                       ("/sysid/validation", ("validation: simulation, ",
+                                              "validation: 1-step prediction"))):
+        got = _rrd_fits(ents, base, names)
+        for slug, label in zip(("windowed_simulation", "prediction_1_step"), rows, strict=True):
+            line = next(ln for ln in lines if ln.startswith(label))
+            printed = [float(v) for v in line.split()[-len(names):]]
+            np.testing.assert_allclose(printed, [got[slug][n] for n in names],
+                                       atol=0.05 + 0.005 + 1e-9, err_msg=line)
 
 
 @pytest.mark.parametrize("command", ["identify", "compare", "order", "sweep", "export"])

@@ -97,6 +97,36 @@ def test_compare_series_and_fits(tmp_path, identified):
     assert sim.fit.min() > 90  # a correct model of a known system: the plot shows a good fit
 
 
+def test_validation_comparisons_have_entities_of_their_own(tmp_path, identified):
+    """The same mode on the identification and on validation data: both kept, each under its
+    own path with its own series, names and summary; one mode twice in one set is refused."""
+    _, data, model = identified
+    ident, val = (sysid.IOData(u=data.u[a:b], y=data.y[a:b], dt=data.dt,
+                               output_names=("p", "q")) for a, b in ((0, 900), (900, 1500)))
+    on_ident, on_val = sysid.compare(model, ident), sysid.compare(model, val)
+    path = tmp_path / "val.rrd"
+    rec, _ = viz.open_recording(name="val", mode="save", rrd_path=path)
+    viz.log_identification(rec=rec, model=model, comparisons=[on_ident], validation=[on_val])
+    rec.disconnect()
+    ents = load(path, sort_by="t")
+    for base, res, d in (("/sysid", on_ident, ident), ("/sysid/validation", on_val, val)):
+        mod = ents[f"{base}/simulation/exp0/q/model"]
+        np.testing.assert_allclose(mod.scalars(), res.y_model[0][:, 1], rtol=1e-12)
+        np.testing.assert_allclose(ents[f"{base}/simulation/exp0/q/measured"].scalars(),
+                                   d.y[:, 1], rtol=1e-12)
+        assert len(mod.times["t"]) == len(d.y)
+        assert f"(fit {res.fits[0, 1]:.2f} %)" in mod.static["SeriesLines:names"][0]
+        assert ents[f"{base}/simulation/summary"].static["TextDocument:text"][0] == \
+            res.summary()
+    assert on_ident.summary() != on_val.summary()
+    rec, _ = viz.open_recording(name="twice", mode="save", rrd_path=tmp_path / "twice.rrd")
+    try:
+        with pytest.raises(sysid.ParameterError, match="simulation given more than once"):
+            viz.log_identification(rec=rec, model=model, comparisons=[on_ident, on_val])
+    finally:
+        rec.disconnect()
+
+
 def test_compare_two_experiments(tmp_path, identified):
     _, data, model = identified
     halves = [sysid.IOData(u=data.u[a:b], y=data.y[a:b], dt=data.dt, output_names=("p", "q"))

@@ -1,11 +1,12 @@
 """Every panel of every blueprint the project writes shows data.
 
 The .rrd files are written by the real commands (replay of a flight and of imported cfclient
-and uSD logs, plan show, sysid identify, compare, sweep and resid) and a live view fed like a
-flight; each blueprint is read back from the file and every view's content query is resolved
-against the file's entities by Rerun's own entity-path filter (:func:`tests.viz.rrd.resolve`):
-no viewer is needed. A view that resolves to nothing would say "No data available" in the
-viewer; a time series without the time panel's timeline would be empty.
+and uSD logs, plan show, sysid identify (also with --validate), compare, sweep and resid) and
+a live view fed like a flight; each blueprint is read back from the file and every view's
+content query is resolved against the file's entities by Rerun's own entity-path filter
+(:func:`tests.viz.rrd.resolve`): no viewer is needed. A view that resolves to nothing would
+say "No data available" in the viewer; a time series without the time panel's timeline would
+be empty.
 """
 
 from __future__ import annotations
@@ -87,6 +88,10 @@ def recordings(tmp_path_factory) -> dict[str, Path]:
     _run(sysid_main, "identify", flight.path, *FAST, "--rrd", d / "identify.rrd",
          "--out", d / "model.h5")
     out["identify"] = d / "identify.rrd"
+    other = write_flight(d / "other.h5", system=known_system(), seed=4, n=1200)
+    _run(sysid_main, "identify", flight.path, *FAST, "--validate", other.path,
+         "--rrd", d / "validate.rrd")
+    out["identify with validation"] = d / "validate.rrd"
     _run(sysid_main, "compare", d / "model.h5", flight.path, "--horizon", "3",
          "--rrd", d / "compare.rrd")
     out["compare"] = d / "compare.rrd"
@@ -107,7 +112,8 @@ def recordings(tmp_path_factory) -> dict[str, Path]:
 
 
 KINDS = ["replay", "replay cfclient import", "replay uSD import", "plan show", "flight view",
-         "odd names", "identify", "compare", "sweep", "resid", "identify with residuals"]
+         "odd names", "identify", "identify with validation", "compare", "sweep", "resid",
+         "identify with residuals"]
 FLIGHT_VIEWS = ["replay", "replay cfclient import", "replay uSD import", "flight view",
                 "odd names"]
 
@@ -206,6 +212,24 @@ def test_identification_report_panels(recordings) -> None:
     assert labels == ["A1", "A2", "A3", "A4"]
     table = ents["/sysid/poles/table"].static["TextDocument:text"][0]
     assert "| A1 |" in table and "| K4 |" in table
+
+
+def test_validation_panels_show_the_validation_flight(recordings) -> None:
+    """identify --validate: a tab and a fit text per mode for each data set, the
+    identification's on /sysid/<mode>, the validation's on /sysid/validation/<mode>."""
+    path = recordings["identify with validation"]
+    found = views(path)
+    for base in ("/sysid", "/sysid/validation"):
+        for slug in ("windowed_simulation", "prediction_1_step"):
+            plot = [v for v in found if v.name == "gyro.x" and v.origin == f"{base}/{slug}"]
+            assert len(plot) == 1, [(v.name, v.origin) for v in found]
+            assert resolve(plot[0], path, timeline="t") == [
+                f"{base}/{slug}/exp0/gyro.x/measured", f"{base}/{slug}/exp0/gyro.x/model"]
+    texts = {v.name: v.origin for v in found if v.kind == "TextDocument"}
+    assert texts["windowed_simulation fit"] == "/sysid/windowed_simulation/summary"
+    assert texts["validation windowed_simulation fit"] == \
+        "/sysid/validation/windowed_simulation/summary"
+    assert timeline(path) == "t"
 
 
 def test_the_blueprint_sent_last_is_the_one_read(tmp_path) -> None:
