@@ -23,6 +23,7 @@ group finishes, so an interrupted batch keeps every finished group.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import logging
@@ -37,7 +38,7 @@ import numpy as np
 
 from sysid.auto import select
 from sysid.data import IOData
-from sysid.errors import SysIdError
+from sysid.errors import ClusterError, SysIdError
 from sysid.methods import Method, Options
 from sysid.session_io import SessionFileError
 
@@ -177,6 +178,31 @@ def _cell(value: Any) -> str:
     return "" if value is None else str(value)
 
 
+def _group_task(groups: list[list[IOData]], **kwargs: Any) -> dict[str, Any]:
+    """:func:`identify_group` timed where it runs (here or on a Dask worker): its result with
+    ``seconds``; a failure carries its seconds as ``sysid_seconds`` (an exception's attributes
+    travel with it from a worker)."""
+    t0 = time.perf_counter()
+    try:
+        out = identify_group(groups, **kwargs)
+    except Exception as exc:
+        with contextlib.suppress(Exception):  # an exception that takes no attributes
+            exc.sysid_seconds = time.perf_counter() - t0  # type: ignore[attr-defined]
+        raise
+    return {**out, "seconds": time.perf_counter() - t0}
+
+
+def _task_seconds(outcome: dict[str, Any] | BaseException) -> float:
+    if isinstance(outcome, BaseException):
+        return float(getattr(outcome, "sysid_seconds", 0.0) or 0.0)
+    return float(outcome.get("seconds", 0.0))
+
+
+def _names(names: Sequence[str], shown: int = 5) -> str:
+    more = len(names) - shown
+    return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
+
+
 def run_batch(
     groups: dict[str, list[Path]], *, out_dir: Path,
     load: Callable[[list[Path]], list[list[IOData]]], method: Method, options: Options,
@@ -188,16 +214,33 @@ def run_batch(
     """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
     group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
     groups run one after another, each sweep on ``workers`` processes; with ``client`` every
-    group is one task on the Dask cluster (its records sent with it)."""
-    rows = list(rows or [])
+    group is one task on the Dask cluster (its records sent with it).
+
+    The rows are the same either way: ``rows``, then the groups in the order of ``groups``
+    (the summary lists the finished ones in that order while the batch runs), and
+    ``seconds`` is the group's own time: loading its sessions, identifying (measured where
+    that runs, so without the time a task waited on the cluster) and saving its model.
+
+    A fault of the cluster (:class:`~sysid.errors.ClusterError`: the scheduler lost, no
+    workers left) ends the batch with one line that counts the finished groups (kept in the
+    summary) and names the groups not run; those are no rows, they did not fail."""
+    known = list(rows or [])
+    names = list(groups)
+    done_rows: dict[str, BatchRow] = {}
     total, done = len(groups), 0
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_summary(rows, out_dir)
-    pending: dict[str, tuple[BatchRow, float]] = {}
+    write_summary(known, out_dir)
+    pending: dict[str, tuple[BatchRow, float]] = {}  # submitted: (row, seconds to load it)
+    task_options = {"method": method, "options": options, "grid": grid,
+                    "choose_focus": choose_focus, "choose_feedthrough": choose_feedthrough,
+                    "choose_method": choose_method}
 
-    def finish(row: BatchRow, t0: float, outcome: dict[str, Any] | BaseException) -> None:
+    def in_order() -> list[BatchRow]:
+        return known + [done_rows[n] for n in names if n in done_rows]
+
+    def finish(row: BatchRow, seconds: float, outcome: dict[str, Any] | BaseException) -> None:
         nonlocal done
-        row.seconds = time.perf_counter() - t0
+        t0 = time.perf_counter()
         if not isinstance(outcome, BaseException):
             path = out_dir / f"{row.group}.h5"
             try:
@@ -212,8 +255,9 @@ def run_batch(
             row.poles = list(np.sort_complex(outcome["model"].poles()))
             row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
             row.model = str(path)
-        rows.append(row)
-        write_summary(rows, out_dir)
+        row.seconds = seconds + time.perf_counter() - t0
+        done_rows[row.group] = row
+        write_summary(in_order(), out_dir)
         done += 1
         log.info("group %s: %s", row.group, row.error or f"order {row.order}")
         if progress is not None:
@@ -227,35 +271,43 @@ def run_batch(
                 data = load(paths)
                 row.flights = sum(len(g) for g in data)
                 if client is None:
-                    outcome: dict[str, Any] | BaseException = identify_group(
-                        data, method=method, options=options, grid=grid, workers=workers,
-                        choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
-                        choose_method=choose_method)
+                    outcome: dict[str, Any] | BaseException = _group_task(
+                        data, workers=workers, **task_options)
                 else:
-                    fut = client.submit(identify_group, data, method=method, options=options,
-                                        grid=grid, choose_focus=choose_focus,
-                                        choose_feedthrough=choose_feedthrough,
-                                        choose_method=choose_method, pure=False)
+                    fut = client.submit(_group_task, data, pure=False, **task_options)
                     futures[fut] = name
-                    pending[name] = (row, t0)
+                    pending[name] = (row, time.perf_counter() - t0)
                     continue
             except Exception as exc:  # a failed group is a row, never the end of the batch
                 _log_unexpected(name, exc)
                 outcome = exc
-            finish(row, t0, outcome)
+            finish(row, time.perf_counter() - t0, outcome)
         if futures:
-            from sysid.cluster import require_distributed
+            from sysid.cluster import completed, task_result
 
-            for fut in require_distributed().as_completed(list(futures)):
-                row, t0 = pending.pop(futures[fut])
+            for fut in completed(client, list(futures)):
                 try:
-                    result = fut.result()
+                    result = task_result(client, fut)
+                except ClusterError:  # the scheduler lost while fetching: no group's fault
+                    raise
                 except Exception as exc:  # also a worker lost on the cluster (KilledWorker)
                     _log_unexpected(futures[fut], exc)
                     result = exc
-                finish(row, t0, result)
-    except BaseException:
+                row, load_s = pending.pop(futures[fut])
+                finish(row, load_s + _task_seconds(result), result)
+    except ClusterError as exc:
+        from sysid.cluster import cancel_quietly
+
+        cancel_quietly(client, futures, exc)
+        not_run = [n for n in names if n in pending]
+        kept = in_order()
+        raise type(exc)(f"{exc}; {len(kept)} finished group(s) kept in "
+                        f"{out_dir / 'summary.json'} and {out_dir / 'summary.csv'}; "
+                        f"{len(not_run)} group(s) not run: {_names(not_run)}") from None
+    except BaseException as exc:
         if futures:
-            client.cancel(list(futures))
+            from sysid.cluster import cancel_quietly
+
+            cancel_quietly(client, futures, exc)
         raise
-    return rows
+    return in_order()

@@ -80,21 +80,45 @@ SCHEDULER_OPTION = click.option(
 
 @contextlib.contextmanager
 def scheduler_client(address: str | None) -> Iterator[Any]:
-    """A Dask client of ``address`` (None: no cluster), its dashboard printed on stderr."""
+    """A Dask client of ``address`` (None: no cluster), its dashboard printed on stderr.
+
+    Every fault of the cluster is one line (:mod:`sysid.cluster`): an address that does not
+    answer the Dask handshake within the connect timeout, a scheduler that has had no worker
+    for that long at the start, and during the run a lost scheduler, or no workers for the
+    worker wait (warned of on stderr when it begins). Dask's own log shows with ``-v``."""
     if address is None:
         yield None
         return
-    from sysid.cluster import connect, dashboard_link
+    from sysid.cluster import (
+        connect,
+        connect_timeout_s,
+        dashboard_link,
+        quiet_dask_log,
+        wait_for_workers,
+        watching,
+        worker_count,
+        worker_wait_s,
+    )
 
-    client = connect(address)
-    try:
-        link = dashboard_link(client)
-        n = len(client.scheduler_info().get("workers", {}))
-        click.echo(f"dask: {address}, {n} worker(s)"
-                   + (f", dashboard {link}" if link else ", no dashboard"), err=True)
-        yield client
-    finally:
-        client.close()
+    label = f"--scheduler {address}"
+    timeout, wait = connect_timeout_s(), worker_wait_s()
+    with quiet_dask_log():
+        client = connect(address, timeout_s=timeout)
+        try:
+            link = dashboard_link(client)
+            n = worker_count(client, label=label)
+            click.echo(f"dask: {address}, {n} worker(s)"
+                       + (f", dashboard {link}" if link else ", no dashboard")
+                       + ("" if n else f"; waiting up to {timeout:g} s for one"), err=True)
+            if not n:
+                n = wait_for_workers(client, timeout_s=timeout, label=label)
+                click.echo(f"dask: {n} worker(s)", err=True)
+            with watching(label=label, worker_wait_s=wait,
+                          notify=lambda msg: click.echo(f"warning: {msg}", err=True)):
+                yield client
+        finally:
+            with contextlib.suppress(Exception):  # a lost scheduler: nothing left to close
+                client.close(timeout=timeout)
 
 
 @main.command()
@@ -221,7 +245,8 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     Groups come from the sessions' metadata (--group-by; docs/sysid.md names them). Each
     group's horizons and order are chosen by validation on held-out data, as `identify` does,
     unless fixed. A group that fails is a row with its reason; the batch goes on. The summary
-    is rewritten as each group finishes: Ctrl-C keeps the finished groups.
+    is rewritten as each group finishes: Ctrl-C keeps the finished groups, and so does a
+    --scheduler cluster that fails mid-run (one line names the groups not run).
 
     \b
     Examples:

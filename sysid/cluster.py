@@ -9,21 +9,70 @@ each task then carries only its past (an integer) and the small method/options o
 returns its rows. The workers run the same :func:`sysid.sweep._past_task` as the local worker
 processes, on the same arrays, so the rows are the same. A batch sends each group's records
 with that group's one task (they are needed by one worker only).
+
+**Faults.** Every wait on the cluster is bounded, and each fault is one
+:class:`~sysid.errors.ClusterError` line:
+
+- :func:`connect` first opens a connection itself and reads the scheduler's Dask handshake,
+  each step within the connect timeout (``distributed.Client`` waits for that answer without
+  a limit): an address that accepts but never answers, or answers something other than Dask
+  (an HTTP server, the dashboard's port), is refused within that time;
+- :func:`completed` yields the tasks as they end and checks the cluster every
+  :data:`POLL_S`: a lost scheduler connection ends the run at once (:class:`SchedulerLost`),
+  a scheduler without workers is reported through the :func:`watching` ``notify`` and ends
+  the run when no worker has joined within the worker wait.
+
+The two waits default to :data:`CONNECT_TIMEOUT_S` and :data:`WORKER_WAIT_S`; the
+environment variables :data:`CONNECT_ENV` and :data:`WORKER_WAIT_ENV` (seconds) replace them.
 """
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import contextlib
 import logging
-from collections.abc import Callable, Iterable
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from contextvars import ContextVar
+from dataclasses import dataclass
 from typing import Any
 
-from sysid.errors import MissingDependencyError
+from sysid.errors import ClusterError, MissingDependencyError, ParameterError
 
-__all__ = ["EXTRA_HINT", "connect", "dashboard_link", "require_distributed", "run_pasts"]
+__all__ = ["CONNECT_ENV", "CONNECT_TIMEOUT_S", "EXTRA_HINT", "POLL_S", "WORKER_WAIT_ENV",
+           "WORKER_WAIT_S", "SchedulerLost", "Watch", "cancel_quietly", "completed", "connect",
+           "connect_timeout_s", "dashboard_link", "probe", "quiet_dask_log",
+           "require_distributed", "run_pasts", "task_result", "wait_for_workers", "watching",
+           "worker_count", "worker_wait_s"]
 
 log = logging.getLogger(__name__)
 
 EXTRA_HINT = "dask.distributed is not installed; install the extra: pip install 'cf-sysid[dask]'"
+
+#: Seconds to reach the scheduler and read its handshake (and, at the start, to wait for a
+#: first worker when it has none).
+CONNECT_TIMEOUT_S = 10.0
+#: Seconds a run waits, once the scheduler has no workers left, for one to join.
+WORKER_WAIT_S = 60.0
+#: Seconds between two checks of the cluster while tasks run.
+POLL_S = 1.0
+#: Environment variables that replace :data:`CONNECT_TIMEOUT_S` and :data:`WORKER_WAIT_S`.
+CONNECT_ENV = "SYSID_DASK_CONNECT_TIMEOUT_S"
+WORKER_WAIT_ENV = "SYSID_DASK_WORKER_WAIT_S"
+#: A finished task's result (rows, a model: small) is fetched within this many connect
+#: timeouts.
+RESULT_WAITS = 10
+#: How long the result loop sleeps between looks at finished tasks.
+_TICK_S = 0.02
+#: Dashboard port hint for an address that accepts but does not answer.
+_PORT_HINT = "the scheduler's port is usually 8786, the dashboard's 8787"
+
+
+class SchedulerLost(ClusterError):
+    """The connection to the scheduler was lost during a run (its tasks are gone with it)."""
 
 
 def require_distributed() -> Any:
@@ -35,16 +84,151 @@ def require_distributed() -> Any:
     return distributed
 
 
-def connect(address: str, *, timeout_s: float = 10.0) -> Any:
-    """A :class:`distributed.Client` of the scheduler at ``address`` (``tcp://HOST:PORT``)."""
+def _seconds_from_env(name: str, default: float) -> float:
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise ParameterError(f"{name}={text!r}: give a number of seconds > 0")
+    return value
+
+
+def connect_timeout_s() -> float:
+    """:data:`CONNECT_TIMEOUT_S`, or the seconds in ``$SYSID_DASK_CONNECT_TIMEOUT_S``."""
+    return _seconds_from_env(CONNECT_ENV, CONNECT_TIMEOUT_S)
+
+
+def worker_wait_s() -> float:
+    """:data:`WORKER_WAIT_S`, or the seconds in ``$SYSID_DASK_WORKER_WAIT_S``."""
+    return _seconds_from_env(WORKER_WAIT_ENV, WORKER_WAIT_S)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).splitlines()[0].strip() if str(exc).strip() else ""
+    return text or type(exc).__name__
+
+
+# ----------------------------------------------------------------------------- connecting
+def connect(address: str, *, timeout_s: float | None = None) -> Any:
+    """A :class:`distributed.Client` of the scheduler at ``address`` (``tcp://HOST:PORT``).
+
+    Raises a one-line :class:`ClusterError` within about ``timeout_s`` (default
+    :func:`connect_timeout_s`) when nothing accepts the connection, when the peer does not
+    answer the Dask handshake, or answers something else."""
     distributed = require_distributed()
-    from sysid.errors import ParameterError
+    timeout = connect_timeout_s() if timeout_s is None else timeout_s
+    where = f"--scheduler {address}"
+    problem = probe(address, timeout_s=timeout)
+    if problem is not None:
+        raise ClusterError(f"{where}: {problem}")
+    try:
+        return distributed.Client(address, timeout=timeout)
+    except Exception as exc:  # whatever the client met: one line, never a traceback
+        raise ClusterError(f"{where}: cannot connect ({_first_line(exc)})") from None
+
+
+def probe(address: str, *, timeout_s: float) -> str | None:
+    """None when a Dask scheduler (or worker) answers at ``address`` within ``timeout_s``,
+    else what is wrong, as the end of a sentence (``cannot connect (...)``, ``does not speak
+    the Dask protocol (...)``).
+
+    Connects as ``distributed`` does (retrying a refused connection until the time is up),
+    then sends its handshake and reads the peer's, which ``distributed.Client`` waits for
+    without a limit. Runs on an event loop of its own in a helper thread, so it works
+    whatever loop the caller runs."""
+    require_distributed()
+    from distributed.comm import parse_address
+    from distributed.comm.registry import get_backend
+    from distributed.security import Security
 
     try:
-        return distributed.Client(address, timeout=timeout_s)
-    except (OSError, TimeoutError, ValueError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ParameterError(f"--scheduler {address}: cannot connect ({first})") from None
+        scheme, loc = parse_address(address)
+        connector = get_backend(scheme).get_connector()
+        args = Security().get_connection_args("client")
+    except Exception as exc:  # a malformed address or an unknown scheme
+        return f"cannot connect ({_first_line(exc)})"
+    if scheme == "inproc":  # same process: nothing can hang on the wire
+        return None
+
+    def run() -> str | None:
+        loop = asyncio.new_event_loop()
+        try:
+            return loop.run_until_complete(_handshake(connector, loc, args, timeout_s))
+        finally:
+            loop.close()
+
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1,
+                                                 thread_name_prefix="sysid-dask-probe")
+    try:
+        return pool.submit(run).result()
+    finally:
+        pool.shutdown(wait=False)
+
+
+async def _handshake(connector: Any, loc: str, args: dict[str, Any],
+                     timeout_s: float) -> str | None:
+    from distributed.comm.core import FatalCommClosedError
+
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s
+    last: BaseException | None = None
+    backoff = 0.01
+    while True:
+        left = deadline - loop.time()
+        if left <= 0:
+            return f"cannot connect ({_reason(last)}; tried for {timeout_s:g} s)"
+        try:
+            comm = await asyncio.wait_for(connector.connect(loc, deserialize=True, **args), left)
+            break
+        except (FatalCommClosedError, ValueError) as exc:  # a TLS certificate that does not
+            return f"cannot connect ({_first_line(exc)})"  # match, no port in the address
+        except (TimeoutError, OSError) as exc:  # refused, unresolvable: retry
+            last = exc
+            await asyncio.sleep(min(backoff, max(deadline - loop.time(), 0.0)))
+            backoff = min(2 * backoff, 1.0)
+
+    async def exchange() -> Any:
+        await comm.write(comm.handshake_info())
+        return await comm.read()
+
+    try:
+        # at least a second for the answer, whatever the retries took
+        answer = await asyncio.wait_for(exchange(), max(deadline - loop.time(),
+                                                        min(timeout_s, 1.0)))
+    except TimeoutError:
+        return (f"cannot connect (the connection is accepted but nothing answers within "
+                f"{timeout_s:g} s: is it a Dask scheduler? {_PORT_HINT})")
+    except Exception as exc:  # garbage read as a frame length, undecodable bytes, a close
+        from distributed.comm import CommClosedError
+
+        log.debug("no Dask handshake from %s", loc, exc_info=exc)
+        how = ("it closed the connection without a Dask handshake"
+               if isinstance(exc, CommClosedError) else "its answer is no Dask handshake")
+        return f"does not speak the Dask protocol ({how}; {_PORT_HINT})"
+    finally:
+        comm.abort()
+    if not isinstance(answer, dict):
+        return f"does not speak the Dask protocol (its answer is no Dask handshake; {_PORT_HINT})"
+    return None
+
+
+def _reason(exc: BaseException | None) -> str:
+    """The operating system's words for a failed connection (``Connection refused``)."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        real = getattr(exc, "real_error", None)
+        for e in (real, exc):
+            if isinstance(e, OSError) and e.strerror:
+                return str(e.strerror)
+        if isinstance(exc, TimeoutError):
+            return "timed out"
+        exc = exc.__cause__ or exc.__context__
+    return "no answer"
 
 
 def dashboard_link(client: Any) -> str | None:
@@ -58,6 +242,185 @@ def dashboard_link(client: Any) -> str | None:
         return None
 
 
+@contextlib.contextmanager
+def quiet_dask_log() -> Iterator[None]:
+    """Keep ``distributed``'s own log (its tracebacks of a lost scheduler, retries) off the
+    terminal while the command reports the faults in one line; ``-v`` (INFO on the root
+    logger) shows it."""
+    if logging.getLogger().isEnabledFor(logging.INFO):
+        yield
+        return
+    saved = {}
+    for name in ("distributed", "tornado", "asyncio"):
+        logger = logging.getLogger(name)
+        saved[name] = (logger.handlers[:], logger.propagate)
+        logger.handlers[:] = [logging.NullHandler()]
+        logger.propagate = False
+    try:
+        yield
+    finally:
+        for name, (handlers, propagate) in saved.items():
+            logger = logging.getLogger(name)
+            logger.handlers[:] = handlers
+            logger.propagate = propagate
+
+
+# ------------------------------------------------------------------------------- watching
+@dataclass(frozen=True)
+class Watch:
+    """How a run on the cluster reports and bounds faults (:func:`watching`)."""
+
+    #: Names the cluster in messages (default: ``Dask scheduler ADDRESS``).
+    label: str | None = None
+    #: Seconds without a worker before the run ends (None: :func:`worker_wait_s`).
+    worker_wait_s: float | None = None
+    #: Seconds between two checks of the cluster.
+    poll_s: float = POLL_S
+    #: Where warnings go (None: this module's logger).
+    notify: Callable[[str], None] | None = None
+
+
+_WATCH: ContextVar[Watch | None] = ContextVar("sysid_cluster_watch", default=None)
+
+
+def _watch() -> Watch:
+    return _WATCH.get() or Watch()
+
+
+@contextlib.contextmanager
+def watching(*, label: str | None = None, worker_wait_s: float | None = None,
+             poll_s: float = POLL_S,
+             notify: Callable[[str], None] | None = None) -> Iterator[Watch]:
+    """Within the block, runs on a cluster (:func:`completed`) name it ``label``, end after
+    ``worker_wait_s`` without workers, check it every ``poll_s`` and warn through ``notify``."""
+    watch = Watch(label=label, worker_wait_s=worker_wait_s, poll_s=poll_s, notify=notify)
+    token = _WATCH.set(watch)
+    try:
+        yield watch
+    finally:
+        _WATCH.reset(token)
+
+
+def _address(client: Any) -> str:
+    try:
+        return str(client.scheduler.address)
+    except Exception:  # a client without a scheduler (closed)
+        return "ADDRESS"
+
+
+def _label(client: Any, watch: Watch) -> str:
+    return watch.label or f"Dask scheduler {_address(client)}"
+
+
+def _no_worker_hint(client: Any) -> str:
+    return f"start one with `dask worker {_address(client)}`"
+
+
+def _lost(client: Any, label: str, *, waited_s: float | None = None) -> SchedulerLost:
+    if waited_s is not None:
+        return SchedulerLost(f"{label}: the scheduler does not answer (waited {waited_s:g} s)")
+    return SchedulerLost(f"{label}: lost the connection to the scheduler")
+
+
+def worker_count(client: Any, *, label: str | None = None) -> int:
+    """How many workers the scheduler has now (one request, answered within
+    :func:`connect_timeout_s`); :class:`SchedulerLost` when the client has lost the scheduler
+    or it does not answer (a hung scheduler keeps the connection open)."""
+    label = label or _label(client, _watch())
+    if client.status != "running":
+        raise _lost(client, label)
+    timeout = connect_timeout_s()
+    try:
+        return len(client.sync(client.scheduler.ncores, callback_timeout=timeout))
+    except TimeoutError:
+        raise _lost(client, label, waited_s=timeout) from None
+    except Exception:  # unreachable (refused, reset) or the client closing under us
+        raise _lost(client, label) from None
+
+
+def wait_for_workers(client: Any, *, timeout_s: float, label: str | None = None) -> int:
+    """Wait up to ``timeout_s`` for the scheduler to have a worker; their number, or a
+    one-line :class:`ClusterError` naming ``dask worker ADDRESS``."""
+    label = label or _label(client, _watch())
+    deadline = time.monotonic() + timeout_s
+    while True:
+        n = worker_count(client, label=label)
+        if n or time.monotonic() >= deadline:
+            break
+        time.sleep(min(0.2, max(deadline - time.monotonic(), 0.0)))
+    if not n:
+        raise ClusterError(f"{label}: the scheduler has no workers (waited {timeout_s:g} s); "
+                           f"{_no_worker_hint(client)}")
+    return n
+
+
+def completed(client: Any, futures: Iterable[Any]) -> Iterator[Any]:
+    """Yield ``futures`` as they finish, like ``distributed.as_completed``, watching the
+    cluster meanwhile (:func:`watching`): :class:`SchedulerLost` as soon as the scheduler
+    connection is lost (its tasks are cancelled with it), a warning when the scheduler has no
+    workers and a :class:`ClusterError` when none has joined within the worker wait."""
+    distributed = require_distributed()
+    watch = _watch()
+    label = _label(client, watch)
+    wait_s = worker_wait_s() if watch.worker_wait_s is None else watch.worker_wait_s
+    say = watch.notify or log.warning
+    pending = distributed.as_completed(list(futures), loop=client.loop)
+    next_check = time.monotonic() + watch.poll_s
+    empty_since: float | None = None
+    while not pending.is_empty():
+        if pending.has_ready():
+            for fut in pending.next_batch(block=False):
+                if fut.cancelled():  # the client cancels every task when it loses the scheduler
+                    raise _lost(client, label)
+                yield fut
+            continue
+        time.sleep(_TICK_S)
+        if time.monotonic() < next_check:
+            continue
+        n = worker_count(client, label=label)
+        now = time.monotonic()
+        if n and empty_since is not None:
+            say(f"{label}: {n} worker(s) again")
+            empty_since = None
+        elif not n and empty_since is None:
+            empty_since = now
+            say(f"{label}: the scheduler has no workers; waiting up to {wait_s:g} s for one "
+                f"({_no_worker_hint(client)})")
+        elif not n and empty_since is not None and now - empty_since >= wait_s:
+            raise ClusterError(f"{label}: the scheduler had no workers for {wait_s:g} s; "
+                               f"{_no_worker_hint(client)}")
+        next_check = time.monotonic() + watch.poll_s
+
+
+def task_result(client: Any, future: Any) -> Any:
+    """``future.result()``: the task's value, or the exception the task raised; a
+    :class:`SchedulerLost` when the result could not be fetched because the scheduler went
+    away meanwhile (the connection closed or reset, the future cancelled) or did not hand it
+    over within :data:`RESULT_WAITS` connect timeouts."""
+    timeout = RESULT_WAITS * connect_timeout_s()
+    try:
+        return future.result(timeout=timeout)
+    except (Exception, asyncio.CancelledError) as exc:
+        if future.status == "error" or not isinstance(
+                exc, (OSError, TimeoutError, concurrent.futures.CancelledError,
+                      asyncio.CancelledError)):
+            raise  # the task's own failure, or its result does not load here
+        label = _label(client, _watch())
+        raise _lost(client, label, waited_s=timeout if isinstance(exc, TimeoutError) else None
+                    ) from None
+
+
+def cancel_quietly(client: Any, futures: Iterable[Any], exc: BaseException | None) -> None:
+    """Cancel ``futures`` on the cluster unless the scheduler is gone (``exc`` is
+    :class:`SchedulerLost`, or the client is no longer running): nothing to cancel there,
+    and asking would wait for the connect timeout."""
+    if isinstance(exc, SchedulerLost) or client.status != "running":
+        return
+    with contextlib.suppress(Exception):
+        client.cancel(list(futures))
+
+
+# --------------------------------------------------------------------------------- sweeps
 def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
               common: dict[str, Any], pasts: Iterable[int],
               finished: Callable[[int, Any], None]) -> None:
@@ -65,19 +428,31 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
 
     ``shared`` (the large data products) is scattered once to every worker; ``finished(p,
     result)`` is called here as each past ends. On any exception here (Ctrl-C included) the
-    pending tasks are cancelled before it propagates."""
-    distributed = require_distributed()
-    [handle] = client.scatter([shared], broadcast=True, hash=False)
+    pending tasks are cancelled before it propagates; faults of the cluster are one-line
+    :class:`ClusterError` (:func:`completed`)."""
+    label = _label(client, _watch())
+    try:
+        [handle] = client.scatter([shared], broadcast=True, hash=False)
+    except Exception as exc:
+        if client.status != "running":
+            raise _lost(client, label) from None
+        if "no valid workers" in str(exc).lower():
+            raise ClusterError(f"{label}: the scheduler has no workers to send the data to; "
+                               f"{_no_worker_hint(client)}") from None
+        raise ClusterError(f"{label}: cannot send the data to the workers "
+                           f"({_first_line(exc)})") from None
     futures = {client.submit(_with_shared, task, handle, past=p, pure=False, **common): p
                for p in pasts}
+    failure: BaseException | None = None
     try:
-        for fut in distributed.as_completed(futures):
-            finished(futures[fut], fut.result())
-    except BaseException:
-        client.cancel(list(futures))
+        for fut in completed(client, futures):
+            finished(futures[fut], task_result(client, fut))
+    except BaseException as exc:
+        failure = exc
+        cancel_quietly(client, futures, exc)
         raise
     finally:
-        client.cancel([handle])
+        cancel_quietly(client, [handle], failure)
 
 
 def _with_shared(task: Callable[..., Any], shared: dict[str, Any], **kwargs: Any) -> Any:

@@ -8,6 +8,7 @@ Messages are one line: they name the offending thing and say what to change.
 from __future__ import annotations
 
 __all__ = [
+    "ClusterError",
     "DataError",
     "DimensionError",
     "HorizonError",
@@ -49,3 +50,8 @@ class ModelFileError(SysIdError, ValueError):
 
 class MissingDependencyError(SysIdError, ImportError):
     """An optional package (e.g. python-control) is needed for this call but not installed."""
+
+
+class ClusterError(SysIdError, RuntimeError):
+    """A Dask cluster that cannot do the work: its scheduler cannot be reached, does not speak
+    the Dask protocol, has no workers, or was lost during the run (:mod:`sysid.cluster`)."""

@@ -1,0 +1,379 @@
+"""A Dask cluster that cannot do the work ends ``--scheduler`` runs with one line, in bounded
+time: an address that accepts but never answers, one that answers something else, a scheduler
+without workers, workers lost mid-run, the scheduler lost mid-run. And a batch on the cluster
+gives the local batch's rows: in input order, each group's own time.
+
+Everything listens on 127.0.0.1 (ports the system chooses). The code's timeouts are shortened
+(``SYSID_DASK_*`` environment variables, :func:`sysid.cluster.watching`) so the tests do not
+depend on the machine's load; the deadlines asserted are generous."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import sysid.batch
+from sysid.batch import run_batch
+from sysid.cluster import (
+    CONNECT_ENV,
+    WORKER_WAIT_ENV,
+    SchedulerLost,
+    connect,
+    run_pasts,
+    watching,
+)
+from sysid.data import IOData
+from sysid.errors import ClusterError, ParameterError
+from sysid.methods import get_method
+from tests.sysid import cluster_fakes
+from tests.sysid.flights import known_system, write_flight
+
+distributed = pytest.importorskip("distributed")
+
+ROOT = Path(__file__).resolve().parents[2]
+#: The connect timeout the commands get here, and the most any fault may take to be reported
+#: (process start-up included, on a loaded machine).
+CONNECT_S = 2.0
+DEADLINE_S = 40.0
+
+
+# ---------------------------------------------------------------------------------- helpers
+class _Listener:
+    """A TCP listener on 127.0.0.1 that accepts every connection and keeps it open, sending
+    ``greeting`` (if any) and then nothing."""
+
+    def __init__(self, greeting: bytes = b"") -> None:
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen()
+        self.address = f"tcp://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.greeting, self.conns = greeting, []
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:  # closed
+                return
+            self.conns.append(conn)
+            if self.greeting:
+                conn.sendall(self.greeting)
+
+    def close(self) -> None:
+        self.sock.close()
+        for c in self.conns:
+            c.close()
+
+
+@pytest.fixture
+def silent() -> Iterator[_Listener]:
+    listener = _Listener()
+    yield listener
+    listener.close()
+
+
+@pytest.fixture
+def garbage() -> Iterator[_Listener]:
+    listener = _Listener(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" * 4)
+    yield listener
+    listener.close()
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("faults")
+    return write_flight(d / "s0.h5", system=known_system(), seed=50, n=1200).path
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, CONNECT_ENV: str(CONNECT_S), WORKER_WAIT_ENV: "2",
+            "PYTHONPATH": str(ROOT)}
+
+
+def _sysid(*args: object) -> tuple[subprocess.CompletedProcess[str], float]:
+    """Run the ``sysid`` command; (its result, seconds it took)."""
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", "from sysid.cli import main; main()",
+                           *map(str, args)], capture_output=True, text=True, timeout=DEADLINE_S,
+                          env=_env(), cwd=ROOT)
+    return proc, time.monotonic() - t0
+
+
+def _clean(stderr: str) -> list[str]:
+    """stderr's lines, checked to hold no traceback."""
+    assert "Traceback" not in stderr and "Error:" not in stderr.replace("error:", ""), stderr
+    return stderr.strip().splitlines()
+
+
+def _sweep_args(session: Path, address: str) -> list[object]:
+    return ["sweep", session, "--pasts", "20,30", "--futures", "10", "--orders", "4",
+            "--scheduler", address]
+
+
+# -------------------------------------------------------------------------------- connecting
+def test_silent_address_is_one_line_within_the_connect_timeout(session: Path,
+                                                                silent: _Listener) -> None:
+    proc, took = _sysid(*_sweep_args(session, silent.address))
+    assert proc.returncode == 2, proc.stderr
+    assert _clean(proc.stderr) == [
+        f"error: --scheduler {silent.address}: cannot connect (the connection is accepted but "
+        f"nothing answers within {CONNECT_S:g} s: is it a Dask scheduler? the scheduler's "
+        "port is usually 8786, the dashboard's 8787)"]
+    assert took < DEADLINE_S
+    assert silent.conns  # it did connect: the handshake is what never came
+
+
+def test_non_dask_service_is_one_line(session: Path, garbage: _Listener) -> None:
+    proc, took = _sysid(*_sweep_args(session, garbage.address))
+    assert proc.returncode == 2, proc.stderr
+    [line] = _clean(proc.stderr)
+    assert line.startswith(f"error: --scheduler {garbage.address}: does not speak the Dask "
+                           "protocol (")
+    assert "EiB" not in line and took < DEADLINE_S
+
+
+def test_connect_bounds_the_handshake_in_process(silent: _Listener, garbage: _Listener) -> None:
+    """The library call too: no hang, no MemoryError, within its timeout."""
+    for listener, words in ((silent, "nothing answers within 1 s"),
+                            (garbage, "does not speak the Dask protocol")):
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match=words):
+            connect(listener.address, timeout_s=1.0)
+        assert time.monotonic() - t0 < 20
+
+
+def test_refused_port_is_one_line() -> None:
+    free = socket.socket()
+    free.bind(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()  # nothing listens there now
+    t0 = time.monotonic()
+    with pytest.raises(ClusterError) as err:
+        connect(f"tcp://127.0.0.1:{port}", timeout_s=1.0)
+    assert str(err.value) == (f"--scheduler tcp://127.0.0.1:{port}: cannot connect "
+                              "(Connection refused; tried for 1 s)")
+    assert time.monotonic() - t0 < 20
+
+
+def test_timeouts_from_the_environment_are_checked(monkeypatch: pytest.MonkeyPatch) -> None:
+    from sysid.cluster import connect_timeout_s, worker_wait_s
+
+    monkeypatch.setenv(CONNECT_ENV, "3.5")
+    monkeypatch.setenv(WORKER_WAIT_ENV, "0")
+    assert connect_timeout_s() == 3.5
+    with pytest.raises(ParameterError, match=f"^{WORKER_WAIT_ENV}='0': give a number"):
+        worker_wait_s()
+
+
+def test_scheduler_without_workers_is_one_line(session: Path) -> None:
+    with distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster:
+        address = cluster.scheduler_address
+        proc, took = _sysid(*_sweep_args(session, address))
+    assert proc.returncode == 2, proc.stderr
+    lines = _clean(proc.stderr)
+    assert lines[0].startswith(f"dask: {address}, 0 worker(s)")
+    assert lines[0].endswith(f"; waiting up to {CONNECT_S:g} s for one")
+    assert lines[1:] == [f"error: --scheduler {address}: the scheduler has no workers (waited "
+                         f"{CONNECT_S:g} s); start one with `dask worker {address}`"]
+    assert took < DEADLINE_S
+
+
+# ------------------------------------------------------------------------------ during a run
+@pytest.fixture
+def fake_batch(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Iterator[Any]:
+    """``run(names, client, **kw)``: a batch of groups named after their delays
+    (:mod:`tests.sysid.cluster_fakes`) on ``client``; blocked tasks are released at the end."""
+    monkeypatch.setattr(sysid.batch, "identify_group", cluster_fakes.fake_identify)
+    rng = np.random.default_rng(1)
+
+    def load(paths: list[Path]) -> list[list[Any]]:  # the fake reads only the name
+        return [[IOData(u=rng.normal(size=(200, 1)), y=rng.normal(size=(200, 1)), dt=0.02,
+                        source=str(paths[0]))]]
+
+    def run(names: list[str], client: Any, **kw: Any) -> list[Any]:
+        groups = {n.partition("_")[0]: [tmp_path / f"{n}.h5"] for n in names}
+        return run_batch(groups, out_dir=tmp_path / "out", load=load,
+                         method=get_method("iem"), options=get_method("iem").options(),
+                         grid={}, client=client, **kw)
+
+    cluster_fakes.GATE.clear()
+    yield run
+    cluster_fakes.GATE.set()
+
+
+@pytest.fixture
+def threads() -> Iterator[tuple[Any, Any]]:
+    """A scheduler with one worker of two threads, in this process; a client of it."""
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                       protocol="tcp://", host="127.0.0.1",
+                                       dashboard_address="127.0.0.1:0")
+    client = distributed.Client(cluster.scheduler_address, timeout=10)
+    yield cluster, client
+    cluster_fakes.GATE.set()
+    client.close(timeout=10)
+    cluster.close(timeout=10)
+
+
+def _summary(out: Path) -> list[str]:
+    return [r["group"] for r in json.loads((out / "summary.json").read_text())]
+
+
+def test_workers_lost_mid_batch_warn_then_end_keeping_finished_groups(
+        fake_batch: Any, threads: tuple[Any, Any], tmp_path: Path) -> None:
+    cluster, client = threads
+    [worker] = cluster.workers.values()
+
+    def progress(done: int, _total: int) -> None:
+        if done == 1:  # the fast group is in: the worker goes, its tasks still blocked
+            cluster.sync(worker.close, executor_wait=False, reason="test")
+
+    warnings: list[str] = []
+    t0 = time.monotonic()
+    with watching(label="cluster", worker_wait_s=1.0, poll_s=0.1, notify=warnings.append), \
+            pytest.raises(ClusterError) as err:
+        fake_batch(["a_0", "b_block", "c_block", "d_block"], client, progress=progress)
+    assert time.monotonic() - t0 < DEADLINE_S
+    assert not isinstance(err.value, SchedulerLost)
+    addr = cluster.scheduler_address
+    assert str(err.value) == (
+        f"cluster: the scheduler had no workers for 1 s; start one with `dask worker {addr}`; "
+        f"1 finished group(s) kept in {tmp_path / 'out' / 'summary.json'} and "
+        f"{tmp_path / 'out' / 'summary.csv'}; 3 group(s) not run: b, c, d")
+    assert warnings == [f"cluster: the scheduler has no workers; waiting up to 1 s for one "
+                        f"(start one with `dask worker {addr}`)"]
+    assert _summary(tmp_path / "out") == ["a"]  # the not-run groups are no failed rows
+
+
+def test_a_worker_that_joins_in_time_lets_the_batch_finish(
+        fake_batch: Any, threads: tuple[Any, Any], tmp_path: Path) -> None:
+    cluster, client = threads
+    [worker] = cluster.workers.values()
+    warnings: list[str] = []
+    joined: list[Any] = []
+
+    def notify(msg: str) -> None:
+        warnings.append(msg)
+        if "no workers" in msg:  # a new worker joins; the old one's tasks run there
+            cluster_fakes.GATE.set()
+
+            async def start() -> Any:
+                return await distributed.Worker(cluster.scheduler_address, nthreads=1)
+
+            joined.append(cluster.sync(start))
+
+    def progress(done: int, _total: int) -> None:
+        if done == 1:
+            cluster.sync(worker.close, executor_wait=False, reason="test")
+
+    try:
+        with watching(label="cluster", worker_wait_s=30.0, poll_s=0.1, notify=notify):
+            rows = fake_batch(["a_0", "b_block", "c_block"], client, progress=progress)
+    finally:
+        for w in joined:
+            cluster.sync(w.close)
+    assert [r.group for r in rows] == ["a", "b", "c"] and not any(r.error for r in rows)
+    assert len(warnings) == 2 and warnings[1] == "cluster: 1 worker(s) again"
+
+
+def test_batch_rows_in_input_order_with_each_groups_own_seconds(
+        fake_batch: Any, threads: tuple[Any, Any], tmp_path: Path) -> None:
+    """Two threads, five groups: ``a`` (1 s) ends last, after ``b`` to ``e`` (0.2 s each, one
+    after another on the other thread: ``e`` waits 0.6 s for it). The rows still come as given,
+    and ``e``'s seconds are its own 0.2 s, not the 0.8 s since it was submitted."""
+    _, client = threads
+    names = ["a_1.0", "b_0.2", "c_0.2", "d_0.2", "e_0.2"]
+    rows = fake_batch(names, client)
+    assert [r.group for r in rows] == _summary(tmp_path / "out") == ["a", "b", "c", "d", "e"]
+    seconds = {r.group: r.seconds for r in rows}
+    assert seconds["a"] >= 1.0 and all(seconds[g] >= 0.2 for g in "bcde")
+    assert seconds["e"] < 0.6, seconds
+    local = fake_batch(names, None)
+    assert [r.group for r in local] == ["a", "b", "c", "d", "e"]
+    for a, b in zip(local, rows, strict=True):
+        assert (a.order, a.fit, a.error) == (b.order, b.fit, b.error)
+        np.testing.assert_array_equal(a.poles, b.poles)
+
+
+@pytest.fixture
+def killable() -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """A one-process cluster (:func:`tests.sysid.cluster_fakes.serve`) and its address."""
+    proc = subprocess.Popen([sys.executable, "-m", "tests.sysid.cluster_fakes"], cwd=ROOT,
+                            env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    try:
+        address = proc.stdout.readline().strip()
+        assert address.startswith("tcp://127.0.0.1:"), address
+        yield proc, address
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+
+
+def test_scheduler_killed_mid_batch_is_one_line_keeping_finished_groups(
+        killable: tuple[subprocess.Popen[str], str], tmp_path: Path) -> None:
+    server, address = killable
+    system = known_system()
+    paths = [write_flight(tmp_path / f"{n}.h5", system=system, seed=i, n=1200).path
+             for i, n in enumerate(["a_0", "b_block", "c_block"])]
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-c", "from sysid.cli import main; main()", "batch", *map(str, paths),
+           "--out", str(out), "--order", "4", "--past", "5", "--future", "5",
+           "--scheduler", address]
+    t0 = time.monotonic()
+    batch = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        while time.monotonic() - t0 < DEADLINE_S and batch.poll() is None:
+            if (out / "summary.json").exists() and _summary(out):
+                break
+            time.sleep(0.05)
+        server.kill()  # the scheduler (and its worker) die mid-batch
+        _, stderr = batch.communicate(timeout=DEADLINE_S)
+    finally:
+        batch.kill()
+    assert time.monotonic() - t0 < DEADLINE_S
+    lines = _clean(stderr)
+    assert lines[-1] == (
+        f"error: --scheduler {address}: lost the connection to the scheduler; 1 finished "
+        f"group(s) kept in {out / 'summary.json'} and {out / 'summary.csv'}; 2 group(s) not "
+        "run: b_block, c_block"), stderr
+    assert batch.returncode == 2
+    assert not any("100 %" in line or "done" in line for line in lines)
+    assert _summary(out) == ["a_0"]
+
+
+def test_scheduler_killed_mid_sweep_is_scheduler_lost(
+        killable: tuple[subprocess.Popen[str], str]) -> None:
+    """The sweep's tasks (:func:`run_pasts`): the scheduler goes while they block."""
+    server, address = killable
+    client = distributed.Client(address, timeout=5)
+    done: list[int] = []
+
+    def finished(past: int, _rows: Any) -> None:
+        done.append(past)
+        server.kill()
+
+    t0 = time.monotonic()
+    try:
+        with watching(label="cluster", poll_s=0.1), \
+                pytest.raises(SchedulerLost, match=r"^cluster: lost the connection to the "
+                                                   r"scheduler$"):
+            run_pasts(client, task=cluster_fakes.fake_past, shared={}, common={"first": 1},
+                      pasts=[1, 2, 3], finished=finished)
+    finally:
+        client.close(timeout=10)
+    assert done == [1] and time.monotonic() - t0 < DEADLINE_S
