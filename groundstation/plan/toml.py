@@ -180,6 +180,11 @@ _KINDS = {
 }
 
 
+def _unit(unit: str) -> str:
+    """`` (states)``, `` (deg)``: the unit a number key is given in, for its error."""
+    return f" ({unit})" if unit else ""
+
+
 class TomlSource:
     """The plan text, its key lines, and the one way to build an error that points into it."""
 
@@ -241,8 +246,7 @@ class TomlTable:
             # TOML's nan/inf compare false with every limit: refuse them before any range check
             want = "a finite number" if kind is float else "an integer"
             raise self.src.error(
-                path, f"{value!r} is not a finite number; use {want}{f' in {unit}' if unit else ''}"
-            )
+                path, f"{value!r} is not a finite number; use {want}{_unit(unit)}")
         if kind is float and numeric:
             return float(value)
         if kind is int and numeric and float(value).is_integer():
@@ -250,7 +254,7 @@ class TomlTable:
         if kind in (str, dict, list) and isinstance(value, kind):
             return value
         want = _KINDS[kind]
-        raise self.src.error(path, f"{value!r} is not {want}{f' in {unit}' if unit else ''}")
+        raise self.src.error(path, f"{value!r} is not {want}{_unit(unit)}")
 
     def number(
         self,

@@ -46,6 +46,8 @@ def test_values_are_read(base_text):
     ('inputs = ["gyro.x"]', "live_id", "both an input and an output"),
     ("order = 0", "order", "out of range"),
     ("order = 4.5", "order", "is not an integer"),
+    # the unit in brackets: it read "True is not an integer in states"
+    ("order = true", "order", "True is not an integer (states)"),
     ("past = 0", "past", "out of range"),
     ("future = 1", "future", "out of range"),
     ("update_period = 0", "update_period", "out of range"),

@@ -200,7 +200,7 @@ def test_unknown_keys_are_refused_at_their_line(old, new, hint):
         ("width = 0.5", "width = 1.5", "width = 1.5", "does not fit"),
         ('kind = "takeoff"', 'kind = "hover"', 'kind = "hover"', "must be 'takeoff'"),
         ('signal = "doublet"', 'signal = "sine"', 'signal = "sine"', "not one of"),
-        ("min_vbat = 3.8", 'min_vbat = "3.8"', "min_vbat", "not a number in V"),
+        ("min_vbat = 3.8", 'min_vbat = "3.8"', "min_vbat", "not a number (V)"),
         ('name = "down"', 'name = "up"', 'name = "up"', "already the name of phase[0]"),
         ("thrust_max = 60000", "thrust_max = 9000", "thrust_max", "> 10000"),
     ],
