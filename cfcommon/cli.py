@@ -15,11 +15,13 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
 
 * :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
   terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
-  plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``).
+  plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``),
+  and no trailing spaces (a plain table pads its last column to the widest cell).
 """
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import sys
@@ -43,12 +45,41 @@ DEFAULT_OUTPUTS = "acc.z,gyro"
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
 
 
+class _TrimmedLines(io.TextIOBase):
+    """The standard stream (looked up at each write, so a redirection in between is followed)
+    with each complete line's trailing spaces removed; a partial line waits for its end."""
+
+    def __init__(self, *, stderr: bool) -> None:
+        self._stderr, self._pending = stderr, ""
+
+    def _stream(self) -> Any:
+        return sys.stderr if self._stderr else sys.stdout
+
+    def writable(self) -> bool:
+        return True
+
+    def isatty(self) -> bool:
+        return False
+
+    def write(self, text: str) -> int:
+        *lines, self._pending = (self._pending + text).split("\n")
+        if lines:
+            self._stream().write("".join(line.rstrip(" ") + "\n" for line in lines))
+        return len(text)
+
+    def flush(self) -> None:
+        if self._pending:  # print(end=""): a line that may go on, written as it is
+            self._stream().write(self._pending)
+            self._pending = ""
+        self._stream().flush()
+
+
 def output_console(*, width: int | None = None, stderr: bool = False) -> Console:
     """The console for a command's text output (module docstring); ``width`` in characters."""
     if Console(stderr=stderr).is_terminal:
         return Console(highlight=False, width=width, stderr=stderr)
-    return Console(highlight=False, width=width or _UNWRAPPED, stderr=stderr, no_color=True,
-                   soft_wrap=width is None)
+    return Console(file=_TrimmedLines(stderr=stderr), highlight=False,
+                   width=width or _UNWRAPPED, no_color=True, soft_wrap=width is None)
 
 
 def output_table(*columns: str, console: Console, title: str | None = None) -> Table:
