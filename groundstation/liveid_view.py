@@ -92,12 +92,7 @@ class LiveIdView:
 
     def begin(self, *, listener: Any, streams: Sequence[StreamSpec]) -> None:
         """Static parts (unit circle, series styles) and the layout."""
-        phi = np.linspace(0.0, 2.0 * np.pi, 181)
-        self.rec.log(_path("z_plane", "unit_circle"),
-                     rr.LineStrips2D([np.column_stack([np.cos(phi), np.sin(phi)])],
-                                     colors=[_REST]), static=True)
-        for name, label in _SERIES.items():
-            self.rec.log(_path("convergence", name), rr.SeriesLines(names=label), static=True)
+        _log_static(self.rec)
         self._labels = tuple(c.label for c in listener.outputs)
         for label in self._labels:
             self.rec.log(_path("prediction", label, "measured"),
@@ -149,6 +144,16 @@ class LiveIdView:
                                       columns=rr.Scalars.columns(scalars=values[:, j]))
 
 
+def _log_static(rec: rr.RecordingStream) -> None:
+    """The unit circle and the convergence series' names with their units (live and replay)."""
+    phi = np.linspace(0.0, 2.0 * np.pi, 181)
+    rec.log(_path("z_plane", "unit_circle"),
+            rr.LineStrips2D([np.column_stack([np.cos(phi), np.sin(phi)])], colors=[_REST]),
+            static=True)
+    for name, label in _SERIES.items():
+        rec.log(_path("convergence", name), rr.SeriesLines(names=label), static=True)
+
+
 def _log_update(rec: rr.RecordingStream, *, t: float, poles: np.ndarray,
                 values: dict[str, float]) -> None:
     """The poles and the convergence series of one update at flight time ``t``."""
@@ -165,10 +170,7 @@ def send_rows(rec: rr.RecordingStream, data: np.ndarray) -> None:
     """Rows of a recorded ``live_id`` stream (replay): the poles, the convergence series and a
     status line of each update (singular values and predictions are not recorded)."""
     names = data.dtype.names or ()
-    phi = np.linspace(0.0, 2.0 * np.pi, 181)
-    rec.log(_path("z_plane", "unit_circle"),
-            rr.LineStrips2D([np.column_stack([np.cos(phi), np.sin(phi)])], colors=[_REST]),
-            static=True)
+    _log_static(rec)
     for row in data:
         n = int(row["order"])
         poles = np.array([row[f"pole_re_{i}"] + 1j * row[f"pole_im_{i}"]

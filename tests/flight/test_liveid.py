@@ -208,7 +208,7 @@ def test_the_view_shows_poles_singular_values_prediction_and_convergence(thesis_
 
 
 def test_recorded_updates_replay_into_the_same_panels(thesis_flight, tmp_path):
-    result, lid, _ = thesis_flight
+    result, lid, _out = thesis_flight
     rec, _ = open_recording(name="replay", mode="save", rrd_path=tmp_path / "r.rrd")
     send_rows(rec, open_session(result.path)["live_id"].data)
     rec.flush()
@@ -218,6 +218,12 @@ def test_recorded_updates_replay_into_the_same_panels(thesis_flight, tmp_path):
     assert len(poles.rows["Points2D:positions"]) == lid.updates
     assert len(poles.rows["Points2D:positions"][-1]) == 8
     assert len(entities["/live_id/convergence/fit_pct"].scalars()) == lid.updates
+    # each series named with its unit, as in the live view (the replay had bare entity names)
+    live = load_rrd(_out / "view.rrd")
+    for name in ("pole_move", "innovation_nvar", "fit_pct", "max_pole"):
+        label = entities[f"/live_id/convergence/{name}"].static["SeriesLines:names"]
+        assert label == live[f"/live_id/convergence/{name}"].static["SeriesLines:names"]
+        assert label[0].endswith("]")
 
 
 def test_replaying_a_live_id_session_shows_data_in_every_panel(thesis_flight, tmp_path):
