@@ -153,7 +153,7 @@ def _summary_text(summary: dict[str, Any]) -> list[str]:
 
     try:
         return [f"  {line}" for line in summary_lines(summary)[1:]]
-    except (KeyError, TypeError, ValueError, AttributeError):
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError):
         return ["  (the stored summary is malformed)"]
 
 
@@ -251,7 +251,7 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
-    if "summary" in d:
+    if isinstance(d.get("summary", {}).get("blocks"), dict):  # a flight's (an import's: none)
         out.print("flight summary, stored when the flight ended (counts to its end: a stream "
                   "silent after a link loss counts as dropped there):")
         for line in _summary_text(d["summary"]):

@@ -127,3 +127,5 @@ def test_info_shows_the_summary_stored_at_the_end_of_the_flight(sim_uri, tmp_pat
     described = json.loads(CliRunner().invoke(main, ["info", path, "--json"]).stdout)
     assert described["summary"]["setpoints"]["stopped"] is True
     assert info._summary_text({"setpoints": 3}) == ["  (the stored summary is malformed)"]
+    huge = {"blocks": {"acc": {"received": 10**400, "expected": 1, "dropped": 0}}}
+    assert info._summary_text(huge) == ["  (the stored summary is malformed)"]

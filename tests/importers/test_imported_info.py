@@ -61,6 +61,9 @@ def test_the_duration_of_an_imported_log_is_the_span_of_its_data(tmp_path):
     assert "data 9.70 to 35.45 s of firmware time (25.75 s)" in text
     assert "duration 35.45" not in text
     assert open_session(d["path"]).meta["duration_s"] == pytest.approx(25.75)
+    # the import's own summary (rows, airborne spans) is not a flight's: no "0 of 0 planned"
+    assert d["summary"]["imported"] is True
+    assert "flight summary" not in text and "planned sent" not in text
 
 
 @needs_crazypad
