@@ -4,6 +4,7 @@ by validation unless given (:mod:`sysid.auto`), reported with its poles and fits
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from cfcommon.cli import check_output
+from sysid.cli_compare import check_fit_samples
 from sysid.cli_options import (
     METHOD_OPTION,
     method_chosen,
@@ -34,20 +36,33 @@ from sysid.cli_support import (
 )
 from sysid.cli_sweep import choose, print_selection, saved_line, selection_json
 from sysid.data import IOData
+from sysid.errors import DataError
+from sysid.model import StateSpaceModel
+from sysid.refit import PROVENANCE_KEY
 from sysid.validate import compare, simulation_window
 
 __all__ = ["identify", "samples_line"]
 
+log = logging.getLogger(__name__)
 
-def samples_line(flights: Sequence[IOData], *, dt: float) -> str:
+
+def samples_line(flights: Sequence[IOData], *, dt: float,
+                 model: StateSpaceModel | None = None) -> str:
     """How much data the model was identified from: the samples in total and, with several
-    experiments, each one's (a session read only as far as its damage shows here too)."""
+    experiments, each one's (a session read only as far as its damage shows here too). When
+    the model is the one a sweep scored on part of them (its refit on all was not kept,
+    :mod:`sysid.refit`), the line says the samples were loaded and what the model used."""
     total = sum(d.n_samples for d in flights)
-    line = f"identified from {total} samples ({total * dt:.1f} s at dt {dt:g} s)"
+    entry = model.provenance.get(PROVENANCE_KEY) if model is not None else None
+    scored = isinstance(entry, dict) and entry.get("identified_again") is False
+    line = (f"{'loaded' if scored else 'identified from'} {total} samples "
+            f"({total * dt:.1f} s at dt {dt:g} s)")
     if len(flights) == 1:
-        return f"{line} of {flights[0].source}"
-    each = ", ".join(f"{d.source} {d.n_samples}" for d in flights)
-    return f"{line} in {len(flights)} experiments: {each}"
+        line += f" of {flights[0].source}"
+    else:
+        each = ", ".join(f"{d.source} {d.n_samples}" for d in flights)
+        line += f" in {len(flights)} experiments: {each}"
+    return line + (f"; the model is the one the sweep scored, {entry['data']}" if scored else "")
 
 
 @click.command("identify")
@@ -131,9 +146,15 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
                                   n_states=model.n_states, n_outputs=model.n_outputs,
                                   samples=round(window_s / model.dt))
-        checks = [(f"validation: simulation, {v_win:.3g} s windows",
-                   compare(model, val, window=v_win, warn=False)),
-                  ("validation: 1-step prediction", compare(model, val, horizon=1, warn=False))]
+        try:  # the rule `sysid compare` refuses such records by; the model is still saved
+            check_fit_samples(model, val)
+        except DataError as exc:
+            log.warning("validation not scored: %s", exc)
+        else:
+            checks = [(f"validation: simulation, {v_win:.3g} s windows",
+                       compare(model, val, window=v_win, warn=False)),
+                      ("validation: 1-step prediction",
+                       compare(model, val, horizon=1, warn=False))]
     if out is not None:
         model.save(out)
     if rrd is not None:
@@ -158,7 +179,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
             "model": str(out) if out else None}, indent=1))
         return
     con = console()
-    con.print(escape(samples_line(flights, dt=model.dt)))
+    con.print(escape(samples_line(flights, dt=model.dt, model=model)))
     if selection is not None:
         print_selection(con, selection)
     con.print(poles_rich_table(

@@ -174,6 +174,11 @@ def test_the_saved_line_says_what_the_saved_model_is(flights, tmp_path, monkeypa
         assert saved == [f"model saved to {out} (the model the sweep scored, identified on "
                          f"{model.provenance['selection']['data'].split()[2]} of the {N_EXC} "
                          "samples)"], res.stdout
+        if command == "identify":  # the samples line agrees: it had counted all as identified
+            used = model.provenance["selection"]["data"]
+            assert f"loaded {N_EXC} samples" in res.stdout
+            assert f"the model is the one the sweep scored, {used}" in res.stdout
+            assert "identified from" not in res.stdout
     else:
         assert model.provenance["n_samples"] == [N_EXC]
         assert model.provenance["selection"] == {"identified_again": True,
@@ -406,3 +411,23 @@ def test_order_with_horizons_given_needs_no_default_grid(tmp_path) -> None:
     assert res.exit_code == 0, res.output
     report = json.loads(res.stdout)
     assert (report["past"], report["future"]) == (1, 2) and report["suggested_order"] >= 1
+
+
+def test_identify_does_not_score_a_validation_record_too_short_to_mean_anything(flights,
+                                                                                tmp_path,
+                                                                                caplog):
+    """`identify --validate` scored a 15-sample validation window (0.3 s windows, fits that
+    only measured the initial state) that `sysid compare` refuses: it now says so, keeps the
+    identification's rows and still saves the model."""
+    short = write_flight(tmp_path / "short.h5", system=known_system(), seed=3,
+                         phases=[(0.0, "takeoff", "takeoff"), (10.0, "prbs", "excitation"),
+                                 (10.3, "land", "landing")])
+    out = tmp_path / "m.h5"
+    res = run("identify", flights[0].path, *FAST, "--validate", short.path, "--out", out)
+    assert res.exit_code == 0, res.output
+    assert "validation not scored: short.h5 has 15 samples" in caplog.text
+    assert "too few to score a model on" in caplog.text
+    assert "validation: simulation" not in res.stdout and out.is_file()
+    assert run("compare", out, short.path).exit_code == 2  # the rule is compare's
+    res = run("identify", flights[0].path, *FAST, "--validate", short.path, "--json")
+    assert json.loads(res.stdout)["validation"] == []
