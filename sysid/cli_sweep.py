@@ -46,7 +46,7 @@ from sysid.cli_support import (
 )
 from sysid.data import IOData
 from sysid.errors import DataError, HorizonError
-from sysid.holdout import GIVE_HORIZONS
+from sysid.holdout import GIVE_HORIZONS, VALIDATE_WITH
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.refit import saved_as
@@ -62,6 +62,7 @@ MAX_SWEEP_MODELS = 100_000
 TOP = 8
 #: What a record too short for the default grid asks `sweep` for (its options).
 SWEEP_GIVE = "ranges of horizons (--pasts/--futures, and --orders)"
+SWEEP_VALIDATE = "a validation session (--validate)"
 
 Connect = Callable[[], AbstractContextManager[Any]]
 
@@ -73,13 +74,15 @@ def choose(groups: Sequence[Sequence[IOData]], *, method: Method, options: Optio
            choose_method: bool = False,
            horizon: int | None = None, window: float | None = None, workers: int = 1,
            connect: Connect | None = None, quiet: bool = False, label: str | None = None,
-           give: str = GIVE_HORIZONS) -> Selection:
+           give: str = GIVE_HORIZONS, validate_with: str = VALIDATE_WITH) -> Selection:
     """:func:`sysid.auto.plan` and :func:`sysid.auto.select_plan` with a progress bar
     (``label``) over every focus run; ``connect()`` opens the Dask client (None: run here).
-    ``give``: the command's options for horizons, named when the records are too short for
-    the default grid (:func:`sysid.holdout.default_grid`).
+    ``give``, ``validate_with``: the command's options for horizons and for validation data,
+    named when the records are too short for the default grid
+    (:func:`sysid.holdout.default_grid`).
     Raises :class:`sysid.auto.NoStableModel` when no model of the grid is stable."""
-    p = plan(groups, validation=validation, give=give, **(grid or {}))
+    p = plan(groups, validation=validation, give=give, validate_with=validate_with,
+             **(grid or {}))
     if p.n_models > MAX_SWEEP_MODELS:
         raise DataError(f"the grid has {p.n_models} models, more than {MAX_SWEEP_MODELS}; use "
                         "coarser steps (START:STOP:STEP) and refine around the best")
@@ -191,7 +194,8 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
         ident = groups[0] if val else holdout(groups)[0]
         # the default grid (and the memory it takes) only for what was not given
         default = {} if "pasts" in lazy and "futures" in lazy else default_grid(
-            ident, groups=None if val else groups, give=SWEEP_GIVE)
+            ident, groups=None if val else groups, give=SWEEP_GIVE,
+            validate_with=SWEEP_VALIDATE)
         check_sweep_horizons(ident, pasts=lazy.get("pasts") or default["pasts"],
                              futures=lazy.get("futures") or default["futures"])
     total = int(np.prod([len(v) for v in lazy.values()], dtype=float))
@@ -205,7 +209,7 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
                      choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
                      choose_method=choose_method, horizon=horizon, window=window_s,
                      workers=workers, connect=connect, quiet=as_json, label="sweep",
-                     give=SWEEP_GIVE)
+                     give=SWEEP_GIVE, validate_with=SWEEP_VALIDATE)
         result, rule, grid = sel.result, sel.rule, sel.grid
     except NoStableModel as exc:  # report the grid of the method's default focus anyway
         result, rule, grid = exc.results[0], exc.plan.rule, exc.plan.grid

@@ -54,7 +54,8 @@ from sysid.memory import predictor_memory
 from sysid.validate import simulation_window
 
 __all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "GIVE_HORIZONS", "HOLDOUT_FRACTION",
-           "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "SCORE_WINDOW_X", "Plan", "default_grid",
+           "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "SCORE_WINDOW_X", "VALIDATE_WITH", "Plan",
+           "default_grid",
            "holdout", "max_blocks", "memory_future", "plan", "short_record_future"]
 
 #: Share of each experiment kept for validation when only one session is given.
@@ -162,26 +163,32 @@ def short_record_future(flights: Sequence[IOData], grid: dict[str, list[int]], *
 #: What the refusal of records too short for the default grid asks for, as ``identify``
 #: spells it (``give=`` of :func:`default_grid`).
 GIVE_HORIZONS = "horizons and an order (--past/--future/--order)"
+#: How the same refusal asks for validation data of their own, which leave every sample
+#: given to identification (``validate_with=``; ``sysid sweep`` names its ``--validate``).
+VALIDATE_WITH = "another session to validate on (the last session given validates)"
 
 
 def default_grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None = None,
-                 give: str = GIVE_HORIZONS) -> dict[str, list[int]]:
+                 give: str = GIVE_HORIZONS, validate_with: str = VALIDATE_WITH
+                 ) -> dict[str, list[int]]:
     """Pasts, futures and orders for ``flights`` (module docstring), in samples.
 
     Records too short for past 2, future 2 are refused in one line (:class:`DataError`)
     that asks for ``give`` (the caller's options for horizons), longer records or fewer
     channels. ``groups``: the experiments of each session that :func:`holdout` split into
     ``flights`` (identification), so the refusal names the samples given and those the
-    held-out part leaves; None when ``flights`` are all the samples given."""
-    return _grid(flights, groups=groups, give=give)[0]
+    held-out part leaves, and asks for ``validate_with`` too; None when ``flights`` are all
+    the samples given."""
+    return _grid(flights, groups=groups, give=give, validate_with=validate_with)[0]
 
 
 def _grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None = None,
-          give: str = GIVE_HORIZONS) -> tuple[dict[str, list[int]], bool, int, int]:
+          give: str = GIVE_HORIZONS, validate_with: str = VALIDATE_WITH
+          ) -> tuple[dict[str, list[int]], bool, int, int]:
     """The default grid, whether the data cut it short of the memory's range, the memory,
     and the largest ``past + future`` the grid may grow to (three Hankel columns per row, or
-    the largest pair of a grid that needed fewer). ``groups`` and ``give`` as
-    :func:`default_grid`."""
+    the largest pair of a grid that needed fewer). ``groups``, ``give`` and
+    ``validate_with`` as :func:`default_grid`."""
     ell = flights[0].n_outputs
     room = max_blocks(flights)
     fat = max_blocks(flights, columns_per_row=MIN_COLUMNS_PER_ROW)
@@ -189,7 +196,8 @@ def _grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | Non
         room = 4
     if room < 4:
         need = round(4 * (flights[0].n_inputs + ell) * MIN_COLUMNS_PER_ROW + 3)
-        raise DataError(_too_few(flights, groups=groups, need=need, give=give))
+        raise DataError(_too_few(flights, groups=groups, need=need, give=give,
+                                 validate_with=validate_with))
     memory = predictor_memory(flights)
     lag = max(memory.lag, 1)
     f_hi = max(2, min(round(FUTURE_X[1] * lag), room // 3))
@@ -214,7 +222,7 @@ def _grid(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | Non
 
 
 def _too_few(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | None,
-             need: int, give: str) -> str:
+             need: int, give: str, validate_with: str) -> str:
     """The one-line refusal of identification records too short for past 2, future 2 (about
     ``need`` samples for the longest), naming what was given and what the held-out rule
     left of it when ``flights`` were split from ``groups``."""
@@ -226,9 +234,9 @@ def _too_few(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | 
         return (f"{n} identification samples are too few to choose horizons for {c} channels "
                 f"(need about {need}); {remedy}")
     if len(groups) > 1:
-        first = "session" if len(groups) == 2 else f"{len(groups) - 1} sessions"
-        return (f"{n} identification samples (the first {first}'s; the last session "
-                f"validates) are too few to choose horizons for {c} channels (need about "
+        first = "the first session" if len(groups) == 2 else f"the first {len(groups) - 1} sessions"
+        return (f"the longest identification record ({first}; the last session validates) "
+                f"has {n} samples: too few to choose horizons for {c} channels (need about "
                 f"{need}); {remedy}")
     given = max(d.n_samples for d in groups[0])
     keep = 1.0 - HOLDOUT_FRACTION
@@ -237,8 +245,8 @@ def _too_few(flights: Sequence[IOData], *, groups: Sequence[Sequence[IOData]] | 
             f"the longest of the {len(groups[0])} records, {given} samples, leaves")
     return (f"{what} {n} for identification after the held-out {100 * HOLDOUT_FRACTION:.0f} % "
             f"(validation): too few to choose horizons for {c} channels (need about {need} for "
-            f"identification, so about {total} in all); {remedy}, or validation records of "
-            "their own (then every sample identifies)")
+            f"identification, so about {total} in all); {remedy}, or {validate_with}: then "
+            "every sample given identifies")
 
 
 def _orders(future: int, n_outputs: int) -> list[int]:
@@ -274,13 +282,15 @@ class Plan:
 
 def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = None,
          futures: Sequence[int] | None = None, orders: Sequence[int] | None = None,
-         validation: Sequence[IOData] | None = None, give: str = GIVE_HORIZONS) -> Plan:
+         validation: Sequence[IOData] | None = None, give: str = GIVE_HORIZONS,
+         validate_with: str = VALIDATE_WITH) -> Plan:
     """Split the data (held-out rule, or ``validation``) and choose the grid; given
     ``pasts``/``futures``/``orders`` replace the default grid's (orders not given go as high as
     the largest future allows). Data whose magnitudes would overflow the identification's
     sums of squares are refused first, in one line (:func:`sysid.data.check_magnitudes`).
     Identification data too short for the default grid are refused naming the samples given
-    and those the held-out part leaves, and asking for ``give`` (:func:`default_grid`)."""
+    and those the held-out part leaves, and asking for ``give`` and ``validate_with``
+    (:func:`default_grid`)."""
     everything = list(as_flights([e for g in groups for e in g]))
     if validation:
         ident, val = everything, list(validation)
@@ -296,7 +306,7 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
         auto, capped, memory, room = {}, False, max(predictor_memory(ident).lag, 1), None
     else:
         auto, capped, memory, room = _grid(ident, groups=None if validation else groups,
-                                           give=give)
+                                           give=give, validate_with=validate_with)
     grid = {"pasts": sorted(pasts) if pasts else auto["pasts"],
             "futures": sorted(futures) if futures else auto["futures"]}
     grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow

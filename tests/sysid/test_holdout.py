@@ -70,8 +70,22 @@ def test_records_too_short_for_past_2_future_2_are_still_refused() -> None:
         default_grid([ident])
     with pytest.raises(sysid.DataError, match=r"^27 identification samples are too few"):
         plan([[ident]], validation=[data])
-    with pytest.raises(sysid.DataError, match=r"^27 identification samples \(the first "
-                                              r"session's; the last session validates\)"):
+    with pytest.raises(sysid.DataError, match=r"^the longest identification record \(the "
+                                              r"first session; the last session validates\) "
+                                              r"has 27 samples: too few"):
         plan([[ident], [data]])
+    # several identification sessions: the count is the longest record's, said as such (it
+    # read "15 identification samples (the first 2 sessions's; ...)" of two records of 15)
+    short = sysid.IOData(u=data.u[:15], y=data.y[:15], dt=data.dt)
+    with pytest.raises(sysid.DataError, match=r"^the longest identification record \(the "
+                                              r"first 2 sessions; the last session validates\) "
+                                              r"has 15 samples"):
+        plan([[short], [short], [data]])
+    # the validation remedy in each caller's words: another session, or sweep's --validate
+    assert msg.endswith("or another session to validate on (the last session given "
+                        "validates): then every sample given identifies"), msg
+    with pytest.raises(sysid.DataError, match=r"or a validation session \(--validate\)"
+                                              r": then every sample given identifies$"):
+        plan([[data]], validate_with="a validation session (--validate)")
     with pytest.raises(sysid.DataError, match=r"give horizons \(--past/--future\), longer"):
         default_grid([ident], give="horizons (--past/--future)")
