@@ -130,3 +130,9 @@ def test_channels_far_from_zero_are_named_with_the_mean_removal_as_remedy() -> N
     assert find_offsets([centred]) == []
     steps = np.repeat([[0.0, 0.0], [1.0, 1.0]], 750, axis=0)  # both inputs step at rest
     assert find_offsets([sysid.IOData(u=steps, y=system.simulate(steps), dt=0.01)]) == []
+    # a step held for a share a of the record sits sqrt(a / (1 - a)) SD out: named beyond 90 %
+    for share, named in ((0.85, False), (0.95, True)):
+        u = np.zeros((1000, 2))
+        u[round(1000 * (1 - share)):, 0] = 1.0
+        found = find_offsets([sysid.IOData(u=u, y=system.simulate(u), dt=0.01)])
+        assert ("u0" in [o.name for o in found]) is named, (share, found)
