@@ -161,8 +161,9 @@ def main() -> int:
         t_sippy = time.perf_counter() - t0
         diff = round(fit, 2) - round(s_fit, 2)  # figures to 0.01 %, as benchmarks.md has them
         # a refusal (NaN) meets the target only on a set added by BENCH_DAISY_EXTRA too short
-        # for the protocol's horizons; on the shared six it is a regression
-        ok &= diff >= 0 if name in SETS or np.isfinite(fit) else True
+        # for the protocol's horizons; on the shared six it is a regression. A figure where
+        # SIPPY has none (all its methods failed) meets it.
+        ok &= (diff >= 0 or not np.isfinite(s_fit)) if np.isfinite(fit) else name not in SETS
         moesp = _po_moesp_best(name)
         auto_fit, auto_how = _no_knobs(name)
         ok_moesp &= moesp >= 0 and not moesp < c_fit - 1.0  # refused (NaN): not met
