@@ -17,7 +17,15 @@ __all__ = [
     "OrderError",
     "ParameterError",
     "SysIdError",
+    "first_line",
 ]
+
+
+def first_line(exc: BaseException) -> str:
+    """An exception as one line of a report (a failed row, a refusal): its message's first
+    line, or its type's name when it has no message."""
+    text = str(exc).strip()
+    return text.splitlines()[0].strip() if text else type(exc).__name__
 
 
 class SysIdError(Exception):

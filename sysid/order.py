@@ -11,7 +11,7 @@ from typing import Any, Literal
 import numpy as np
 
 from sysid.data import IOData, as_flights
-from sysid.errors import OrderError, ParameterError, SysIdError
+from sysid.errors import OrderError, ParameterError, SysIdError, first_line
 from sysid.factor import build_products
 from sysid.finish import check_flags
 from sysid.kalman import stable_predictor
@@ -114,7 +114,7 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
             log_det.append(_log_det(meth, flights, order=n, past=past, future=future,
                                     options=opts, products=products, n_total=n_total))
         except (SysIdError, np.linalg.LinAlgError) as exc:
-            failed[n] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            failed[n] = first_line(exc)
             log_det.append(np.nan)
     if len(failed) == len(orders):
         reasons = [f"order {n}: {why}" for n, why in failed.items()]

@@ -45,7 +45,7 @@ import numpy as np
 import threadpoolctl
 
 from sysid.data import IOData, as_flights
-from sysid.errors import DataError, ParameterError, SysIdError
+from sysid.errors import DataError, ParameterError, SysIdError, first_line
 from sysid.factor import DataProducts, grid_values
 from sysid.grid import HorizonGrid, build_grid, grid_products
 from sysid.iem import without_stability_cost
@@ -272,10 +272,9 @@ def _row(pair: DataProducts | SysIdError, *, past: int, future: int, order: int,
 
 def _failed(past: int, future: int, order: int, exc: Exception, seconds: float,
             n_outputs: int) -> SweepRow:
-    msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     return SweepRow(past=past, future=future, order=order, fit=np.full(n_outputs, np.nan),
                     poles=np.array([], dtype=complex), stable=False, predictor_stable=False,
-                    seconds=seconds, error=msg)
+                    seconds=seconds, error=first_line(exc))
 
 
 def sweep(
