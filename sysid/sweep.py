@@ -360,6 +360,23 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _unblock_manager(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+    """After the workers were terminated: a worker stopped in the middle of sending its result
+    leaves half a message, which the executor's manager thread waits for forever, and the
+    call queue's feeder thread may be blocked writing a task no worker will read. The
+    interpreter's exit joins the manager (``_python_exit``), so the interrupted command hung
+    after printing its error (seen under load, 1 run in 6). Closing this process's end of the
+    result pipe's writer makes that wait end (EOF: the manager marks the pool broken and
+    stops), and the feeder is not waited for. CPython internals, each looked up with care."""
+    call_queue = getattr(pool, "_call_queue", None)
+    if call_queue is not None and hasattr(call_queue, "cancel_join_thread"):
+        call_queue.cancel_join_thread()
+    writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+    if writer is not None:
+        with contextlib.suppress(OSError):
+            writer.close()
+
+
 def _run_parallel(pasts: list[int], common: dict[str, Any], *, workers: int,
                   finished: Callable[[int, list[SweepRow]], None]) -> None:
     """Run the pasts in worker processes, calling ``finished(past, rows)`` as each ends.
@@ -397,6 +414,10 @@ def _run_parallel(pasts: list[int], common: dict[str, Any], *, workers: int,
                 proc.terminate()
         for proc in procs:
             proc.join(timeout=5)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=5)
+        _unblock_manager(pool)
         # let the executor's manager thread see its workers gone and close its wake-up pipe:
         # else the interpreter's exit hook may write to that pipe as it closes and print a
         # traceback after Ctrl-C (CPython 3.11 concurrent.futures.process._python_exit)
