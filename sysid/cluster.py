@@ -16,11 +16,20 @@ with that group's one task (they are needed by one worker only).
 - :func:`connect` first opens a connection itself and reads the scheduler's Dask handshake,
   each step within the connect timeout (``distributed.Client`` waits for that answer without
   a limit): an address that accepts but never answers, or answers something other than Dask
-  (an HTTP server, the dashboard's port), is refused within that time;
+  (an HTTP server, the dashboard's port), is refused within that time. The client's own
+  start (its connection, handshake and registration) is bounded by the connect timeout too,
+  so a scheduler that stops answering after that check is refused as well;
+- every request that waits for the scheduler's answer (:func:`dashboard_link`,
+  :func:`worker_count`) gets the connect timeout; a sweep's one-time scatter checks every
+  :data:`POLL_S` that the scheduler still answers and ends within :data:`RESULT_WAITS`
+  connect timeouts;
 - :func:`completed` yields the tasks as they end and checks the cluster every
   :data:`POLL_S`: a lost scheduler connection ends the run at once (:class:`SchedulerLost`),
   a scheduler without workers is reported through the :func:`watching` ``notify`` and ends
-  the run when no worker has joined within the worker wait.
+  the run when no worker has joined within the worker wait;
+- :func:`task_result` turns Dask's ``KilledWorker`` (the workers running a task died more
+  often than the scheduler's ``allowed-failures``) into a one-line :class:`WorkerLost`: a
+  failure of that task (a batch's failed row), not of the cluster.
 
 The two waits default to :data:`CONNECT_TIMEOUT_S` and :data:`WORKER_WAIT_S`; the
 environment variables :data:`CONNECT_ENV` and :data:`WORKER_WAIT_ENV` (seconds) replace them.
@@ -40,13 +49,19 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
-from sysid.errors import ClusterError, MissingDependencyError, ParameterError
+from sysid.errors import (
+    ClusterError,
+    MissingDependencyError,
+    ParameterError,
+    SysIdError,
+    first_line,
+)
 
 __all__ = ["CONNECT_ENV", "CONNECT_TIMEOUT_S", "EXTRA_HINT", "POLL_S", "WORKER_WAIT_ENV",
-           "WORKER_WAIT_S", "SchedulerLost", "Watch", "cancel_quietly", "completed", "connect",
-           "connect_timeout_s", "dashboard_link", "probe", "quiet_dask_log",
-           "require_distributed", "run_pasts", "task_result", "wait_for_workers", "watching",
-           "worker_count", "worker_wait_s"]
+           "WORKER_WAIT_S", "SchedulerLost", "Watch", "WorkerLost", "cancel_quietly",
+           "completed", "connect", "connect_timeout_s", "dashboard_link", "probe",
+           "quiet_dask_log", "require_distributed", "run_pasts", "scatter", "task_result",
+           "wait_for_workers", "watching", "worker_count", "worker_wait_s"]
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +77,8 @@ POLL_S = 1.0
 #: Environment variables that replace :data:`CONNECT_TIMEOUT_S` and :data:`WORKER_WAIT_S`.
 CONNECT_ENV = "SYSID_DASK_CONNECT_TIMEOUT_S"
 WORKER_WAIT_ENV = "SYSID_DASK_WORKER_WAIT_S"
-#: A finished task's result (rows, a model: small) is fetched within this many connect
-#: timeouts.
+#: A finished task's result (rows, a model: small) is fetched, and a sweep's data are sent
+#: to the workers, within this many connect timeouts.
 RESULT_WAITS = 10
 #: How long the result loop sleeps between looks at finished tasks.
 _TICK_S = 0.02
@@ -73,6 +88,11 @@ _PORT_HINT = "the scheduler's port is usually 8786, the dashboard's 8787"
 
 class SchedulerLost(ClusterError):
     """The connection to the scheduler was lost during a run (its tasks are gone with it)."""
+
+
+class WorkerLost(SysIdError):
+    """The workers running one task died more often than the scheduler allows (Dask's
+    ``KilledWorker``): that task failed, the cluster goes on (no :class:`ClusterError`)."""
 
 
 def require_distributed() -> Any:
@@ -107,11 +127,6 @@ def worker_wait_s() -> float:
     return _seconds_from_env(WORKER_WAIT_ENV, WORKER_WAIT_S)
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).splitlines()[0].strip() if str(exc).strip() else ""
-    return text or type(exc).__name__
-
-
 # ----------------------------------------------------------------------------- connecting
 def connect(address: str, *, timeout_s: float | None = None) -> Any:
     """A :class:`distributed.Client` of the scheduler at ``address`` (``tcp://HOST:PORT``).
@@ -126,9 +141,45 @@ def connect(address: str, *, timeout_s: float | None = None) -> Any:
     if problem is not None:
         raise ClusterError(f"{where}: {problem}")
     try:
-        return distributed.Client(address, timeout=timeout)
+        return _client_type(distributed)(address, timeout=timeout)
+    except TimeoutError:  # it answered the probe, then stopped answering
+        raise ClusterError(f"{where}: the scheduler does not answer (the client did not start "
+                           f"within {timeout:g} s)") from None
     except Exception as exc:  # whatever the client met: one line, never a traceback
-        raise ClusterError(f"{where}: cannot connect ({_first_line(exc)})") from None
+        raise ClusterError(f"{where}: cannot connect ({first_line(exc)})") from None
+
+
+_CLIENT_TYPE: type | None = None
+
+
+def _client_type(distributed: Any) -> type:
+    """:class:`distributed.Client` with its start bounded by its ``timeout``.
+
+    ``Client`` reads the scheduler's handshake without a limit (only connecting and its later
+    requests are bounded), so a scheduler that stops answering between :func:`probe` and the
+    client's start would hang it. Here the whole start is one wait of ``timeout`` seconds:
+    when it ends, the start is cancelled on the client's loop, the client closed (its loop
+    thread stopped) and :class:`TimeoutError` raised."""
+    global _CLIENT_TYPE
+    if _CLIENT_TYPE is not None and issubclass(_CLIENT_TYPE, distributed.Client):
+        return _CLIENT_TYPE
+
+    class BoundedClient(distributed.Client):
+        async def _start(self, timeout: Any = None, **kwargs: Any) -> Any:
+            limit = timeout if isinstance(timeout, (int, float)) else None
+            return await asyncio.wait_for(super()._start(timeout=timeout, **kwargs), limit)
+
+        def start(self, **kwargs: Any) -> None:
+            try:
+                super().start(**kwargs)
+            except BaseException:
+                with contextlib.suppress(Exception):  # bounded; stops its loop thread
+                    self.close(timeout=kwargs.get("timeout") or CONNECT_TIMEOUT_S)
+                raise
+
+    BoundedClient.__qualname__ = "BoundedClient"
+    _CLIENT_TYPE = BoundedClient
+    return BoundedClient
 
 
 def probe(address: str, *, timeout_s: float) -> str | None:
@@ -150,7 +201,7 @@ def probe(address: str, *, timeout_s: float) -> str | None:
         connector = get_backend(scheme).get_connector()
         args = Security().get_connection_args("client")
     except Exception as exc:  # a malformed address or an unknown scheme
-        return f"cannot connect ({_first_line(exc)})"
+        return f"cannot connect ({first_line(exc)})"
     if scheme == "inproc":  # same process: nothing can hang on the wire
         return None
 
@@ -185,7 +236,7 @@ async def _handshake(connector: Any, loc: str, args: dict[str, Any],
             comm = await asyncio.wait_for(connector.connect(loc, deserialize=True, **args), left)
             break
         except (FatalCommClosedError, ValueError) as exc:  # a TLS certificate that does not
-            return f"cannot connect ({_first_line(exc)})"  # match, no port in the address
+            return f"cannot connect ({first_line(exc)})"  # match, no port in the address
         except (TimeoutError, OSError) as exc:  # refused, unresolvable: retry
             last = exc
             await asyncio.sleep(min(backoff, max(deadline - loop.time(), 0.0)))
@@ -231,14 +282,26 @@ def _reason(exc: BaseException | None) -> str:
     return "no answer"
 
 
-def dashboard_link(client: Any) -> str | None:
-    """The cluster's dashboard address, or None when it has none."""
+def dashboard_link(client: Any, *, label: str | None = None) -> str | None:
+    """The cluster's dashboard address, or None when it has none. Asks the scheduler within
+    :func:`connect_timeout_s` (``Client.dashboard_link`` and ``scheduler_info()`` wait without
+    a limit): :class:`SchedulerLost` when it does not answer in that time, named ``label``
+    (default: the :func:`watching` label, else ``--scheduler ADDRESS`` as :func:`connect`)."""
+    timeout = connect_timeout_s()
     try:
-        info = client.scheduler_info()
-        if "dashboard" not in info.get("services", {}):
+        info = client.sync(client.scheduler.identity, n_workers=0, callback_timeout=timeout)
+        port = info.get("services", {}).get("dashboard")
+        if port is None:
             return None
-        return str(client.dashboard_link)
-    except Exception:  # a missing dashboard is no error
+        from distributed.comm import get_address_host
+        from distributed.utils import format_dashboard_link
+
+        host = get_address_host(client.scheduler.address)
+        return str(format_dashboard_link(f"[{host}]" if ":" in host else host, port))
+    except TimeoutError:
+        label = label or _watch().label or f"--scheduler {_address(client)}"
+        raise _lost(client, label, waited_s=timeout) from None
+    except Exception:  # a missing dashboard is no error (a lost scheduler is seen next)
         return None
 
 
@@ -401,6 +464,9 @@ def task_result(client: Any, future: Any) -> Any:
     try:
         return future.result(timeout=timeout)
     except (Exception, asyncio.CancelledError) as exc:
+        lost = _worker_lost(exc)
+        if lost is not None:
+            raise lost from None
         if future.status == "error" or not isinstance(
                 exc, (OSError, TimeoutError, concurrent.futures.CancelledError,
                       asyncio.CancelledError)):
@@ -408,6 +474,23 @@ def task_result(client: Any, future: Any) -> Any:
         label = _label(client, _watch())
         raise _lost(client, label, waited_s=timeout if isinstance(exc, TimeoutError) else None
                     ) from None
+
+
+def _worker_lost(exc: BaseException) -> WorkerLost | None:
+    """:class:`WorkerLost` (one line) for Dask's ``KilledWorker``, else None."""
+    try:
+        from distributed.scheduler import KilledWorker
+    except ImportError:  # pragma: no cover - distributed without its scheduler
+        return None
+    if not isinstance(exc, KilledWorker):
+        return None
+    allowed = getattr(exc, "allowed_failures", None)
+    where = getattr(getattr(exc, "last_worker", None), "address", None)
+    times = f" {allowed + 1} times" if isinstance(allowed, int) else ""
+    detail = "; ".join(x for x in (
+        f"the scheduler's allowed-failures is {allowed}" if isinstance(allowed, int) else "",
+        f"the last was {where}, see its log" if where else "see the workers' logs") if x)
+    return WorkerLost(f"worker lost{times} while running it ({detail})")
 
 
 def cancel_quietly(client: Any, futures: Iterable[Any], exc: BaseException | None) -> None:
@@ -426,33 +509,79 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
               finished: Callable[[int, Any], None]) -> None:
     """Run ``task(past=p, **shared, **common)`` for every past on the cluster.
 
-    ``shared`` (the large data products) is scattered once to every worker; ``finished(p,
-    result)`` is called here as each past ends. On any exception here (Ctrl-C included) the
-    pending tasks are cancelled before it propagates; faults of the cluster are one-line
-    :class:`ClusterError` (:func:`completed`)."""
+    ``shared`` (the large data products) is scattered once to every worker (:func:`scatter`:
+    bounded); ``finished(p, result)`` is called here as each past ends. On any exception here
+    (Ctrl-C included) the pending tasks are cancelled before it propagates; faults of the
+    cluster are one-line :class:`ClusterError` (:func:`completed`), and so is a past whose
+    workers died more often than the scheduler allows (:class:`WorkerLost`): the sweep needs
+    every past."""
     label = _label(client, _watch())
-    try:
-        [handle] = client.scatter([shared], broadcast=True, hash=False)
-    except Exception as exc:
-        if client.status != "running":
-            raise _lost(client, label) from None
-        if "no valid workers" in str(exc).lower():
-            raise ClusterError(f"{label}: the scheduler has no workers to send the data to; "
-                               f"{_no_worker_hint(client)}") from None
-        raise ClusterError(f"{label}: cannot send the data to the workers "
-                           f"({_first_line(exc)})") from None
+    handle = scatter(client, shared, label=label)
     futures = {client.submit(_with_shared, task, handle, past=p, pure=False, **common): p
                for p in pasts}
     failure: BaseException | None = None
     try:
         for fut in completed(client, futures):
-            finished(futures[fut], task_result(client, fut))
+            try:
+                result = task_result(client, fut)
+            except WorkerLost as exc:
+                raise ClusterError(f"{label}: past {futures[fut]}: {exc}") from None
+            finished(futures[fut], result)
     except BaseException as exc:
         failure = exc
         cancel_quietly(client, futures, exc)
         raise
     finally:
         cancel_quietly(client, [handle], failure)
+
+
+def scatter(client: Any, data: Any, *, label: str | None = None,
+            limit_s: float | None = None) -> Any:
+    """``client.scatter([data], broadcast=True)``'s one future, or a one-line
+    :class:`ClusterError`.
+
+    ``Client.scatter`` waits for the scheduler's answer without a limit, and a large scatter to
+    many workers may take long on a healthy cluster; so the scatter runs on the client's loop
+    while this thread checks every :data:`POLL_S` (:func:`watching`) that the scheduler still
+    answers (:func:`worker_count`, within the connect timeout: :class:`SchedulerLost`), and
+    gives up after ``limit_s`` (default :data:`RESULT_WAITS` connect timeouts: a worker that
+    does not take its copy). The scatter is cancelled on the way out."""
+    watch = _watch()
+    label = label or _label(client, watch)
+    limit = RESULT_WAITS * connect_timeout_s() if limit_s is None else limit_s
+    try:
+        coro = client.scatter([data], broadcast=True, hash=False, asynchronous=True)
+        running = asyncio.run_coroutine_threadsafe(coro, client.loop.asyncio_loop)
+    except Exception as exc:  # the client closed under us
+        raise _scatter_error(client, label, exc) from None
+    deadline = time.monotonic() + limit
+    try:
+        while True:
+            concurrent.futures.wait([running], timeout=min(
+                watch.poll_s, max(deadline - time.monotonic(), 0.0)))
+            if running.done():
+                break
+            if time.monotonic() >= deadline:
+                raise ClusterError(f"{label}: the data were not sent to the workers within "
+                                   f"{limit:g} s (a worker that does not answer?)")
+            worker_count(client, label=label)  # SchedulerLost when it does not answer
+    except BaseException:
+        running.cancel()
+        raise
+    try:
+        [handle] = running.result()
+    except (Exception, asyncio.CancelledError) as exc:
+        raise _scatter_error(client, label, exc) from None
+    return handle
+
+
+def _scatter_error(client: Any, label: str, exc: BaseException) -> ClusterError:
+    if client.status != "running":
+        return _lost(client, label)
+    if "no valid workers" in str(exc).lower():
+        return ClusterError(f"{label}: the scheduler has no workers to send the data to; "
+                            f"{_no_worker_hint(client)}")
+    return ClusterError(f"{label}: cannot send the data to the workers ({first_line(exc)})")
 
 
 def _with_shared(task: Callable[..., Any], shared: dict[str, Any], **kwargs: Any) -> Any:

@@ -2,12 +2,13 @@
 
 - :func:`fake_identify` replaces :func:`sysid.batch.identify_group`: it takes as long as its
   session's name says (``a_0.5.h5``: 0.5 s; ``b_block.h5``: until :data:`GATE` opens, at most
-  :data:`BLOCK_S`, then :data:`AFTER_S`) and returns a fixed model;
+  :data:`BLOCK_S`, then :data:`AFTER_S`; ``k_die.h5``: its worker is lost, see
+  :func:`lose_worker`) and returns a fixed model;
 - :func:`fake_past` is a sweep task (:func:`sysid.cluster.run_pasts`) that blocks for every
-  past but the first;
-- ``python -m tests.sysid.cluster_fakes`` runs a scheduler with one worker thread in a process
-  of its own (batch groups identified by :func:`fake_identify`), prints its address and serves
-  until its stdin closes, so a test can kill it mid-run.
+  past but the first, and loses its worker for the past ``die``;
+- ``python -m tests.sysid.cluster_fakes [N]`` runs a scheduler with N (default 1) one-thread
+  workers in a process of its own (batch groups identified by :func:`fake_identify`), prints
+  its address and serves until its stdin closes, so a test can stop or kill it mid-run.
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ GATE = threading.Event()
 BLOCK_S = 30.0
 #: How long a blocked group still takes once :data:`GATE` is open.
 AFTER_S = 0.5
+#: A task that loses its worker (:func:`lose_worker`) first waits for this (open unless a test
+#: closes it).
+LOSE = threading.Event()
+LOSE.set()
 
 
 def _stem(groups: list[list[Any]]) -> str:
@@ -35,6 +40,8 @@ def fake_identify(groups: list[list[Any]], **_: Any) -> dict[str, Any]:
     from tests.sysid.flights import known_system
 
     delay = _stem(groups).rpartition("_")[2]
+    if delay == "die":
+        lose_worker()
     if delay == "block":
         GATE.wait(BLOCK_S)
         time.sleep(AFTER_S)
@@ -46,11 +53,28 @@ def fake_identify(groups: list[list[Any]], **_: Any) -> dict[str, Any]:
             "stable": True}
 
 
-def fake_past(*, past: int, first: int, **_: Any) -> list[int]:
-    """A sweep task: ``first`` returns at once, every other past blocks (:data:`GATE`)."""
+def fake_past(*, past: int, first: int, die: int | None = None, **_: Any) -> list[int]:
+    """A sweep task: ``first`` returns at once, every other past blocks (:data:`GATE`); the
+    past ``die`` loses its worker (:func:`lose_worker`)."""
+    if past == die:
+        lose_worker()
     if past != first:
         GATE.wait(BLOCK_S)
     return [past]
+
+
+def lose_worker() -> None:
+    """Called in a task: once :data:`LOSE` is open, the worker running it closes at once, as
+    if its process were killed (the scheduler counts the task as suspicious and runs it on
+    another worker, up to its ``allowed-failures``), and the task blocks until :data:`GATE`
+    opens."""
+    from distributed import get_worker
+
+    LOSE.wait(BLOCK_S)
+    worker = get_worker()
+    worker.loop.add_callback(worker.close, executor_wait=False, reason="test: worker lost")
+    GATE.wait(BLOCK_S)
+    raise RuntimeError("the lost worker's task went on")  # never seen: its worker is gone
 
 
 def serve() -> None:
@@ -59,8 +83,9 @@ def serve() -> None:
     import sysid.batch
 
     sysid.batch.identify_group = fake_identify  # type: ignore[assignment]
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                       protocol="tcp://", host="127.0.0.1",
+    n_workers = int(sys.argv[1]) if len(sys.argv) > 1 else 1
+    cluster = distributed.LocalCluster(n_workers=n_workers, threads_per_worker=1,
+                                       processes=False, protocol="tcp://", host="127.0.0.1",
                                        dashboard_address="127.0.0.1:0")
     print(cluster.scheduler_address, flush=True)
     sys.stdin.read()  # until the test closes it (or kills this process)

@@ -1,7 +1,9 @@
 """A Dask cluster that cannot do the work ends ``--scheduler`` runs with one line, in bounded
 time: an address that accepts but never answers, one that answers something else, a scheduler
-without workers, workers lost mid-run, the scheduler lost mid-run. And a batch on the cluster
-gives the local batch's rows: in input order, each group's own time.
+without workers, workers lost mid-run, the scheduler lost mid-run, a scheduler that stops
+answering (``SIGSTOP``) before the client has started or during a sweep's scatter. A task whose
+workers all die (Dask's ``KilledWorker``) is a failed row of a batch, in one line. And a batch
+on the cluster gives the local batch's rows: in input order, each group's own time.
 
 Everything listens on 127.0.0.1 (ports the system chooses). The code's timeouts are shortened
 (``SYSID_DASK_*`` environment variables, :func:`sysid.cluster.watching`) so the tests do not
@@ -9,8 +11,12 @@ depend on the machine's load; the deadlines asserted are generous."""
 
 from __future__ import annotations
 
+import asyncio
 import json
+import logging
 import os
+import re
+import signal
 import socket
 import subprocess
 import sys
@@ -24,13 +30,16 @@ import numpy as np
 import pytest
 
 import sysid.batch
+import sysid.cluster
 from sysid.batch import run_batch
 from sysid.cluster import (
     CONNECT_ENV,
     WORKER_WAIT_ENV,
     SchedulerLost,
     connect,
+    dashboard_link,
     run_pasts,
+    scatter,
     watching,
 )
 from sysid.data import IOData
@@ -116,6 +125,25 @@ def _clean(stderr: str) -> list[str]:
     """stderr's lines, checked to hold no traceback."""
     assert "Traceback" not in stderr and "Error:" not in stderr.replace("error:", ""), stderr
     return stderr.strip().splitlines()
+
+
+def _cli(*args: object) -> tuple[Any, float]:
+    """Run the ``sysid`` command in this process (so a test can patch what it calls); (its
+    click result, seconds it took). A command still running after :data:`DEADLINE_S` fails
+    the test (its thread is left to the fixtures' teardown)."""
+    from click.testing import CliRunner
+
+    from sysid.cli import main
+
+    out: list[Any] = []
+    t0 = time.monotonic()
+    runner = threading.Thread(target=lambda: out.append(
+        CliRunner().invoke(main, [str(a) for a in args])), daemon=True)
+    runner.start()
+    runner.join(DEADLINE_S)
+    if not out:
+        pytest.fail(f"sysid {' '.join(map(str, args))}: still running after {DEADLINE_S:g} s")
+    return out[0], time.monotonic() - t0
 
 
 def _sweep_args(session: Path, address: str) -> list[object]:
@@ -377,3 +405,220 @@ def test_scheduler_killed_mid_sweep_is_scheduler_lost(
     finally:
         client.close(timeout=10)
     assert done == [1] and time.monotonic() - t0 < DEADLINE_S
+
+
+# ------------------------------------------------------- a scheduler that stops answering
+def _stop(server: subprocess.Popen[str]) -> None:
+    """The scheduler's process stops (SIGSTOP): its connections stay open and the system still
+    accepts new ones, but nothing answers (a hung scheduler; the fixture kills it)."""
+    os.kill(server.pid, signal.SIGSTOP)
+
+
+def test_scheduler_that_stops_answering_before_the_client_starts_is_one_line(
+        killable: tuple[subprocess.Popen[str], str], session: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """It answers the handshake check, then nothing: ``distributed.Client`` would wait for its
+    own handshake forever; the command ends within the connect timeout."""
+    server, address = killable
+    real = sysid.cluster.probe
+
+    def probe_then_stop(*args: Any, **kwargs: Any) -> str | None:
+        problem = real(*args, **kwargs)
+        _stop(server)
+        return problem
+
+    monkeypatch.setattr(sysid.cluster, "probe", probe_then_stop)
+    monkeypatch.setenv(CONNECT_ENV, str(CONNECT_S))
+    before = set(threading.enumerate())
+    res, took = _cli(*_sweep_args(session, address))
+    assert res.exit_code == 2, res.output
+    assert _clean(res.stderr) == [f"error: --scheduler {address}: the scheduler does not "
+                                  f"answer (the client did not start within {CONNECT_S:g} s)"]
+    assert took < DEADLINE_S
+    assert server.poll() is None  # still there, stopped: nothing closed the connection
+    # the half-started client was closed: no thread of it is left behind
+    deadline = time.monotonic() + DEADLINE_S
+    while set(threading.enumerate()) - before and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not set(threading.enumerate()) - before
+
+
+def test_scheduler_that_stops_answering_during_the_scatter_is_one_line(
+        killable: tuple[subprocess.Popen[str], str], session: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The sweep's one-time scatter of its data: the scheduler stops as it begins."""
+    server, address = killable
+    real = distributed.Client.scatter
+    calls: list[dict[str, Any]] = []
+
+    def stop_then_scatter(self: Any, *args: Any, **kwargs: Any) -> Any:
+        calls.append(kwargs)
+        _stop(server)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(distributed.Client, "scatter", stop_then_scatter)
+    monkeypatch.setenv(CONNECT_ENV, str(CONNECT_S))
+    res, took = _cli(*_sweep_args(session, address))
+    assert res.exit_code == 2, res.output
+    lines = _clean(res.stderr)
+    assert lines[0].startswith(f"dask: {address}, 1 worker(s)")
+    assert lines[-1] == (f"error: --scheduler {address}: the scheduler does not answer "
+                         f"(waited {CONNECT_S:g} s)")
+    assert took < DEADLINE_S
+    assert len(calls) == 1 and calls[0]["broadcast"] is True  # it was the scatter that waited
+
+
+def test_scheduler_that_stops_answering_once_connected_is_one_line(
+        killable: tuple[subprocess.Popen[str], str], session: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command's first question once connected (the dashboard's address:
+    ``Client.dashboard_link`` would wait without a limit)."""
+    server, address = killable
+    real = sysid.cluster.connect
+
+    def connect_then_stop(*args: Any, **kwargs: Any) -> Any:
+        client = real(*args, **kwargs)
+        _stop(server)
+        return client
+
+    monkeypatch.setattr(sysid.cluster, "connect", connect_then_stop)
+    monkeypatch.setenv(CONNECT_ENV, str(CONNECT_S))
+    res, took = _cli(*_sweep_args(session, address))
+    assert res.exit_code == 2, res.output
+    assert _clean(res.stderr) == [f"error: --scheduler {address}: the scheduler does not "
+                                  f"answer (waited {CONNECT_S:g} s)"]
+    assert took < DEADLINE_S
+
+
+def test_dashboard_link_from_the_schedulers_answer() -> None:
+    class Fake:
+        def __init__(self, services: dict[str, int], address: str) -> None:
+            self.services = services
+            self.scheduler = type("Rpc", (), {"address": address, "identity": None})()
+
+        def sync(self, *_: Any, **kwargs: Any) -> dict[str, Any]:
+            assert kwargs["callback_timeout"] > 0  # never an unbounded wait
+            return {"services": self.services}
+
+    assert dashboard_link(Fake({}, "tcp://10.0.0.5:8786")) is None
+    assert dashboard_link(Fake({"dashboard": 8787}, "tcp://10.0.0.5:8786")) == \
+        "http://10.0.0.5:8787/status"
+    assert dashboard_link(Fake({"dashboard": 8787}, "tcp://[::1]:8786")) == \
+        "http://[::1]:8787/status"
+
+
+def test_scatter_that_never_ends_is_cancelled_at_its_limit(
+        threads: tuple[Any, Any]) -> None:
+    """A scheduler that answers but never finishes the scatter (a worker that does not take
+    its copy): a one-line error at the limit, the scatter cancelled."""
+    _, client = threads
+    cancelled = threading.Event()
+
+    async def forever() -> Any:
+        try:
+            await asyncio.sleep(3600)
+        finally:
+            cancelled.set()
+
+    class Stuck:
+        def scatter(self, *_: Any, **kwargs: Any) -> Any:
+            assert kwargs["asynchronous"] is True
+            return forever()
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(client, name)
+
+    t0 = time.monotonic()
+    with watching(label="cluster", poll_s=0.1), \
+            pytest.raises(ClusterError) as err:
+        scatter(Stuck(), {"x": 1}, limit_s=0.5)
+    assert str(err.value) == ("cluster: the data were not sent to the workers within 0.5 s "
+                              "(a worker that does not answer?)")
+    assert not isinstance(err.value, SchedulerLost)
+    assert cancelled.wait(DEADLINE_S) and time.monotonic() - t0 < DEADLINE_S
+    # the real one, on the same client, still works
+    assert client.gather(scatter(client, {"x": 1})) == {"x": 1}
+
+
+# ----------------------------------------------------- workers killed while running a task
+@pytest.fixture
+def four() -> Iterator[tuple[Any, Any]]:
+    """A scheduler with four one-thread workers in this process (Dask's default
+    allowed-failures, 3, lets a task lose four); a client of it."""
+    cluster = distributed.LocalCluster(n_workers=4, threads_per_worker=1, processes=False,
+                                       protocol="tcp://", host="127.0.0.1",
+                                       dashboard_address="127.0.0.1:0")
+    client = distributed.Client(cluster.scheduler_address, timeout=10)
+    cluster_fakes.LOSE.clear()
+    yield cluster, client
+    cluster_fakes.LOSE.set()
+    cluster_fakes.GATE.set()
+    client.close(timeout=10)
+    cluster.close(timeout=10)
+
+
+_LOST = (r"worker lost 4 times while running it \(the scheduler's allowed-failures is 3; the "
+         r"last was tcp://127\.0\.0\.1:\d+, see its log\)")
+
+
+def test_group_whose_workers_all_die_is_a_failed_row_without_traceback(
+        fake_batch: Any, four: tuple[Any, Any], tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Group ``k`` kills every worker that runs it (once ``a`` is in): Dask gives up on it
+    (``KilledWorker``). It is a failed row with that reason in one line, logged without a
+    traceback; the batch goes on and keeps ``a``."""
+    _, client = four
+
+    def progress(done: int, _total: int) -> None:
+        if done == 1:
+            cluster_fakes.LOSE.set()
+
+    t0 = time.monotonic()
+    with caplog.at_level(logging.INFO, logger="sysid"), watching(label="cluster", poll_s=0.1):
+        rows = fake_batch(["a_0", "k_die"], client, progress=progress)
+    assert time.monotonic() - t0 < DEADLINE_S
+    assert [(r.group, r.error is None) for r in rows] == [("a", True), ("k", False)]
+    assert re.fullmatch(_LOST, rows[1].error), rows[1].error
+    assert [r["error"] for r in json.loads((tmp_path / "out" / "summary.json").read_text())
+            ] == [None, rows[1].error]
+    sysid_records = [r for r in caplog.records if r.name.startswith("sysid")]
+    assert not any(r.exc_info for r in sysid_records), [r.getMessage() for r in sysid_records]
+    assert f"group k: {rows[1].error}" in [r.getMessage() for r in sysid_records]
+
+
+def test_cli_batch_group_whose_workers_all_die_is_one_line(tmp_path: Path) -> None:
+    """The command, on a scheduler of its own process: no traceback on stderr; the group is a
+    failed row and, as it is the only one, the batch ends with that reason (exit 2)."""
+    proc = subprocess.Popen([sys.executable, "-m", "tests.sysid.cluster_fakes", "4"], cwd=ROOT,
+                            env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    try:
+        address = proc.stdout.readline().strip()
+        assert address.startswith("tcp://127.0.0.1:"), address
+        path = write_flight(tmp_path / "k_die.h5", system=known_system(), seed=3, n=1200).path
+        out = tmp_path / "out"
+        batch, took = _sysid("batch", path, "--out", out, "--order", "4", "--past", "5",
+                             "--future", "5", "--scheduler", address)
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    assert batch.returncode == 2, batch.stderr
+    lines = _clean(batch.stderr)
+    assert re.fullmatch(f"error: every one of the 1 group\\(s\\) failed; first: k_die: {_LOST}",
+                        lines[-1]), lines
+    [row] = json.loads((out / "summary.json").read_text())
+    assert row["group"] == "k_die" and re.fullmatch(_LOST, row["error"])
+    assert took < DEADLINE_S
+
+
+def test_sweep_past_whose_workers_all_die_is_one_line(four: tuple[Any, Any]) -> None:
+    """A sweep needs every past: it ends with a :class:`ClusterError` naming the past."""
+    _, client = four
+    cluster_fakes.LOSE.set()
+    t0 = time.monotonic()
+    with watching(label="cluster", poll_s=0.1), \
+            pytest.raises(ClusterError, match=f"^cluster: past 2: {_LOST}$") as err:
+        run_pasts(client, task=cluster_fakes.fake_past, shared={}, common={"first": 1, "die": 2},
+                  pasts=[2], finished=lambda *_: None)
+    assert not isinstance(err.value, SchedulerLost)
+    assert time.monotonic() - t0 < DEADLINE_S
