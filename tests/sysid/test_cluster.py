@@ -166,13 +166,20 @@ def test_cli_scheduler_without_the_extra_is_one_line(monkeypatch: pytest.MonkeyP
 
 
 def test_dashboard_link_is_none_without_a_dashboard() -> None:
+    """A scheduler whose identity lists no dashboard service: no link (the client's own
+    ``dashboard_link`` would invent one)."""
+    from types import SimpleNamespace
+
     from sysid.cluster import dashboard_link
 
     class NoDashboard:
         dashboard_link = "http://unused"
+        scheduler = SimpleNamespace(address="tcp://127.0.0.1:8786",
+                                    identity=lambda **_: {"services": {}, "workers": {}})
 
-        def scheduler_info(self) -> dict[str, Any]:
-            return {"services": {}, "workers": {}}
+        def sync(self, fn: Any, **kwargs: Any) -> Any:
+            kwargs.pop("callback_timeout")
+            return fn(**kwargs)
 
     assert dashboard_link(NoDashboard()) is None
 
