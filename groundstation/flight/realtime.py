@@ -26,14 +26,19 @@ def prompt_thread_switches(interval_s: float = 0.0005) -> Iterator[None]:
         sys.setswitchinterval(previous)
 
 
+_HANGUP = (signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()  # POSIX only
+
+
 @contextlib.contextmanager
 def signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
-    """SIGINT and SIGTERM request an abort while flying (main thread only); restored after."""
+    """SIGINT, SIGTERM and SIGHUP (the terminal closed, an SSH session dropped) request an
+    abort while flying (main thread only); restored after. SIGHUP's default killed the
+    process mid-flight with no stop setpoint and the session left open."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM, *_HANGUP):
         previous[sig] = signal.signal(sig, lambda n, _f: abort(f"{signal.Signals(n).name} "
                                                                "received"))
     try:

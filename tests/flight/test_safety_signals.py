@@ -24,10 +24,11 @@ def _pitch_only():
     return plan_variant("pitch-only", **{f"{_SETTLE}3.0": f"{_SETTLE}1.0"})
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM,
+                                 *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])])
 def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
     one_variant_on_sitl(request, first=sig == signal.SIGINT,
-                        why="SIGTERM and SIGINT take one path, in the ground station")
+                        why="SIGINT, SIGTERM and SIGHUP take one path, in the ground station")
     plan, uri = _pitch_only(), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     before = signal.getsignal(sig)
