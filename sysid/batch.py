@@ -222,8 +222,9 @@ def run_batch(
     that runs, so without the time a task waited on the cluster) and saving its model.
 
     A fault of the cluster (:class:`~sysid.errors.ClusterError`: the scheduler lost, no
-    workers left) ends the batch with one line that counts the finished groups (kept in the
-    summary) and names the groups not run; those are no rows, they did not fail."""
+    workers left) ends the batch with one line that counts the finished groups of ``groups``
+    (kept in the summary with ``rows``, which are not counted: they never ran) and names the
+    groups not run; those are no rows, they did not fail."""
     known = list(rows or [])
     names = list(groups)
     done_rows: dict[str, BatchRow] = {}
@@ -300,8 +301,8 @@ def run_batch(
 
         cancel_quietly(client, futures, exc)
         not_run = [n for n in names if n in pending]
-        kept = in_order()
-        raise type(exc)(f"{exc}; {len(kept)} finished group(s) kept in "
+        kept = len(done_rows)  # the groups that ended, not the rows given (unreadable sessions)
+        raise type(exc)(f"{exc}; {kept} finished group(s) kept in "
                         f"{out_dir / 'summary.json'} and {out_dir / 'summary.csv'}; "
                         f"{len(not_run)} group(s) not run: {_names(not_run)}") from None
     except BaseException as exc:

@@ -26,7 +26,15 @@ with that group's one task (they are needed by one worker only).
 - :func:`completed` yields the tasks as they end and checks the cluster every
   :data:`POLL_S`: a lost scheduler connection ends the run at once (:class:`SchedulerLost`),
   a scheduler without workers is reported through the :func:`watching` ``notify`` and ends
-  the run when no worker has joined within the worker wait;
+  the run when no worker has joined within the worker wait. A task cancelled while the
+  scheduler still answers is no lost scheduler: :class:`TaskCancelled` (a batch), or handed
+  to the caller (a sweep, below);
+- a sweep's scattered data live only on the workers: when every worker holding them leaves,
+  the scheduler forgets them and cancels the pasts that need them (finished ones whose
+  results were not fetched yet too). :func:`run_pasts` then waits for a worker as above (the
+  same warning and worker wait), sends the data again and reruns those pasts; after
+  :data:`RESEND_LIMIT` such losses in a row without a past finishing it ends with one line
+  (:class:`DataLost`);
 - :func:`task_result` turns Dask's ``KilledWorker`` (the workers running a task died more
   often than the scheduler's ``allowed-failures``) into a one-line :class:`WorkerLost`: a
   failure of that task (a batch's failed row), not of the cluster.
@@ -57,8 +65,9 @@ from sysid.errors import (
     first_line,
 )
 
-__all__ = ["CONNECT_ENV", "CONNECT_TIMEOUT_S", "EXTRA_HINT", "POLL_S", "WORKER_WAIT_ENV",
-           "WORKER_WAIT_S", "SchedulerLost", "Watch", "WorkerLost", "cancel_quietly",
+__all__ = ["CONNECT_ENV", "CONNECT_TIMEOUT_S", "EXTRA_HINT", "POLL_S", "RESEND_LIMIT",
+           "WORKER_WAIT_ENV", "WORKER_WAIT_S", "DataLost", "SchedulerLost", "TaskCancelled",
+           "Watch", "WorkerLost", "cancel_quietly",
            "completed", "connect", "connect_timeout_s", "dashboard_link", "probe",
            "quiet_dask_log", "require_distributed", "run_pasts", "scatter", "task_result",
            "wait_for_workers", "watching", "worker_count", "worker_wait_s"]
@@ -80,6 +89,9 @@ WORKER_WAIT_ENV = "SYSID_DASK_WORKER_WAIT_S"
 #: A finished task's result (rows, a model: small) is fetched, and a sweep's data are sent
 #: to the workers, within this many connect timeouts.
 RESULT_WAITS = 10
+#: A sweep ends (:class:`DataLost`) when its data were lost this many times in a row without
+#: a past finishing in between (workers that keep leaving).
+RESEND_LIMIT = 3
 #: How long the result loop sleeps between looks at finished tasks.
 _TICK_S = 0.02
 #: Dashboard port hint for an address that accepts but does not answer.
@@ -88,6 +100,17 @@ _PORT_HINT = "the scheduler's port is usually 8786, the dashboard's 8787"
 
 class SchedulerLost(ClusterError):
     """The connection to the scheduler was lost during a run (its tasks are gone with it)."""
+
+
+class TaskCancelled(ClusterError):
+    """A task was cancelled on the cluster while the scheduler still answers (not a lost
+    scheduler): the data it needs were lost with the workers that held them, or another
+    client cancelled it."""
+
+
+class DataLost(ClusterError):
+    """A sweep's data were lost with the workers holding them too often in a row
+    (:data:`RESEND_LIMIT`) for the sweep to go on."""
 
 
 class WorkerLost(SysIdError):
@@ -417,49 +440,104 @@ def wait_for_workers(client: Any, *, timeout_s: float, label: str | None = None)
     return n
 
 
-def completed(client: Any, futures: Iterable[Any]) -> Iterator[Any]:
+class _WorkerWatch:
+    """The scheduler's workers during a run: :meth:`check` asks for their number (a lost
+    scheduler is :class:`SchedulerLost`), warns when the last has left and when one is back,
+    and ends the run (:class:`ClusterError`) once there has been none for the worker wait.
+    One per run, so the wait goes on across a sweep's resends (:func:`run_pasts`)."""
+
+    def __init__(self, client: Any, watch: Watch | None = None) -> None:
+        watch = watch or _watch()
+        self.client, self.label, self.poll_s = client, _label(client, watch), watch.poll_s
+        self.wait_s = worker_wait_s() if watch.worker_wait_s is None else watch.worker_wait_s
+        self.say = watch.notify or log.warning
+        self.empty_since: float | None = None
+
+    def check(self) -> int:
+        n = worker_count(self.client, label=self.label)
+        now = time.monotonic()
+        if n and self.empty_since is not None:
+            self.say(f"{self.label}: {n} worker(s) again")
+            self.empty_since = None
+        elif not n and self.empty_since is None:
+            self.empty_since = now
+            self.say(f"{self.label}: the scheduler has no workers; waiting up to "
+                     f"{self.wait_s:g} s for one ({_no_worker_hint(self.client)})")
+        elif not n and self.empty_since is not None and now - self.empty_since >= self.wait_s:
+            raise ClusterError(f"{self.label}: the scheduler had no workers for "
+                               f"{self.wait_s:g} s; {_no_worker_hint(self.client)}")
+        return n
+
+    def until_one(self) -> int:
+        """Wait for a worker (bounded by the worker wait); their number."""
+        while True:
+            n = self.check()
+            if n:
+                return n
+            time.sleep(self.poll_s)
+
+
+def _cancel_reason(future: Any) -> str:
+    reason = getattr(getattr(getattr(future, "_state", None), "exception", None), "reason", None)
+    return str(reason) if reason else "no reason given"
+
+
+def _cancelled(client: Any, future: Any, label: str) -> TaskCancelled:
+    """A cancelled ``future``: :class:`SchedulerLost` raised when the client lost the
+    scheduler (it cancels every task then) or the scheduler does not answer, else the
+    :class:`TaskCancelled` to raise or handle."""
+    worker_count(client, label=label)  # SchedulerLost unless running and answering
+    return TaskCancelled(f"{label}: the scheduler cancelled a task while it still answers "
+                         f"({_cancel_reason(future)})")
+
+
+def completed(client: Any, futures: Iterable[Any], *,
+              cancelled: Callable[[Any], None] | None = None,
+              workers: _WorkerWatch | None = None) -> Iterator[Any]:
     """Yield ``futures`` as they finish, like ``distributed.as_completed``, watching the
     cluster meanwhile (:func:`watching`): :class:`SchedulerLost` as soon as the scheduler
     connection is lost (its tasks are cancelled with it), a warning when the scheduler has no
-    workers and a :class:`ClusterError` when none has joined within the worker wait."""
+    workers and a :class:`ClusterError` when none has joined within the worker wait.
+
+    A future cancelled while the scheduler still answers is given to ``cancelled`` (not
+    yielded), or, without it, ends the run with :class:`TaskCancelled`. ``workers`` carries
+    the no-worker wait over from an earlier call of the same run."""
     distributed = require_distributed()
     watch = _watch()
     label = _label(client, watch)
-    wait_s = worker_wait_s() if watch.worker_wait_s is None else watch.worker_wait_s
-    say = watch.notify or log.warning
+    workers = workers or _WorkerWatch(client, watch)
     pending = distributed.as_completed(list(futures), loop=client.loop)
     next_check = time.monotonic() + watch.poll_s
-    empty_since: float | None = None
     while not pending.is_empty():
         if pending.has_ready():
+            gone: list[Any] = []
+            ended: list[Any] = []
             for fut in pending.next_batch(block=False):
-                if fut.cancelled():  # the client cancels every task when it loses the scheduler
-                    raise _lost(client, label)
-                yield fut
+                (gone if fut.cancelled() else ended).append(fut)
+            if gone:  # the client cancels every task when it loses the scheduler: ask it
+                exc = _cancelled(client, gone[0], label)  # (once for the batch)
+                if cancelled is None:
+                    raise exc
+                for fut in gone:
+                    cancelled(fut)
+            yield from ended
             continue
         time.sleep(_TICK_S)
         if time.monotonic() < next_check:
             continue
-        n = worker_count(client, label=label)
-        now = time.monotonic()
-        if n and empty_since is not None:
-            say(f"{label}: {n} worker(s) again")
-            empty_since = None
-        elif not n and empty_since is None:
-            empty_since = now
-            say(f"{label}: the scheduler has no workers; waiting up to {wait_s:g} s for one "
-                f"({_no_worker_hint(client)})")
-        elif not n and empty_since is not None and now - empty_since >= wait_s:
-            raise ClusterError(f"{label}: the scheduler had no workers for {wait_s:g} s; "
-                               f"{_no_worker_hint(client)}")
+        workers.check()
         next_check = time.monotonic() + watch.poll_s
 
 
 def task_result(client: Any, future: Any) -> Any:
     """``future.result()``: the task's value, or the exception the task raised; a
     :class:`SchedulerLost` when the result could not be fetched because the scheduler went
-    away meanwhile (the connection closed or reset, the future cancelled) or did not hand it
-    over within :data:`RESULT_WAITS` connect timeouts."""
+    away meanwhile (the connection closed or reset, the future cancelled with it) or did not
+    hand it over within :data:`RESULT_WAITS` connect timeouts and does not answer now;
+    :class:`TaskCancelled` when the future was cancelled while the scheduler still answers
+    (its result was lost with the workers holding it, and so was the data it needs); a
+    :class:`ClusterError` when the result did not come in that time but the scheduler
+    answers."""
     timeout = RESULT_WAITS * connect_timeout_s()
     try:
         return future.result(timeout=timeout)
@@ -472,8 +550,13 @@ def task_result(client: Any, future: Any) -> Any:
                       asyncio.CancelledError)):
             raise  # the task's own failure, or its result does not load here
         label = _label(client, _watch())
-        raise _lost(client, label, waited_s=timeout if isinstance(exc, TimeoutError) else None
-                    ) from None
+        if future.cancelled():
+            raise _cancelled(client, future, label) from None
+        if isinstance(exc, TimeoutError):  # no lost scheduler if it answers now
+            worker_count(client, label=label)  # (SchedulerLost when it does not)
+            raise ClusterError(f"{label}: a finished task's result was not handed over within "
+                               f"{timeout:g} s (the worker holding it left?)") from None
+        raise _lost(client, label) from None
 
 
 def _worker_lost(exc: BaseException) -> WorkerLost | None:
@@ -514,25 +597,74 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
     (Ctrl-C included) the pending tasks are cancelled before it propagates; faults of the
     cluster are one-line :class:`ClusterError` (:func:`completed`), and so is a past whose
     workers died more often than the scheduler allows (:class:`WorkerLost`): the sweep needs
-    every past."""
-    label = _label(client, _watch())
-    handle = scatter(client, shared, label=label)
-    futures = {client.submit(_with_shared, task, handle, past=p, pure=False, **common): p
-               for p in pasts}
+    every past.
+
+    The scattered data are lost when every worker holding them leaves: the scheduler cancels
+    the pasts not yet fetched (:class:`TaskCancelled`, the scheduler still answering). Those
+    pasts are run again: once a worker is there (the :func:`watching` warning and worker wait,
+    as for a scheduler without workers) the data are scattered again and the pasts
+    resubmitted, announced through ``notify``. :data:`RESEND_LIMIT` losses in a row without
+    a past finishing end the sweep (:class:`DataLost`)."""
+    watch = _watch()
+    label = _label(client, watch)
+    say = watch.notify or log.warning
+    workers = _WorkerWatch(client, watch)
+    todo = list(pasts)
+    handles: list[Any] = []
+    futures: dict[Any, int] = {}
     failure: BaseException | None = None
+    losses = 0  # data losses since the last past finished
     try:
-        for fut in completed(client, futures):
-            try:
-                result = task_result(client, fut)
-            except WorkerLost as exc:
-                raise ClusterError(f"{label}: past {futures[fut]}: {exc}") from None
-            finished(futures[fut], result)
+        while todo:
+            handle = _scatter_when_workers(client, shared, label, workers, resend=bool(handles))
+            handles.append(handle)
+            futures = {client.submit(_with_shared, task, handle, past=p, pure=False,
+                                     **common): p for p in todo}
+            lost: set[Any] = set()
+            for fut in completed(client, futures, cancelled=lost.add, workers=workers):
+                try:
+                    result = task_result(client, fut)
+                except TaskCancelled:  # finished, its result lost before it was fetched
+                    lost.add(fut)
+                    continue
+                except WorkerLost as exc:
+                    raise ClusterError(f"{label}: past {futures[fut]}: {exc}") from None
+                finished(futures[fut], result)
+                losses = 0
+            todo = [p for fut, p in futures.items() if fut in lost]
+            if not todo:
+                break
+            losses += 1
+            if losses >= RESEND_LIMIT:
+                raise DataLost(f"{label}: the workers holding the sweep's data left {losses} "
+                               f"times without a past finishing ({len(todo)} past(s) not "
+                               "run); run again when the workers stay")
+            say(f"{label}: the workers holding the sweep's data left; {len(todo)} past(s) "
+                "to run again, the data sent again once a worker is there")
     except BaseException as exc:
         failure = exc
         cancel_quietly(client, futures, exc)
         raise
     finally:
-        cancel_quietly(client, [handle], failure)
+        cancel_quietly(client, handles, failure)
+
+
+def _scatter_when_workers(client: Any, shared: dict[str, Any], label: str,
+                          workers: _WorkerWatch, *, resend: bool) -> Any:
+    """:func:`scatter` of a sweep's data; when sending it again (``resend``), first waited for
+    a worker (bounded by the worker wait) and, should the scatter fail because the workers
+    left again meanwhile, waited for again."""
+    while True:
+        if resend:
+            workers.until_one()
+        try:
+            return scatter(client, shared, label=label)
+        except SchedulerLost:
+            raise
+        except ClusterError:
+            if not resend or workers.check():
+                raise
+            # the workers left during the scatter: wait for one again (the same wait)
 
 
 def scatter(client: Any, data: Any, *, label: str | None = None,

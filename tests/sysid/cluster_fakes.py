@@ -5,7 +5,8 @@
   :data:`BLOCK_S`, then :data:`AFTER_S`; ``k_die.h5``: its worker is lost, see
   :func:`lose_worker`) and returns a fixed model;
 - :func:`fake_past` is a sweep task (:func:`sysid.cluster.run_pasts`) that blocks for every
-  past but the first, and loses its worker for the past ``die``;
+  past but the first, and loses its worker for the past ``die``; :func:`start_worker` adds a
+  worker to an in-process cluster;
 - ``python -m tests.sysid.cluster_fakes [N]`` runs a scheduler with N (default 1) one-thread
   workers in a process of its own (batch groups identified by :func:`fake_identify`), prints
   its address and serves until its stdin closes, so a test can stop or kill it mid-run.
@@ -53,14 +54,27 @@ def fake_identify(groups: list[list[Any]], **_: Any) -> dict[str, Any]:
             "stable": True}
 
 
-def fake_past(*, past: int, first: int, die: int | None = None, **_: Any) -> list[int]:
+def fake_past(*, past: int, first: int, die: int | None = None, data: Any = None,
+              **_: Any) -> list[Any]:
     """A sweep task: ``first`` returns at once, every other past blocks (:data:`GATE`); the
-    past ``die`` loses its worker (:func:`lose_worker`)."""
+    past ``die`` loses its worker (:func:`lose_worker`). Returns ``[past]``, and the sum of
+    the shared ``data`` when given (so a test sees the scattered data reached the task)."""
     if past == die:
         lose_worker()
     if past != first:
         GATE.wait(BLOCK_S)
-    return [past]
+    return [past] if data is None else [past, int(sum(data))]
+
+
+def start_worker(cluster: Any) -> Any:
+    """A new one-thread worker of ``cluster`` (in this process), registered when this returns;
+    close it with ``cluster.sync(worker.close)``."""
+    import distributed
+
+    async def start() -> Any:
+        return await distributed.Worker(cluster.scheduler_address, nthreads=1)
+
+    return cluster.sync(start)
 
 
 def lose_worker() -> None:
