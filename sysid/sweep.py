@@ -9,7 +9,8 @@ columns for every pair), IEM shares one Cholesky factor among the futures of a p
 order is realised from the pair's products. Each model is scored with
 :func:`sysid.validate.compare` on validation data (simulation, windowed simulation or k-step
 prediction). Pasts run in parallel worker processes with ``workers > 1``, or on a Dask
-cluster with ``client=`` (:mod:`sysid.cluster`: the grid is scattered once per worker).
+cluster with ``client=`` (:mod:`sysid.cluster`: the grid is scattered to the workers once,
+and again if the workers holding it leave).
 
 **Score.** A model is ranked by its *score*: the mean over the output channels of the fit
 floored at 0 %, :math:`S = \\frac1l \\sum_i \\max(F_i, 0)`. A channel no model can predict
@@ -303,7 +304,8 @@ def sweep(
     defaults to the identification data; ``horizon``/``window`` choose how models are compared
     (see :func:`sysid.compare`). ``workers > 1`` runs the pasts in that many processes.
     ``client`` (a :class:`distributed.Client`) runs the pasts on that Dask cluster instead,
-    the grid and validation data scattered once per worker (:mod:`sysid.cluster`); the rows
+    the grid and validation data scattered to the workers (again if they leave:
+    :mod:`sysid.cluster`); the rows
     are the same as locally. ``progress(done, total)`` is called in this process with counts
     of models: after each model when the sweep runs here (``workers=1``, no ``client``), after
     each past otherwise. ``keep_models`` keeps every model in its row (memory!), with what
