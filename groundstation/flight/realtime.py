@@ -33,14 +33,29 @@ _HANGUP = (signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()  # POSIX only
 def signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
     """SIGINT, SIGTERM and SIGHUP (the terminal closed, an SSH session dropped) request an
     abort while flying (main thread only); restored after. SIGHUP's default killed the
-    process mid-flight with no stop setpoint and the session left open."""
+    process mid-flight with no stop setpoint and the session left open.
+
+    A second SIGINT or SIGTERM is the operator's second request (the descent ends, the stop
+    is sent at once); SIGHUP counts once: one hangup can arrive twice (the kernel's to the
+    terminal's process group, then the shell's to its jobs), and it is no one's decision to
+    skip the descent. SIGHUP ignored when the flight starts (``nohup``) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    hung_up = []
+
+    def request(n: int, _frame: object) -> None:
+        if n in _HANGUP:
+            if hung_up:
+                return
+            hung_up.append(n)
+        abort(f"{signal.Signals(n).name} received")
+
     previous = {}
     for sig in (signal.SIGINT, signal.SIGTERM, *_HANGUP):
-        previous[sig] = signal.signal(sig, lambda n, _f: abort(f"{signal.Signals(n).name} "
-                                                               "received"))
+        if sig in _HANGUP and signal.getsignal(sig) is signal.SIG_IGN:
+            continue  # nohup: the operator asked for the flight to outlive the terminal
+        previous[sig] = signal.signal(sig, request)
     try:
         yield
     finally:

@@ -122,3 +122,62 @@ def test_an_interrupt_is_honoured_from_the_start_when_launched_with_sigint_ignor
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGHUP"), reason="POSIX signal")
+def test_a_flight_started_under_nohup_outlives_the_hangup(sim_uri, tmp_path):
+    """``nohup groundstation fly ...`` sets SIGHUP to be ignored so that the flight survives
+    a closed terminal: it stays ignored while flying (the review found the flight's handler
+    aborting it at the first hangup)."""
+    plan, uri = _pitch_only(), sim_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), signal.SIGHUP)
+
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+    assert not result.aborted, result.cause
+    check_setpoints(check_closed_with_stop(result), plan, complete=True)
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGHUP"), reason="POSIX signal")
+def test_one_hangup_delivered_twice_keeps_the_descent(sim_uri, tmp_path):
+    """A closed terminal can deliver SIGHUP twice (the kernel's, then the shell's to its
+    jobs): that is one hangup, not an operator's second request, so the descent is flown in
+    full (a second SIGINT stops it at once: the test above)."""
+    plan, uri = _pitch_only(), sim_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), signal.SIGHUP)
+
+    class SecondHangup:
+        """The same hangup again once the descent has streamed a few setpoints."""
+
+        descent, sent = 0, False
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints":
+                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+                if self.descent >= 3 and not self.sent:
+                    self.sent = True
+                    os.kill(os.getpid(), signal.SIGHUP)
+
+    second = SecondHangup()
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook, listeners=[second])
+    assert second.sent
+    assert result.aborted and "SIGHUP" in result.cause
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    assert not any("during the abort" in e.text for e in safety_events(s))
+    check_descent(s, thrust_ceiling=34000, n=20)
