@@ -125,11 +125,12 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
 
 
 def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
-                      window_s: float | None = None) -> None:
+                      window_s: float | None = None, remedy: str | None = None) -> None:
     """Refuse records, or --window-s windows, too short for a fit to mean anything: every
     mode fits an initial state of ``model.n_states`` parameters to each record (each window),
     and on fewer than :func:`sysid.validate.min_fit_samples` samples (the rule of the default
-    windows) that state alone fits them, so every score comes out near 100 %."""
+    windows) that state alone fits them, so every score comes out near 100 %. ``remedy``
+    replaces the advice for a short record (default: ``compare``'s longer --window)."""
     need = min_fit_samples(n_states=model.n_states, n_outputs=model.n_outputs)
     why = (f"the initial state of a {model.n_states}-state model on {model.n_outputs} "
            f"output(s) needs at least {need} ({SAMPLES_PER_STATE} output values per state, "
@@ -138,9 +139,9 @@ def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
     if short:
         first = short[0]
         others = f" (and {len(short) - 1} other record(s))" if len(short) > 1 else ""
+        remedy = remedy or f"choose a longer --window ({need * model.dt:.3g} s at least)"
         raise DataError(f"{experiment_label(first.source)} has {first.n_samples} samples in "
-                        f"its window{others}, too few to score a model on: {why}; choose a "
-                        f"longer --window ({need * model.dt:.3g} s at least)")
+                        f"its window{others}, too few to score a model on: {why}; {remedy}")
     if window_s is not None and round(window_s / model.dt) < need:
         raise DataError(f"--window-s {window_s:g} is {round(window_s / model.dt)} samples of "
                         f"{model.dt:g} s, too few to score a model on: {why} per window; use "

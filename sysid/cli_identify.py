@@ -39,7 +39,7 @@ from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel
 from sysid.refit import PROVENANCE_KEY
-from sysid.validate import compare, simulation_window
+from sysid.validate import compare, min_fit_samples, simulation_window
 
 __all__ = ["identify", "samples_line"]
 
@@ -141,16 +141,23 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
                            inputs=model.input_names, outputs=model.output_names,
                            verb="validate the model on")
-        # the window of the identification rows (one report, one window), capped by the
-        # validation records: `sysid compare --window-s` with it gives the same figures
-        v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
-                                  n_states=model.n_states, n_outputs=model.n_outputs,
-                                  samples=round(window_s / model.dt))
-        try:  # the rule `sysid compare` refuses such records by; the model is still saved
-            check_fit_samples(model, val)
+        # records too short to score (the rule `sysid compare` refuses them by) are named and
+        # left out; the others are scored; the model is saved either way
+        need = min_fit_samples(n_states=model.n_states, n_outputs=model.n_outputs)
+        short = [d for d in val if d.n_samples < need]
+        try:
+            check_fit_samples(model, short, remedy=f"validate on records of "
+                              f"{need * model.dt:.3g} s at least")
         except DataError as exc:
-            log.warning("validation not scored: %s", exc)
-        else:
+            log.warning("validation not scored%s: %s", " on these" if len(short) < len(val)
+                        else "", exc)
+        val = [d for d in val if d.n_samples >= need]
+        if val:
+            # the window of the identification rows (one report, one window), capped by the
+            # validation records: `sysid compare --window-s` with it gives the same figures
+            v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
+                                      n_states=model.n_states, n_outputs=model.n_outputs,
+                                      samples=round(window_s / model.dt))
             checks = [(f"validation: simulation, {v_win:.3g} s windows",
                        compare(model, val, window=v_win, warn=False)),
                       ("validation: 1-step prediction",

@@ -431,3 +431,11 @@ def test_identify_does_not_score_a_validation_record_too_short_to_mean_anything(
     assert run("compare", out, short.path).exit_code == 2  # the rule is compare's
     res = run("identify", flights[0].path, *FAST, "--validate", short.path, "--json")
     assert json.loads(res.stdout)["validation"] == []
+    # one short record among others leaves only itself out (it cancelled every row: review)
+    caplog.clear()
+    res = run("identify", flights[0].path, *FAST, "--validate", flights[1].path,
+              "--validate", short.path, "--json")
+    assert res.exit_code == 0, res.output
+    assert "validation not scored on these: short.h5 has 15 samples" in caplog.text
+    assert "validate on records of 0.4 s at least" in caplog.text  # identify has no --window
+    assert len(json.loads(res.stdout)["validation"]) == 2  # f1's simulation and prediction
