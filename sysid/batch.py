@@ -38,7 +38,7 @@ import numpy as np
 
 from sysid.auto import select
 from sysid.data import IOData
-from sysid.errors import ClusterError, SysIdError
+from sysid.errors import ClusterError, SysIdError, first_line
 from sysid.methods import Method, Options
 from sysid.session_io import SessionFileError
 
@@ -107,7 +107,7 @@ def group_sessions(paths: Sequence[Path], *, by: GroupBy,
             meta = read_meta(path) if by not in ("all", "session") else {}
         except Exception as exc:  # any unreadable file is one failed row, never the end
             bad.append(BatchRow(group=_safe(path.stem), sessions=[str(path)],
-                                error=_one_line(exc)))
+                                error=first_line(exc)))
             continue
         key = _key(path, meta, by)
         if by == "session":
@@ -116,11 +116,6 @@ def group_sessions(paths: Sequence[Path], *, by: GroupBy,
                 key, k = f"{base}-{k}", k + 1
         groups.setdefault(key, []).append(path)
     return groups, bad
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).splitlines()[0] if str(exc) else ""
-    return text or type(exc).__name__
 
 
 def _log_unexpected(group: str, exc: Exception) -> None:
@@ -249,7 +244,7 @@ def run_batch(
             except Exception as exc:  # e.g. the disk is full: this group fails, the rest go on
                 outcome = exc
         if isinstance(outcome, BaseException):
-            row.error = _one_line(outcome)
+            row.error = first_line(outcome)
         else:
             row.past, row.future, row.order = outcome["past"], outcome["future"], outcome["order"]
             row.focus, row.method = outcome["focus"], outcome["method"]

@@ -105,7 +105,7 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
     with quiet_dask_log():
         client = connect(address, timeout_s=timeout)
         try:
-            link = dashboard_link(client)
+            link = dashboard_link(client, label=label)
             n = worker_count(client, label=label)
             click.echo(f"dask: {address}, {n} worker(s)"
                        + (f", dashboard {link}" if link else ", no dashboard")

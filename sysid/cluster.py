@@ -4,7 +4,8 @@
 cluster raises :class:`~sysid.errors.MissingDependencyError` with one line naming the extra.
 
 **What is sent.** A sweep's data products (the grid's Gram matrix with its flights, and the
-validation records) are scattered *once per worker* (``client.scatter(..., broadcast=True)``);
+validation records) are scattered to every worker (``client.scatter(..., broadcast=True)``;
+again when the workers holding them leave: **Faults** below);
 each task then carries only its past (an integer) and the small method/options objects, and
 returns its rows. The workers run the same :func:`sysid.sweep._past_task` as the local worker
 processes, on the same arrays, so the rows are the same. A batch sends each group's records

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sysid.errors import ModelFileError
+from sysid.errors import ModelFileError, first_line
 from sysid.mat_guard import Limits, check_mat
 
 if TYPE_CHECKING:
@@ -117,7 +117,7 @@ def _os_reason(exc: OSError) -> str:
     found = re.search(r"error message = '([^']*)'", text)
     if found:
         return found.group(1)
-    return text.splitlines()[0] if text else type(exc).__name__
+    return first_line(exc)
 
 
 # ------------------------------------------------------------------------------- loading
