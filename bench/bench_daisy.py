@@ -6,10 +6,9 @@ over orders 2..10 among stable models, past = future = 20, D estimated. The proj
 over IEM, PO-MOESP and PARSIM-K with prediction and simulation focus (and their PEM refinement with
 ``BENCH_DAISY_PEM=1``: slow on cstr); SIPPY 1.0.1's over N4SID, MOESP, CVA, PARSIM-K/S/P.
 Target (issue 10): project >= SIPPY on every set. The last column is what the no-knobs
-selection chooses for open-loop data (IEM, held-out selection on the identification part, focus
-and direct term chosen, PARSIM-K tried at the chosen horizons:
-``select(..., choose_focus=True, choose_feedthrough=True, choose_method=True)``), by the
-protocol.
+selection chooses (``sysid.identify(ident)``, as ``sysid identify`` with no settings: IEM,
+held-out selection on the identification part, focus chosen, a direct term tried where the
+feedback test finds no feedback, PARSIM-K tried at the chosen horizons), by the protocol.
 ``BENCH_DAISY_SETS=dryer,cstr`` picks sets; ``BENCH_DAISY_EXTRA`` adds other sets' files by the
 same protocol (``NAME=FILE:INPUTS:OUTPUTS;...``, columns 1-based: e.g. DaISy's
 ``cd_arm=CD_player_arm.dat:1,2:3,4;glassfurnace=glassfurnace.dat:2,3,4:5,6,7,8,9,10``); SIPPY's
@@ -98,16 +97,12 @@ def _po_moesp_best(name: str) -> float:
 
 
 def _no_knobs(name: str) -> tuple[float, str]:
-    """What the no-knobs selection chooses on open-loop data (IEM, held-out selection, focus
-    and direct term chosen), scored by the protocol."""
-    from sysid.auto import select
-    from sysid.methods import get_method
-
+    """What :func:`sysid.identify` chooses with no settings given (the no-knobs path of the
+    CLI's ``sysid identify``: held-out selection, focus chosen, a direct term tried only where
+    the feedback test finds none, PARSIM-K tried), scored by the protocol."""
     ident, val = load(name)
-    iem = get_method("iem")
     try:
-        sel = select([[ident]], method=iem, options=iem.options(), choose_focus=True,
-                     choose_feedthrough=True, choose_method=True)
+        sel = sysid.identify(ident)
     except sysid.SysIdError as exc:
         return np.nan, f"refused: {exc}"
     b = sel.best
