@@ -40,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -276,6 +277,13 @@ class LiveIdentifierProcess:
     The child is ``python -c`` running :func:`_serve` on two pipes, not a
     :mod:`multiprocessing` child: those re-import the caller's main module, and a script
     that flies without an ``if __name__ == "__main__"`` guard would fly again.
+
+    The parent decides when the child ends (:meth:`close`, or its pipe closing when the
+    parent exits): :data:`PARENT_SIGNALS`, which a terminal sends to the whole process group
+    (Ctrl-C, a hang-up) and the flight handles as an abort, are blocked in the child from its
+    first instruction (a blocked signal stays blocked across ``exec``) and ignored by
+    :func:`_serve`, so a Ctrl-C never ends an update half-way or prints the child's
+    ``KeyboardInterrupt`` traceback, and the abort's final update still has its engine.
     """
 
     def __init__(self, **settings: Any) -> None:
@@ -288,9 +296,10 @@ class LiveIdentifierProcess:
         code = ("import sys; from sysid.live import _serve; "
                 "_serve(int(sys.argv[1]), int(sys.argv[2]))")
         try:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-c", code, str(to_child), str(from_child)],
-                pass_fds=(to_child, from_child), stdin=subprocess.DEVNULL, env=env)
+            with _parent_signals_blocked():  # the child starts with them blocked: module doc
+                self._proc = subprocess.Popen(
+                    [sys.executable, "-c", code, str(to_child), str(from_child)],
+                    pass_fds=(to_child, from_child), stdin=subprocess.DEVNULL, env=env)
         finally:
             os.close(to_child)
             os.close(from_child)
@@ -338,19 +347,45 @@ class LiveIdentifierProcess:
 #: How much lower the child's CPU priority is than its parent's (``nice``).
 CHILD_NICENESS = 10
 
+#: Signals the child of :class:`LiveIdentifierProcess` leaves to its parent.
+PARENT_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
+                       if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def _parent_signals_blocked():
+    """:data:`PARENT_SIGNALS` blocked in the calling thread (a child started meanwhile inherits
+    the mask); one arriving meanwhile goes to another thread or waits, it is not lost."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, PARENT_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
 
 def _serve(commands_fd: int, replies_fd: int) -> None:
     """The child of :class:`LiveIdentifierProcess`: one identifier, commands from a pipe.
 
     It runs :data:`CHILD_NICENESS` steps nicer than the flight: on a busy host the ground
     station's threads and a real-time firmware in the loop get the CPU first, and an update
-    that falls behind is skipped by the caller (it never holds the flight up)."""
+    that falls behind is skipped by the caller (it never holds the flight up). It leaves
+    :data:`PARENT_SIGNALS` to the parent (ignored; blocked since it started) and ends quietly
+    when the parent's end of a pipe closes."""
+    for sig in PARENT_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
     if hasattr(os, "nice"):
         os.nice(CHILD_NICENESS)
     threadpoolctl.threadpool_limits(limits=1)
     commands = Connection(commands_fd, writable=False)
     replies = Connection(replies_fd, readable=False)
-    live = LiveIdentifier(**commands.recv())
+    try:
+        settings = commands.recv()
+    except (EOFError, OSError):
+        return
+    live = LiveIdentifier(**settings)
     failed: Exception | None = None  # an append's error, raised by the next reply
     while True:
         try:
@@ -367,9 +402,12 @@ def _serve(commands_fd: int, replies_fd: int) -> None:
                     failed = exc
             continue
         try:
-            if failed is not None:
-                raise failed
-            replies.send(("ok", live.update(fit_samples=args[0]) if command == "update"
-                          else live.samples()))
-        except Exception as exc:
-            replies.send(("error", exc))
+            try:
+                if failed is not None:
+                    raise failed
+                replies.send(("ok", live.update(fit_samples=args[0]) if command == "update"
+                              else live.samples()))
+            except Exception as exc:
+                replies.send(("error", exc))
+        except OSError:  # the parent is gone (its end of the pipe closed): nobody to answer
+            return

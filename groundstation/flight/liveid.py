@@ -235,7 +235,11 @@ class LiveIdListener:
         try:
             self._loop()
         except Exception as exc:  # a bug here (or a dead engine) must never reach the flight
-            log.exception("live id worker failed")
+            if isinstance(exc, EOFError | OSError):  # the engine's process ended: no bug here
+                log.error("live id worker failed: the identification process ended (%s: %s)",
+                          type(exc).__name__, exc)
+            else:
+                log.exception("live id worker failed")
             self.error = f"worker failed ({type(exc).__name__}: {exc})"
             self.status = f"live id: stopped ({type(exc).__name__})"
         finally:

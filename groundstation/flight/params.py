@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from groundstation.errors import GroundStationError, LinkError
+from groundstation.plan.param_types import value_problem
 
 __all__ = ["CONFIRM_TIMEOUT_S", "ParamChange", "check_parameters", "restore_after_flight",
            "set_for_flight", "typed_value", "write_parameters"]
@@ -48,7 +49,8 @@ class ParamChange:
 def check_parameters(cf: Any, wanted: Sequence[tuple[str, float]]) -> list[ParamChange]:
     """The plan's ``(name, value)`` pairs against ``cf``'s parameter TOC (a connected cflib
     ``Crazyflie``). Raises :class:`LinkError` (one line) for a name the firmware lacks, a
-    read-only one, or a fraction for an integer parameter."""
+    read-only one, or a value its type cannot hold (a fraction for an integer, beyond the
+    type's range: :func:`groundstation.plan.param_types.value_problem`)."""
     changes = []
     for name, value in wanted:
         element = cf.param.toc.get_element_by_complete_name(name)
@@ -58,10 +60,11 @@ def check_parameters(cf: Any, wanted: Sequence[tuple[str, float]]) -> list[Param
         if element.get_readable_access() == "RO":
             raise LinkError(f"plan [parameters]: {name} is read-only in the firmware")
         ctype = element.ctype
+        problem = value_problem(value, ctype)
+        if problem:
+            raise LinkError(f"plan [parameters]: {name}: {problem}, its type in the firmware's "
+                            "TOC; use a value in that range")
         if ctype not in _FLOAT_TYPES:
-            if not float(value).is_integer():
-                raise LinkError(f"plan [parameters]: {name} is an integer ({ctype}); "
-                                f"{value:g} is not")
             value = int(value)
         group, _, short = name.partition(".")
         text = cf.param.values.get(group, {}).get(short)

@@ -5,6 +5,8 @@ flight and restored after it.
 Read like the flight's own sections (:mod:`groundstation.plan.sections`): every reader takes a
 :class:`TomlTable`, so its errors name the key and its line. The names are only checked for form
 here; the flight checks them against the log blocks and the firmware's TOC before take-off.
+A ``[parameters]`` value is also checked here against the type of a parameter the firmware is
+known to have (:mod:`groundstation.plan.param_types`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from groundstation.plan.param_types import KNOWN_TYPES, value_problem
 from groundstation.plan.toml import TomlTable
 
 __all__ = ["MAX_PARAMETERS", "LiveIdConfig", "read_live_id", "read_parameters"]
@@ -86,7 +89,9 @@ MAX_PARAMETERS = 32
 def read_parameters(t: TomlTable) -> tuple[tuple[str, float], ...]:
     """``[parameters]``: firmware parameters for the flight, ``GROUP.NAME = number`` (TOML's
     dotted keys, so ``pid_attitude.yaw_kd = 0.0`` or a ``[parameters.pid_attitude]`` table).
-    Returned as ``("group.name", value)`` pairs in file order. The runner sets them after
+    Returned as ``("group.name", value)`` pairs in file order. A value the parameter's type
+    cannot hold is refused here where the type is known offline
+    (:data:`~groundstation.plan.param_types.KNOWN_TYPES`). The runner sets them after
     connecting, checked against the firmware's TOC, and restores the old values after the
     stop (:mod:`groundstation.flight.runner`)."""
     out: list[tuple[str, float]] = []
@@ -100,7 +105,13 @@ def read_parameters(t: TomlTable) -> tuple[tuple[str, float], ...]:
                 raise t.src.error((*path, name), f"'{group}.{name}' is not a firmware "
                                   "parameter name; write GROUP.NAME = number")
             value = TomlTable(t.src, path, names).get(name, float)
-            out.append((f"{group}.{name}", value))
+            full = f"{group}.{name}"
+            ctype = KNOWN_TYPES.get(full)
+            problem = "" if ctype is None else value_problem(value, ctype)
+            if problem:
+                raise t.src.error((*path, name), f"{problem}, the firmware's type for it; use "
+                                  "a value in that range")
+            out.append((full, value))
     if len(out) > MAX_PARAMETERS:
         raise t.src.error(t.path, f"{len(out)} parameters; at most {MAX_PARAMETERS}")
     return tuple(out)

@@ -6,7 +6,9 @@ the flight (every backend) and from the simulated vehicle during it (``sim://``)
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 
 import pytest
 from cflib.crazyflie import Crazyflie
@@ -110,7 +112,6 @@ def test_a_lost_link_leaves_them_set_and_says_so(sim_uri, tmp_path):
 @pytest.mark.parametrize(("extra", "needle"), [
     ("\n[parameters]\npid_attitude.no_such = 1.0\n", "has no parameter 'pid_attitude.no_such'"),
     ("\n[parameters]\nfirmware.revision0 = 1\n", "firmware.revision0 is read-only"),
-    ("\n[parameters]\nstabilizer.estimator = 1.5\n", "is an integer (uint8_t); 1.5 is not"),
 ])
 def test_a_parameter_the_firmware_cannot_take_is_one_line_and_nothing_flown(
         sim_uri, tmp_path, extra, needle):
@@ -124,6 +125,35 @@ def test_a_parameter_the_firmware_cannot_take_is_one_line_and_nothing_flown(
     assert res.exit_code != 0 and needle in res.output and res.output.count("\n") == 1, res.output
     assert not list(tmp_path.rglob("*.h5"))  # nothing recorded, nothing flown
     assert gsim.instance(uri).vehicle.read_param("pid_rate.yaw_kp") == 120.0
+
+
+def _past_the_loader(name: str, value: float):
+    """A plan whose ``[parameters]`` the loader did not check: the types it knows offline
+    (``groundstation.plan.param_types``) may not be the flown firmware's, whose TOC decides."""
+    return dataclasses.replace(_plan(""), parameters=((name, value),))
+
+
+def test_a_fraction_for_an_integer_parameter_is_refused_after_connect(sim_uri, tmp_path):
+    uri = sim_uri()
+    with pytest.raises(LinkError, match=r"plan \[parameters\]: stabilizer\.estimator.*1\.5"):
+        fly_plan(plan=_past_the_loader("stabilizer.estimator", 1.5), out=tmp_path, uri=uri)
+    assert not list(tmp_path.rglob("*.h5"))
+
+
+@pytest.mark.parametrize(("name", "value", "needle"), [
+    ("stabilizer.estimator", 300.0, "300 is outside uint8_t's range 0 to 255"),
+    ("stabilizer.estimator", -1.0, "-1 is outside uint8_t's range 0 to 255"),
+    ("pid_attitude.yaw_kd", 1e39, "1e+39 is outside float's range"),
+])
+def test_a_value_beyond_the_firmwares_type_is_refused_after_connect_before_take_off(
+        sim_uri, tmp_path, name, value, needle):
+    """The TOC's type decides where the loader does not know it: one line before anything is
+    recorded or written, not cflib's struct.error after the take-off checks (audit)."""
+    uri = sim_uri()
+    with pytest.raises(LinkError, match=re.escape(f"plan [parameters]: {name}: {needle}")):
+        fly_plan(plan=_past_the_loader(name, value), out=tmp_path, uri=uri)
+    assert not list(tmp_path.rglob("*.h5"))  # nothing recorded, nothing flown
+    assert gsim.instance(uri).vehicle.read_param("stabilizer.estimator") == 1.0
 
 
 HUGE = "1" + "0" * 400  # a JSON integer float() cannot hold (OverflowError)
