@@ -42,9 +42,11 @@ _MAX_LAG_MS = 200  # when the host cannot keep up, simulation time slips beyond 
 _PACE_LEAD_MS = 5  # a paced simulation runs at most this far past the scheduler's wake time
 _COMMANDER_PORTS = (P_COMMANDER, P_GENERIC)  # RPYT setpoints; stop and notify-stop: lock-step
 # delays them as a radio would (groundstation.sim.radio_phase)
-_PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler; the
-# hold ends at once when the link detaches, so only a scheduler that stops sleeping mid-link
-# (a stalled or crashed client) ever waits it out
+_PACE_HOLD_S = 3.0  # ... and holds there at most this long (wall s) for the scheduler: only a
+# scheduler that stops sleeping mid-link (a stalled or crashed client) ever waits it out
+_DETACHED_HOLD_S = 0.2  # once the link has detached, at most this long: a flight that has not
+# heard of a lost link yet (cflib reports it ~80 ms of wall time after it closes the link) still
+# holds time, and the vehicle's watchdog runs on soon after the flight stops sleeping
 _REST_S = 1.0  # a lingering simulation (no link) powers off after this long at rest
 _NEVER_ATTACHED_S = 10.0  # ... or this long if no link ever attached (created by its clock)
 
@@ -85,6 +87,10 @@ class Simulator:
         self._closed: set[int] = set()  # links detached whose link-down marker waits in _rx
         self._ever_attached = False
         self._cut = False
+        # lock-step: a cut's report to the link (cflib closes it, then tells the flight: ~80 ms
+        # of wall time) holds time until it is through, so the flight hears of it on time
+        self._reporting: threading.Thread | None = None
+        self._cut_wall = 0.0
         self._on_lost: Callable[[str], None] | None = None
         self._pace_ms: int | None = None  # paced: run no further than this (see pace())
         self._pace_wall = 0.0
@@ -119,14 +125,17 @@ class Simulator:
         handled every packet sent to it, and the link has taken every released packet and come
         back for more (cflib's thread has run their callbacks). Time starts held (connecting
         costs no simulated time) and moves only while the link is idle, so what the scheduler
-        and the link read never depends on thread timing. Always true at a finite speed; true
-        once a hold lapses (``_PACE_HOLD_S``), so nothing ever hangs on it."""
+        and the link read never depends on thread timing; a cut link holds it until the link
+        has been told (cflib has closed it and told the flight). Always true at a finite
+        speed; true once a hold lapses (``_PACE_HOLD_S``), so nothing ever hangs on it."""
         with self.cond:
             if not self._lockstep:
                 return True
-            lapsed = time.monotonic() - self._pace_wall > _PACE_HOLD_S
+            lapsed = time.monotonic() - self._pace_wall > self._hold_s()
             held = self._pace_ms is None or lapsed or self._published_ms >= self._pace_ms
-            return held and not self._rx and self._link_idle()
+            reporting = (self._reporting is not None and self._reporting.is_alive()
+                         and time.monotonic() - self._cut_wall < _PACE_HOLD_S)
+            return held and not self._rx and self._link_idle() and not reporting
 
     def _link_idle(self) -> bool:
         """(under ``cond``) Lock-step: nothing released waits for the link or is in its hands
@@ -145,12 +154,6 @@ class Simulator:
         """
         ms = math.ceil(until_s * 1000.0) + _PACE_LEAD_MS
         with self.cond:
-            if self._ever_attached and not self._token:
-                # The link has detached (closed, or lost: cflib closes it on the error), so no
-                # scheduler is flying this vehicle: a sleep on its clock after that (the abort
-                # path's stop after a link loss) must not hold time, or the vehicle would stand
-                # still for _PACE_HOLD_S once the runner is gone (its watchdog with it).
-                return
             if self._pace_ms is None or ms > self._pace_ms:
                 self._pace_ms = ms
             self._pace_wall = time.monotonic()
@@ -159,16 +162,25 @@ class Simulator:
     def _paced_target(self, target: int) -> int:
         """``target`` capped at the pace limit while a scheduler holds the simulation."""
         with self.cond:
-            limit, since = self._pace_ms, self._pace_wall
+            limit, since, hold_s = self._pace_ms, self._pace_wall, self._hold_s()
             behind = (self._max_backlog is not None and self._token != 0
                       and len(self._out) >= self._max_backlog
                       and time.monotonic() - self._taken_wall < _PACE_HOLD_S)
             behind = behind or (self._lockstep and not self._link_idle())
         if behind:
             return min(target, self.vehicle.firmware_ms)
-        if limit is None or time.monotonic() - since > _PACE_HOLD_S:
+        if limit is None or time.monotonic() - since > hold_s:
             return target
         return min(target, max(limit, self.vehicle.firmware_ms))
+
+    def _hold_s(self) -> float:
+        """(under ``cond``) How long a hold lasts past the scheduler's last sleep (wall s): a
+        link that has detached (closed, or lost: cflib closes it on the error) shortens it to
+        :data:`_DETACHED_HOLD_S`. Time held there keeps a flight that has not heard of the loss
+        yet on the simulation clock (it ran free before: at ``speed=inf`` the loss was recorded
+        0.3-26 s of simulated time late, a different time each run); held long, the vehicle
+        would stand still (its watchdog with it) once the flight has gone."""
+        return _DETACHED_HOLD_S if self._ever_attached and not self._token else _PACE_HOLD_S
 
     # ------------------------------------------------------------------ faults API
     def set_faults(self, *, drop: float | None = None, latency_ms: float | None = None,
@@ -205,7 +217,6 @@ class Simulator:
                 self._closed.add(token)  # before the token goes: its packets still land
                 self._token, self._on_lost = 0, None
                 self._out.clear()
-                self._pace_ms = None  # no scheduler on a detached link: time runs freely
                 self._rx.append((-1, token, b""))  # tells the simulation thread: link down
                 self._wake.set()
                 self.cond.notify_all()
@@ -307,8 +318,11 @@ class Simulator:
         self.peer.link_down()
         logger.info("sim-%s: link cut at %.3f s", self.address, self.vehicle.time_s)
         if on_lost is not None:  # off this thread: cflib's handlers may block or close the link
-            threading.Thread(target=on_lost, args=("simulated radio link lost (cut_at)",),
-                             name=f"sim-{self.address}-lost", daemon=True).start()
+            report = threading.Thread(target=on_lost, args=("simulated radio link lost (cut_at)",),
+                                      name=f"sim-{self.address}-lost", daemon=True)
+            with self.cond:
+                self._reporting, self._cut_wall = report, time.monotonic()
+            report.start()
 
     def _advance_to(self, target_ms: int) -> None:
         v, peer = self.vehicle, self.peer
