@@ -373,7 +373,10 @@ def _serve(commands_fd: int, replies_fd: int) -> None:
     station's threads and a real-time firmware in the loop get the CPU first, and an update
     that falls behind is skipped by the caller (it never holds the flight up). It leaves
     :data:`PARENT_SIGNALS` to the parent (ignored; blocked since it started) and ends quietly
-    when the parent's end of a pipe closes."""
+    when the parent's end of a pipe closes. Its log stays off the flight's terminal (each
+    update's warnings, such as a kept pole, printed there once per update): what matters
+    comes back in the replies."""
+    logging.getLogger().addHandler(logging.NullHandler())
     for sig in PARENT_SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
     if hasattr(os, "nice"):

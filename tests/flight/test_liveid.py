@@ -152,7 +152,9 @@ def thesis_flight(tmp_path_factory):
 def test_final_live_model_equals_offline_iem_of_the_recorded_samples(thesis_flight):
     result, lid, _ = thesis_flight
     assert not result.aborted, result.cause
-    assert lid.error == "" and lid.updates >= 2 and lid.failed == 0 and lid.skipped == 0
+    # (updates skipped are not checked: one is skipped when the host falls behind in wall
+    # time, which a busy machine does; the rows below are the updates that ran)
+    assert lid.error == "" and lid.updates >= 2 and lid.failed == 0
     s = check_closed_with_stop(result)
     rows = s["live_id"].data
     assert len(rows) == lid.updates and rows["final"].tolist() == [0] * (len(rows) - 1) + [1]
