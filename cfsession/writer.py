@@ -10,12 +10,24 @@ attributes exist before SWMR starts; rows are buffered in memory and appended at
 background thread: a slow card never delays the caller, the flight runner), so a
 process killed at any instant leaves a readable file that lacks at most about one second.
 A row resized but not yet written reads as NaN ``host_time`` and is dropped by the reader.
+
+Failures (``docs/session-format.md``, "When the disk fills"): HDF5 writes through
+:class:`_SessionFile`, so a write the disk refuses never reaches HDF5 (h5py cannot close a file
+whose writes keep failing). A flight's writer keeps :data:`RESERVE_BYTES` allocated ahead and
+says so (:attr:`SessionWriter.trouble`) when the disk, a quota or the file size limit will not
+give more, while the landing still fits; a write that fails all the same goes on in memory and is
+saved at close if there is room then. At close the writer checks that its path still names the
+file it wrote (a folder moved or deleted meanwhile) and reports where the session really is.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import io
 import json
 import logging
+import math
 import os
 import stat
 import tempfile
@@ -42,10 +54,12 @@ from cfsession.schema import (
     setpoints_spec,
 )
 
-__all__ = ["SessionWriter", "check_writable", "event_rows", "standard_streams"]
+__all__ = ["RESERVE_BYTES", "SessionWriter", "check_room", "check_writable", "event_rows",
+           "standard_streams"]
 
 log = logging.getLogger(__name__)
 
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
 _LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "critical": 5}
 
 
@@ -71,6 +85,231 @@ def event_rows(*, t: float, text: str, level: str = "info", source: str = "runne
     return [(t, lvl, src, piece, int(i > 0)) for i, piece in enumerate(pieces)]
 
 
+RESERVE_BYTES = 256 << 10
+"""Disk space a flight's session keeps allocated beyond what it has written (``reserve`` of
+:class:`SessionWriter`, used by the flight recorder): once the disk, a quota or the file size
+limit (``ulimit -f``) will not give more, :attr:`SessionWriter.trouble` says so while this much
+room is still there for the landing (a few seconds need about 10 KiB a second)."""
+
+_FULL = {errno.ENOSPC: "disk full", errno.EDQUOT: "disk quota exceeded",
+         errno.EFBIG: "file size limit reached"}
+"""Errors that mean no more room (and nothing else wrong): the flight can land into the reserve."""
+
+
+def _fsize_limit() -> int | None:
+    """The soft file size limit (``ulimit -f``) in bytes, ``None`` when there is none."""
+    try:
+        import resource
+    except ImportError:  # not POSIX
+        return None
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
+def _problem(exc: OSError, folder: Path) -> str:
+    """One line for a write (or an allocation) in ``folder`` that the disk refused."""
+    if exc.errno == errno.EFBIG:
+        limit = _fsize_limit()
+        if limit is not None:
+            return (f"file size limit reached writing in {folder}: a file may not grow past "
+                    f"{limit} bytes (ulimit -f)")
+        return f"file too large for the file system of {folder}"
+    if exc.errno in _FULL:
+        return f"{_FULL[exc.errno]}: no room left in {folder} ({exc.strerror or exc})"
+    return f"cannot write in {folder} ({exc.strerror or exc})"
+
+
+def check_room(path: str | os.PathLike[str], nbytes: int = 2 * RESERVE_BYTES) -> None:
+    """Allocate ``nbytes`` in the existing, empty file ``path`` (a probe: its caller removes
+    it) or say in one line (:class:`SessionError`) that the disk, a quota or the file size
+    limit will not give them."""
+    fd = os.open(path, os.O_WRONLY | _NOFOLLOW)
+    try:
+        _fallocate(fd, 0, nbytes)
+    except OSError as exc:
+        if exc.errno in _FULL:
+            raise SessionError(f"{_problem(exc, Path(path).parent)}; a flight's session needs "
+                               f"{nbytes >> 10} KiB to start") from None
+        log.debug("cannot allocate in %s: %s", path, exc)  # no allocation on this file system
+    finally:
+        os.close(fd)
+
+
+def _pwrite(fd: int, data: memoryview, pos: int) -> int:
+    if hasattr(os, "pwrite"):
+        return os.pwrite(fd, data, pos)
+    os.lseek(fd, pos, os.SEEK_SET)  # Windows: one thread writes
+    return os.write(fd, data)
+
+
+def _pread(fd: int, n: int, pos: int) -> bytes:
+    if hasattr(os, "pread"):
+        return os.pread(fd, n, pos)
+    os.lseek(fd, pos, os.SEEK_SET)
+    return os.read(fd, n)
+
+
+def _fallocate(fd: int, offset: int, length: int) -> None:
+    if not hasattr(os, "posix_fallocate"):  # macOS, Windows: no reserve
+        raise OSError(errno.EOPNOTSUPP, "posix_fallocate is not available")
+    os.posix_fallocate(fd, offset, length)
+
+
+class _SessionFile:
+    """What HDF5 writes a session through (h5py's ``fileobj`` driver): positioned reads and
+    writes on one descriptor, so that no failing write ever reaches HDF5 (h5py cannot close a
+    file whose writes keep failing: it retried for ever at exit and crashed the interpreter).
+
+    * ``reserve`` bytes beyond the end written are kept allocated (``posix_fallocate``, a
+      reserve's worth at a time). When the disk, a quota or the file size limit refuses more,
+      :attr:`problem` is set and writing goes on into what is allocated.
+    * A write that fails all the same (another process took the space, an I/O error) sets
+      :attr:`problem` and :attr:`failed`; the file's bytes are read into memory and everything
+      from then on (that write included) goes to :attr:`memory`, so HDF5 finishes the file
+      there and :class:`SessionWriter` can save it whole at close if there is room again.
+    * Past the end reads as zeros, as HDF5's own drivers read it.
+    * A signal handler that raises (Ctrl-C) while HDF5 is inside one of these calls does not
+      interrupt it: the call completes (each is idempotent) and :meth:`raise_interrupt`
+      raises the exception once HDF5 has returned.
+    """
+
+    def __init__(self, fd: int, *, reserve: int = 0) -> None:
+        self.fd, self.reserve = fd, reserve
+        self.pos = 0
+        self.size = 0  # HDF5's end of file
+        self.disk_size = 0  # bytes the descriptor's file has (written or allocated)
+        self.memory: bytearray | None = None
+        self.problem: OSError | None = None  # the first refusal (allocation or write)
+        self.failed: OSError | None = None  # the write that failed: memory since
+        self.interrupt: BaseException | None = None
+
+    # --------------------------------------------- the file object h5py's fileobj driver uses
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        base = {os.SEEK_SET: 0, os.SEEK_CUR: self.pos, os.SEEK_END: self.size}[whence]
+        self.pos = base + offset
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def read(self, n: int = -1) -> bytes:
+        n = max(self.size - self.pos, 0) if n is None or n < 0 else n
+        data = self._completed(self._read, self.pos, n)
+        self.pos += n
+        return data
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        size = len(data)
+        self._completed(self._write, self.pos, data)
+        self.pos += size
+        self.size = max(self.size, self.pos)
+        return size
+
+    def truncate(self, size: int | None = None) -> int:
+        size = self.pos if size is None else size
+        self._completed(self._resize, size)
+        self.size = size
+        return size
+
+    def flush(self) -> None:
+        """Nothing buffered here (the writer ``fsync``-s the descriptor itself)."""
+
+    # ---------------------------------------------------------------------- the work
+    def raise_interrupt(self) -> None:
+        """Raise what a signal handler raised inside one of HDF5's calls (see the class)."""
+        if self.interrupt is not None:
+            exc, self.interrupt = self.interrupt, None
+            raise exc
+
+    def image(self) -> bytes:
+        """The whole file as HDF5 wrote it."""
+        if self.memory is not None:
+            return bytes(self.memory[:self.size])
+        return self._read(0, self.size)
+
+    def _completed(self, fn: Any, *args: Any) -> Any:
+        for _ in range(100):
+            try:
+                return fn(*args)
+            except (KeyboardInterrupt, SystemExit) as exc:  # from a signal handler
+                self.interrupt = self.interrupt or exc
+        return fn(*args)
+
+    def _read(self, pos: int, n: int) -> bytes:
+        if self.memory is not None:
+            data = bytes(self.memory[pos:pos + n])
+        else:
+            data = b""
+            while len(data) < n:
+                more = _pread(self.fd, n - len(data), pos + len(data))
+                if not more:
+                    break
+                data += more
+        return data.ljust(n, b"\0")
+
+    def _write(self, pos: int, data: bytes | bytearray | memoryview) -> None:
+        end = pos + len(data)
+        if self.memory is None:
+            self._allocate(end)
+            view, done = memoryview(data).cast("B"), 0
+            try:
+                while done < len(view):
+                    n = _pwrite(self.fd, view[done:], pos + done)
+                    if n <= 0:
+                        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+                    done += n
+                self.disk_size = max(self.disk_size, end)
+                return
+            except OSError as exc:
+                self._to_memory(exc)
+        mem = self.memory
+        if len(mem) < pos:
+            mem.extend(bytes(pos - len(mem)))
+        mem[pos:end] = data
+
+    def _resize(self, size: int) -> None:
+        if self.memory is not None:
+            if size < len(self.memory):
+                del self.memory[size:]
+            else:
+                self.memory.extend(bytes(size - len(self.memory)))
+            return
+        if size <= self.disk_size:  # shorter: the reserve stays allocated until close
+            return
+        try:
+            os.ftruncate(self.fd, size)
+            self.disk_size = size
+        except OSError as exc:
+            self._to_memory(exc)
+            self._resize(size)
+
+    def _allocate(self, end: int) -> None:
+        """Keep :attr:`reserve` bytes allocated beyond ``end``."""
+        if not self.reserve or end + self.reserve <= self.disk_size:
+            return
+        want = end + 2 * self.reserve
+        try:
+            _fallocate(self.fd, self.disk_size, want - self.disk_size)
+        except OSError as exc:
+            self.reserve = 0  # writing goes on into what there is
+            if exc.errno in _FULL:
+                self.problem = self.problem or exc
+            else:  # a file system without allocation (EOPNOTSUPP): no reserve there
+                log.debug("no space reserved: %s", exc)
+            return
+        self.disk_size = want
+
+    def _to_memory(self, exc: OSError) -> None:
+        log.debug("write failed (%s); the session continues in memory", exc)
+        self.problem = self.problem or exc
+        self.failed = exc
+        try:
+            image = bytearray(self._read(0, self.size))
+        except OSError:  # unreadable too: what HDF5 reads back of it is zeros
+            image = bytearray(self.size)
+        self.memory = image
+
+
 class SessionWriter:
     """Writes one flight to ``path``; crash-safe, for one thread.
 
@@ -84,6 +323,12 @@ class SessionWriter:
     start_time_ns: wall-clock start (ns since the Unix epoch); defaults to now.
     flush_interval, fsync_interval: seconds (wall clock) between flushes / ``fsync`` calls.
     compress_on_close: on a clean close, rewrite the file with gzip-compressed chunks.
+    reserve: bytes kept allocated beyond the end written (:data:`RESERVE_BYTES` for a flight):
+        a disk that cannot give them is :attr:`trouble` while they are still there. A file
+        that cannot get them at creation is refused (:class:`SessionError`, nothing left).
+
+    A disk that fills, a file size limit, a file moved or deleted while written: see
+    :attr:`trouble`, :meth:`close`, :attr:`notes` and :attr:`saved_until`.
     """
 
     def __init__(
@@ -96,6 +341,7 @@ class SessionWriter:
         flush_interval: float = 1.0,
         fsync_interval: float = 3.0,
         compress_on_close: bool = True,
+        reserve: int = 0,
     ) -> None:
         self.path = Path(path)
         if self.path.is_symlink():
@@ -113,17 +359,63 @@ class SessionWriter:
         self.fsync_interval = fsync_interval
         self.compress_on_close = compress_on_close
         self.start_time_ns = time.time_ns() if start_time_ns is None else start_time_ns
-        self._file = h5py.File(self.path, "w", libver="latest")
-        self._datasets: dict[str, h5py.Dataset] = {}
-        self._write_header(dict(metadata or {}))
-        for spec in streams:
-            self._create_stream(spec)
-        self._file.swmr_mode = True
-        self._file.flush()
-        self._last_flush = self._last_fsync = time.monotonic()
-        self._fsync_thread: threading.Thread | None = None
+        self.notes: list[str] = []
+        self.saved_until: float | None = None
         self.closed = False
+        self._sync_error: OSError | None = None
+        self._fsync_thread: threading.Thread | None = None
+        self._newest = -math.inf  # host_time of the newest row flushed before any failure
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o666)
+        except FileExistsError:
+            raise SessionError(f"{self.path}: already exists; choose another output path"
+                               ) from None
+        self._io = _SessionFile(fd, reserve=reserve)
+        self._datasets: dict[str, h5py.Dataset] = {}
+        try:
+            self._io._allocate(0)
+            self._file = h5py.File(self._io, "w", libver="latest")
+            self._write_header(dict(metadata or {}))
+            for spec in streams:
+                self._create_stream(spec)
+            self._file.swmr_mode = True
+            self._file.flush()
+            if self.trouble:
+                need = f"; a flight's session needs {2 * reserve >> 10} KiB to start" \
+                    if reserve else ""
+                raise SessionError(f"{self.trouble}{need}")
+        except BaseException:
+            self._abandon()
+            raise
+        self._io.raise_interrupt()
+        self._last_flush = self._last_fsync = time.monotonic()
         log.info("recording session to %s", self.path)
+
+    def _abandon(self) -> None:
+        """Close and remove a file that could not be set up."""
+        with contextlib.suppress(Exception):
+            if getattr(self, "_file", None) is not None:
+                self._file.close()
+        self.closed = True
+        with contextlib.suppress(OSError):
+            os.close(self._io.fd)
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+
+    @property
+    def trouble(self) -> str:
+        """One line once the disk (a quota, the file size limit) refused this file room, or a
+        write or ``fsync`` failed; ``""`` until then. With a ``reserve`` the rows still reach
+        the file (the reserve's room); after a failed write they are kept in memory and saved
+        at close if there is room then (:meth:`close`). Whoever flies should land now."""
+        exc = self._io.problem or self._sync_error
+        return "" if exc is None else _problem(exc, self.path.parent)
+
+    @property
+    def disk_full(self) -> bool:
+        """Whether the disk or a quota refused room (not merely the file size limit)."""
+        exc = self._io.problem
+        return exc is not None and exc.errno in (errno.ENOSPC, errno.EDQUOT)
 
     # ----------------------------------------------------------------- layout
     def _write_header(self, metadata: dict[str, Any]) -> None:
@@ -198,8 +490,14 @@ class SessionWriter:
 
     def flush(self, *, fsync: bool | None = None) -> None:
         """Append buffered rows to the file and make them visible to readers."""
+        self._flush(fsync=fsync)
+        self._io.raise_interrupt()
+
+    def _flush(self, *, fsync: bool | None) -> None:
         if self.closed:
             return
+        on_disk = self._io.failed is None
+        newest = -math.inf
         for name, rows in self._buffers.items():
             if not rows:
                 continue
@@ -210,25 +508,36 @@ class SessionWriter:
             ds[n0:] = block
             self._counts[name] += len(block)
             rows.clear()
+            with contextlib.suppress(ValueError, TypeError):  # host_time is the first field
+                newest = max(newest, float(np.nanmax(block[block.dtype.names[0]])))
         self._file.flush()
+        if on_disk and self._io.failed is None:
+            self._newest = max(self._newest, newest)
         now = time.monotonic()
         self._last_flush = now
-        if fsync:
-            self._join_fsync()
-            os.fsync(self._file.id.get_vfd_handle())
-            self._last_fsync = now
-        elif fsync is None and now - self._last_fsync >= self.fsync_interval:
-            self._fsync_in_background()
-            self._last_fsync = now
+        if self._io.memory is None:
+            if fsync:
+                self._join_fsync()
+                self._sync()
+                self._last_fsync = now
+            elif fsync is None and now - self._last_fsync >= self.fsync_interval:
+                self._fsync_in_background()
+                self._last_fsync = now
+
+    def _sync(self) -> None:
+        """``fsync``; a failure (the disk, an I/O error) is :attr:`trouble`, never raised."""
+        try:
+            os.fsync(self._io.fd)
+        except OSError as exc:
+            self._sync_error = self._sync_error or exc
 
     def _fsync_in_background(self) -> None:
         """``fsync`` off the caller's thread: on a slow card it can take longer than a setpoint
         period, and the caller is the flight runner. One at a time; joined before closing."""
         if self._fsync_thread is not None and self._fsync_thread.is_alive():
             return  # the previous one is still syncing: it covers these rows too, or the next
-        self._fsync_thread = threading.Thread(
-            target=os.fsync, args=(self._file.id.get_vfd_handle(),), name="session-fsync",
-            daemon=True)
+        self._fsync_thread = threading.Thread(target=self._sync, name="session-fsync",
+                                              daemon=True)
         self._fsync_thread.start()
 
     def _join_fsync(self) -> None:
@@ -242,26 +551,137 @@ class SessionWriter:
 
     # ---------------------------------------------------------------- closing
     def close(self, *, duration_s: float | None = None, summary: Mapping | None = None) -> Path:
-        """Flush everything, mark the file closed cleanly, optionally compress; returns the path."""
+        """Flush everything, mark the file closed cleanly, optionally compress; returns the
+        path the session is at.
+
+        Before that it checks that :attr:`path` still names the file written (a folder moved
+        or deleted while the file was open: on POSIX the open file lives on). Moved: the
+        session's new name is returned. Deleted (or moved where its name cannot be found):
+        it is written again, from the open file, to :attr:`path` (the folder created again;
+        ``-2`` ... if the name is taken meanwhile). After a failed write (:attr:`trouble`) the
+        whole file, kept in memory, is saved compressed if there is room now. Each of these is
+        one line in :attr:`notes` (and a logged warning). If there is no room, the file keeps
+        what reached it, rows up to :attr:`saved_until` (``host_time``), and ``close`` raises a
+        one-line :class:`SessionError` saying so (:attr:`path` names the file); so it does
+        when the session cannot be saved anywhere (:attr:`saved_until` stays ``None``)."""
         if self.closed:
             return self.path
-        self.flush(fsync=True)
-        a = self._file.attrs
-        a["closed_cleanly"] = np.int8(1)
-        if duration_s is not None:
-            a["duration_s"] = np.float64(duration_s)
-        text = json.dumps(dict(summary or {}), sort_keys=True, default=str)
-        a["summary"] = text[:4096].ljust(4096)
-        self._file.flush()
-        self._file.close()
-        self.closed = True
-        if self.compress_on_close:
+        try:
             try:
-                _repack(self.path)
-            except Exception:  # the uncompressed file is complete: never lose it over this
-                log.exception("could not compress %s; kept uncompressed", self.path)
+                self._flush(fsync=False)
+                a = self._file.attrs
+                a["closed_cleanly"] = np.int8(1)
+                if duration_s is not None:
+                    a["duration_s"] = np.float64(duration_s)
+                text = json.dumps(dict(summary or {}), sort_keys=True, default=str)
+                a["summary"] = text[:4096].ljust(4096)
+                self._file.flush()
+            finally:
+                self.closed = True
+                with contextlib.suppress(Exception):
+                    self._file.close()
+                self._join_fsync()
+            self.path = self._settle()
+        finally:
+            with contextlib.suppress(OSError):
+                os.close(self._io.fd)
+            for note in self.notes:
+                log.warning("%s", note)
+        self._io.raise_interrupt()
         log.info("session closed: %s", self.path)
         return self.path
+
+    def _settle(self) -> Path:
+        """Where the closed session ends up (see :meth:`close`); the descriptor is still open."""
+        sink, original = self._io, self.path
+        trouble = self.trouble
+        if sink.memory is None:
+            with contextlib.suppress(OSError):
+                os.ftruncate(sink.fd, sink.size)  # the reserve is given back
+            self._sync()
+        current, gone = self._whereabouts()
+        if current is not None and current != original:
+            self.notes.append(f"{original} was moved while being written; the session is now "
+                              f"{current}")
+        if sink.memory is not None:  # a write failed: the whole file is in memory
+            return self._save_from_memory(current or original, trouble=trouble, gone=gone)
+        if current is None:  # the open file still holds it
+            return self._write_again(original, sink.image(), gone=gone,
+                                     source="the still open file")
+        if self.compress_on_close and not self.disk_full:
+            try:
+                _repack(current)
+            except Exception as exc:  # the uncompressed file is complete: never lose it
+                log.debug("compressing %s", current, exc_info=True)
+                log.warning("could not compress %s (%s); kept uncompressed", current,
+                            _one_line(exc))
+        elif self.compress_on_close:
+            log.info("%s not compressed: the disk is full", current)
+        return current
+
+    def _whereabouts(self) -> tuple[Path | None, str]:
+        """The name of the open file: :attr:`path`, or its new name when it (or its folder) was
+        moved (from ``/proc/self/fd``); ``None`` and how it went when it has none to be
+        found."""
+        fd = self._io.fd
+        st = os.fstat(fd)
+        if st.st_nlink == 0:
+            return None, "was deleted while being written (its folder removed?)"
+
+        def ours(p: Path) -> bool:
+            try:
+                cur = os.lstat(p)
+            except (OSError, ValueError):
+                return False
+            return (cur.st_dev, cur.st_ino) == (st.st_dev, st.st_ino)
+
+        unknown = "was moved while being written, to a place unknown"
+        if ours(self.path):
+            return self.path, ""
+        try:
+            name = Path(os.readlink(f"/proc/self/fd/{fd}"))
+        except OSError:  # no /proc (not Linux)
+            return None, unknown
+        return (name, "") if ours(name) else (None, unknown)
+
+    def _write_again(self, original: Path, image: bytes, *, gone: str, source: str) -> Path:
+        """``image`` (the closed file's bytes) to a new file at ``original`` (its folder made
+        again, ``-2`` ... if taken); one-line :class:`SessionError` if that fails."""
+        try:
+            target = _save_image(image, original, compress=self.compress_on_close,
+                                 mode=_mode_of(self._io.fd))
+        except Exception as exc:
+            log.debug("writing %s again", original, exc_info=True)
+            raise SessionError(f"{original} {gone}, and writing it again failed "
+                               f"({_one_line(exc)}): the session is lost") from None
+        self.notes.append(f"{original} {gone}; the session was written again, from {source}, "
+                          f"to {target}")
+        return target
+
+    def _save_from_memory(self, target: Path, *, trouble: str, gone: str) -> Path:
+        """After a failed write: the whole session from memory, compressed, to ``target``
+        (replacing what reached the disk there, or a new file if it is gone)."""
+        image, mode = self._io.image(), _mode_of(self._io.fd)
+        try:
+            if gone:
+                return self._write_again(target, image, gone=gone, source="memory")
+            saved = _save_image(image, target, compress=True, mode=mode, replace=True)
+        except SessionError:
+            raise
+        except Exception as exc:
+            log.debug("saving %s from memory", target, exc_info=True)
+            if self._newest == -math.inf:
+                raise SessionError(f"{trouble}; no row reached {target} (it holds the metadata "
+                                   f"only) and saving the session at close failed too "
+                                   f"({_one_line(exc)}): its data are lost") from None
+            self.saved_until, self.path = self._newest, target
+            raise SessionError(f"{target} holds the session up to "
+                               f"{math.floor(self._newest * 10) / 10:.1f} s only "
+                               f"({trouble}; saving the rest at close failed: "
+                               f"{_one_line(exc)})") from None
+        self.notes.append(f"{trouble}; the whole session, kept in memory since, was saved "
+                          f"(compressed) to {saved} at close")
+        return saved
 
     def __enter__(self) -> SessionWriter:
         return self
@@ -275,6 +695,98 @@ class SessionWriter:
         self.close()
 
 
+def _one_line(exc: BaseException) -> str:
+    """An exception as one short line (HDF5's messages span lines)."""
+    text = " ".join(str(exc).split()) if str(exc).strip() else type(exc).__name__
+    if isinstance(exc, OSError) and exc.strerror:
+        text = exc.strerror
+    return text[:200]
+
+
+def _mode_of(fd: int) -> int:
+    """Permission bits of the open file (the umask's, from its creation)."""
+    try:
+        return stat.S_IMODE(os.fstat(fd).st_mode) & 0o777
+    except OSError:
+        return 0o644
+
+
+def _claim_new(path: Path) -> Path:
+    """Create an empty file exclusively at ``path`` or the first free ``stem-N`` name."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for n in range(1, 1001):
+        candidate = path if n == 1 else path.with_name(f"{path.stem}-{n}{path.suffix}")
+        try:
+            os.close(os.open(candidate, os.O_CREAT | os.O_EXCL | os.O_WRONLY | _NOFOLLOW, 0o600))
+        except FileExistsError:
+            continue
+        return candidate
+    raise FileExistsError(errno.EEXIST, f"{path} and 999 other names taken")
+
+
+def _save_image(image: bytes, target: Path, *, compress: bool, mode: int,
+                replace: bool = False) -> Path:
+    """A closed session's bytes to ``target``: compressed (:func:`_copy_compressed`) or as they
+    are, through a temporary file renamed onto ``target`` (over it with ``replace``, else onto a
+    name claimed exclusively). Returns the name written."""
+    if not replace:
+        target = _claim_new(target)
+    try:
+        if compress:
+            with h5py.File(io.BytesIO(image), "r") as src:
+                tmp = _write_compressed(src, target, mode=mode)
+        else:
+            tmp = _write_tmp(target, mode=mode, fill=lambda fd: _write_all(fd, image))
+        os.replace(tmp, target)
+    except BaseException:
+        if not replace:
+            with contextlib.suppress(OSError):
+                target.unlink()
+        raise
+    return target
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _write_tmp(path: Path, *, mode: int, fill: Any) -> Path:
+    """A file created exclusively (``O_EXCL``, random name) beside ``path``, ``fill(fd)``-ed,
+    ``fsync``-ed, with ``mode``; removed again if anything fails."""
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".repack")
+    tmp = Path(tmp_name)
+    try:
+        try:
+            os.fchmod(fd, mode)
+            fill(fd)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    return tmp
+
+
+def _write_compressed(src: h5py.File, path: Path, *, mode: int) -> Path:
+    """``src`` compressed into a new temporary file beside ``path`` (:func:`_write_tmp`),
+    through :class:`_SessionFile`: a disk that fills is an :class:`OSError`, never a failing
+    HDF5 file."""
+
+    def fill(fd: int) -> None:
+        sink = _SessionFile(fd)
+        with h5py.File(sink, "w", libver="latest") as dst:
+            _copy_compressed(src, dst)
+        sink.raise_interrupt()
+        if sink.failed is not None:
+            raise sink.failed
+
+    return _write_tmp(path, mode=mode, fill=fill)
+
+
 def _repack(path: Path) -> None:
     """Rewrite ``path`` with gzip-compressed chunks, atomically: into a file created exclusively
     (``O_EXCL``, random name) in the same folder and written through that descriptor, so no
@@ -283,14 +795,9 @@ def _repack(path: Path) -> None:
     umask's, from when it was created): ``mkstemp`` makes its file owner-only."""
     st = os.lstat(path)
     mode = stat.S_IMODE(st.st_mode) & 0o777 if stat.S_ISREG(st.st_mode) else 0o600
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
-                                    suffix=".repack")
-    tmp = Path(tmp_name)
+    with h5py.File(path, "r") as src:
+        tmp = _write_compressed(src, path, mode=mode)
     try:
-        with os.fdopen(fd, "w+b") as fh:
-            os.fchmod(fh.fileno(), mode)
-            with h5py.File(path, "r") as src, h5py.File(fh, "w", libver="latest") as dst:
-                _copy_compressed(src, dst)
         if path.is_symlink():
             raise SessionError(f"{path}: became a symbolic link while closing; left as it is "
                                f"(the data are in {tmp})")

@@ -8,6 +8,14 @@
 The file name is claimed when the file is created, by an exclusive create (``O_EXCL``): with
 ``unique=True`` a name another process took first (two flights started in the same second into
 one folder) moves on to ``-2``, ``-3`` ...; an existing file is never written over.
+
+A disk that fills (or a quota, or the file size limit) never makes ``rows`` raise: the writer
+keeps :data:`~cfsession.writer.RESERVE_BYTES` allocated ahead, and the first
+:attr:`~cfsession.writer.SessionWriter.trouble` goes to ``on_trouble`` (the runner's abort) once,
+so the landing is still recorded. ``end`` never raises either: where the session ended up
+(:attr:`Recorder.path`), what happened to it (:attr:`Recorder.notes`), whether it holds only part
+of the flight (:attr:`Recorder.saved_until`) or was lost (:attr:`Recorder.error`) are for the
+caller to report.
 """
 
 from __future__ import annotations
@@ -19,12 +27,12 @@ import os
 import re
 import secrets
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from cfsession.schema import StreamSpec
-from cfsession.writer import SessionWriter
+from cfsession.writer import RESERVE_BYTES, SessionWriter, check_room
 from groundstation.errors import SessionError
 
 __all__ = ["Recorder", "check_folder", "check_tag", "session_path"]
@@ -98,14 +106,23 @@ def check_tag(tag: str) -> str:
 def session_path(*, out: str | Path, plan_name: str, tag: str = "") -> Path:
     """The first choice of file name, ``OUT/PLAN[-TAG]-YYYYmmddTHHMMSSZ.h5`` (UTC), checked before
     anything connects: the folder is created if missing, and a file of that name (or the next
-    free ``-N``) is created and removed again, so a read-only folder, a pseudo file system or an
-    over-long name is a one-line :class:`SessionError` now rather than after take-off. The
-    name itself is claimed when :meth:`Recorder.begin` creates the file."""
+    free ``-N``) is created, given the room a session starts with (twice
+    :data:`~cfsession.writer.RESERVE_BYTES`) and removed again, so a read-only folder, a pseudo
+    file system, an over-long name, a full disk or a file size limit (``ulimit -f``) too small
+    is a one-line :class:`SessionError` now rather than after take-off. The name itself is
+    claimed when :meth:`Recorder.begin` creates the file."""
     check_tag(tag)
     folder = check_folder(out)
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())  # UTC, as start_time_iso
     path = folder / "-".join([plan_name, *([tag] if tag else []), f"{stamp}.h5"])
     probe = _claim(path, unique=True)
+    try:
+        check_room(probe, 2 * RESERVE_BYTES)
+    except BaseException as exc:
+        _remove(probe)
+        if isinstance(exc, OSError):
+            raise _os_error(probe, exc) from None
+        raise
     try:
         os.unlink(probe)
     except OSError as exc:
@@ -120,17 +137,32 @@ class Recorder:
     ``unique`` the file may end up as ``stem-2.h5`` ... when ``path`` is taken by the time it is
     created (``self.path`` is the file's name once :meth:`begin` returned); without it an
     existing ``path`` is a :class:`SessionError`.
+
+    ``on_trouble(text)`` hears, once, that the disk (a quota, the file size limit) refuses the
+    file more room or a write failed (one line; the runner aborts the flight on it, and the
+    landing goes into the reserve); without it ``rows`` raises :class:`SessionError` then.
+    After :meth:`end`: :attr:`path` is where the session is (another name if its folder was
+    moved), :attr:`notes` what happened to it, :attr:`saved_until` the flight time the file
+    holds rows up to when the rest could not be saved (``None``: all of it), :attr:`error`
+    one line when it could not be saved at all.
     """
 
     def __init__(self, path: str | Path, *, flush_interval: float = 1.0,
-                 compress_on_close: bool = True, unique: bool = False) -> None:
+                 compress_on_close: bool = True, unique: bool = False,
+                 reserve: int | None = None) -> None:
         self.path = Path(path)
         self._flush_interval = flush_interval
         self._compress = compress_on_close
         self._unique = unique
+        self._reserve = RESERVE_BYTES if reserve is None else reserve
         self._writer: SessionWriter | None = None
         self._flushed_at_s: float | None = None  # flight time of the last flight-time flush
         self._flushed_wall = 0.0
+        self.on_trouble: Callable[[str], None] | None = None
+        self.trouble = ""
+        self.notes: list[str] = []
+        self.saved_until: float | None = None
+        self.error = ""
 
     def begin(self, *, streams: Sequence[StreamSpec], metadata: Mapping[str, Any]) -> None:
         """Create the file: claim its name exclusively, write it under a temporary name in the
@@ -143,7 +175,7 @@ class Recorder:
         try:
             writer = SessionWriter(tmp, streams=streams, metadata=meta,
                                    start_time_ns=start_ns, flush_interval=self._flush_interval,
-                                   compress_on_close=self._compress)
+                                   compress_on_close=self._compress, reserve=self._reserve)
         except OSError as exc:
             _remove(path, tmp)
             raise _os_error(path, exc) from None
@@ -164,6 +196,11 @@ class Recorder:
             raise RuntimeError("Recorder.rows() before begin()")
         self._writer.extend(stream, rows)
         self._flush_on_flight_time(rows)
+        if self._writer.trouble and not self.trouble:
+            self.trouble = self._writer.trouble
+            if self.on_trouble is None:
+                raise SessionError(self.trouble)
+            self.on_trouble(self.trouble)
 
     def _flush_on_flight_time(self, rows: Sequence[tuple]) -> None:
         """Flush every ``flush_interval`` of *flight* time too (the writer flushes on wall
@@ -187,12 +224,28 @@ class Recorder:
         return {} if self._writer is None else self._writer.counts()
 
     def end(self, *, summary: Mapping[str, Any]) -> None:
-        if self._writer is None:
+        """Close the session (see the class for what it tells afterwards); never raises."""
+        writer = self._writer
+        if writer is None or writer.closed:
             return
         duration = summary.get("duration_s")
-        self._writer.close(duration_s=None if duration is None else float(duration),
-                           summary=summary)
-        log.info("session written: %s", self.path)
+        try:
+            self.path = writer.close(duration_s=None if duration is None else float(duration),
+                                     summary=summary)
+        except SessionError as exc:
+            if writer.saved_until is None:
+                self.error = str(exc)
+            else:  # the file holds the flight up to then: the caller says so in its words
+                log.warning("%s", exc)
+            self.path = writer.path
+        except Exception as exc:  # unforeseen: one line here, the details at debug level
+            log.debug("closing %s", self.path, exc_info=True)
+            self.error = (f"closing {self.path} failed ({type(exc).__name__}: "
+                          f"{' '.join(str(exc).split())[:200]})")
+        self.notes, self.saved_until = list(writer.notes), writer.saved_until
+        self.trouble = self.trouble or writer.trouble
+        if not self.error:
+            log.info("session written: %s", self.path)
 
 
 def _remove(*paths: Path) -> None:

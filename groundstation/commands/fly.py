@@ -2,7 +2,10 @@
 
 Progress (phase, flight time, packets) is a ``rich`` bar on a terminal and, otherwise (``nohup``,
 CI logs), a plain line every :data:`PLAIN_EVERY_S` seconds of flight time and at each phase
-start. An aborted flight prints its cause and the session path on one line and exits 2.
+start. An aborted flight prints its cause and the session path on one line and exits 2; so
+does a session that could not be saved (``file_error`` in the summary: a disk that filled, a
+folder deleted while flying that could not be made again). A folder moved while flying moves
+the file: the summary names it where it is now, and the writer warns.
 A validation flight is the plan with a different PRBS realisation (``--advance``/``--seed``, see
 :mod:`groundstation.plan.variants`), named with ``--name`` (file name and ``tag`` metadata).
 ``--live-id`` (or a plan's ``[live_id]`` table) identifies a model while the excitation flies
@@ -189,7 +192,7 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
                  f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms "
                  "on the flight clock")
     lines += _live_id_lines(summary)
-    lines.append(f"  file {summary.get('file')}")
+    lines.append(f"  file {summary.get('file') or 'none: the session could not be saved'}")
     return lines
 
 
@@ -334,6 +337,10 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
         click.echo("the web viewer stops with this command (not started from a terminal); "
                    f"groundstation replay {result.path} --view serve shows the flight again",
                    err=True)
+    lost = result.summary.get("file_error")
+    if lost:  # the session lost, or only part of a flight that was not aborted
+        raise GroundStationError(f"flight aborted: {result.cause}; {lost}" if result.cause
+                                 else lost)
     result.raise_if_aborted()
 
 

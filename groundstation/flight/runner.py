@@ -39,7 +39,11 @@ the abort path failing included (:meth:`~groundstation.flight.link.Link.deliver_
 recorded as a row and an event. The summary counts the log packets missing up to the moment the link
 closed, so a link dead before the end shows as dropped packets. A listener that raises is dropped
 (with an event); the flight goes on. Without its recorder the flight aborts; a session file
-that cannot be created (folder, name) is a one-line error before take-off, nothing flown.
+that cannot be created (folder, name, no room) is a one-line error before take-off, nothing
+flown. A disk that fills (or the file size limit) is a cause too, told by the recorder while
+its reserve still holds the landing; where the session ended up after a moved or deleted
+folder, or that it holds part of the flight or was lost, goes into the summary (``file``,
+``file_notes``, ``file_error``) and the result (:meth:`_Runner.file_outcome`).
 
 **Sources.** A listener with ``streams()``, ``poll()``, ``finish(path=)``
 (:mod:`groundstation.flight.listeners`; live identification, :mod:`groundstation.flight.liveid`)
@@ -102,6 +106,7 @@ class _Runner:
         install_drivers()  # a link driver may bring its own clock (sim://): register it first
         self.clock = clock_for_uri(uri)
         self.journal = Journal(clock=self.clock, recorder=recorder, listeners=listeners)
+        recorder.on_trouble = self.journal.cause  # a full disk: land while the reserve lasts
         # its inbox is the only hand-off from cflib's threads: log rows, link events, aborts
         self.telemetry = Telemetry(journal=self.journal, limits=limits)
         self.start_ns = time.time_ns()
@@ -263,8 +268,32 @@ class _Runner:
             if begun:
                 journal.dispatch()
                 listeners.end(summary=summary)
-        return FlightResult(path=self.recorder.path, summary=summary,
-                            cause=journal.causes[0] if journal.causes else "")
+                if not listeners.recording:  # dropped after raising: close what it has
+                    self.recorder.end(summary=summary)
+        cause = journal.causes[0] if journal.causes else ""
+        if begun:
+            cause = self.file_outcome(summary, cause)
+        return FlightResult(path=self.recorder.path, summary=summary, cause=cause)
+
+    def file_outcome(self, summary: dict[str, Any], cause: str) -> str:
+        """The session file as it ended up, into ``summary``: ``file`` (its name now: a folder
+        moved while flying moves it; ``None`` when lost), ``file_notes`` (what happened to it),
+        ``file_error`` (one line: lost, or holding only part of a flight that was not aborted).
+        Returns the abort cause, told when the file holds only part of the flight."""
+        rec = self.recorder
+        summary["file"] = None if rec.error else str(rec.path)
+        if rec.notes:
+            summary["file_notes"] = list(rec.notes)
+        partial = ""
+        if rec.saved_until is not None:
+            until = math.floor(rec.saved_until * 10) / 10  # rows up to then at least
+            partial = (f"the file holds the flight up to {until:.1f} s only"
+                       f"{f' ({rec.trouble})' if rec.trouble and not cause else ''}")
+        if rec.error:
+            summary["file_error"] = rec.error
+        elif partial and not cause:
+            summary["file_error"] = f"{rec.path}: {partial}"
+        return f"{cause}; {partial}" if cause and partial else cause
 
     def write_params(self, changes: list[ParamChange]) -> bool:
         """The plan's ``[parameters]`` written (:func:`~.params.set_for_flight`); False after a

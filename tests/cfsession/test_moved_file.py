@@ -1,0 +1,82 @@
+"""A session's folder renamed or deleted while the file is open (on POSIX the open file lives
+on): ``close`` never names a file that is not there. Moved: the session is where it went, and
+``close`` returns that name. Deleted: it is written again from the open file to its name."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+from cfsession import SessionError, SessionWriter, open_session
+from cfsession.schema import log_block_spec
+from cfsession.writer import standard_streams
+
+pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="open files outlive their name")
+
+GYRO = log_block_spec(name="gyro", variables=[(f"gyro.{a}", "float") for a in "xyz"],
+                      period_s=0.02)
+
+
+def _writer(folder):
+    w = SessionWriter(folder / "s.h5", streams=[GYRO, *standard_streams()], flush_interval=0.0)
+    w.extend("gyro", [(k * 0.02, 20 * k, 0.1, 0.2, float(k)) for k in range(300)])
+    return w
+
+
+def _finish(w: SessionWriter) -> None:
+    w.extend("gyro", [(k * 0.02, 20 * k, 0.1, 0.2, float(k)) for k in range(300, 400)])
+
+
+def _whole(path) -> None:
+    s = open_session(path)
+    assert s.closed_cleanly and not s.problems
+    np.testing.assert_array_equal(s["gyro"].data["z"], np.arange(400))
+
+
+def test_a_renamed_folder_moves_the_session(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    out.rename(tmp_path / "moved")
+    _finish(w)
+    path = w.close()
+    assert path == tmp_path / "moved" / "s.h5" == w.path
+    assert not out.exists()
+    assert w.notes == [f"{out / 's.h5'} was moved while being written; the session is now "
+                       f"{path}"]
+    _whole(path)
+
+
+def test_a_deleted_folder_is_made_again_and_the_session_written_to_it(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    shutil.rmtree(out)
+    _finish(w)
+    assert w.close() == out / "s.h5"
+    assert len(w.notes) == 1 and "was deleted while being written" in w.notes[0]
+    assert "written again, from the still open file" in w.notes[0]
+    _whole(out / "s.h5")
+    assert [p.name for p in out.iterdir()] == ["s.h5"]
+
+
+def test_a_deleted_file_whose_name_was_taken_is_written_to_the_next_name(tmp_path):
+    w = _writer(tmp_path)
+    (tmp_path / "s.h5").unlink()
+    (tmp_path / "s.h5").write_bytes(b"another file")
+    _finish(w)
+    assert w.close() == tmp_path / "s-2.h5"
+    assert (tmp_path / "s.h5").read_bytes() == b"another file"
+    _whole(tmp_path / "s-2.h5")
+
+
+def test_a_deleted_folder_that_cannot_be_made_again_is_one_line(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    shutil.rmtree(out)
+    out.write_text("a file now")
+    with pytest.raises(SessionError, match="the session is lost") as err:
+        w.close()
+    assert str(out / "s.h5") in str(err.value) and "\n" not in str(err.value)
+    assert out.read_text() == "a file now"
