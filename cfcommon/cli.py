@@ -13,6 +13,10 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
   line and exits with 2, never a traceback; ``-h`` still shows the usage. Ctrl-C prints one
   line and exits with 130 (click would print "Aborted!" and exit 1).
 
+* :func:`output_gone`: the terminal closed (EIO) or a pipe's reader quit (EPIPE) under a
+  command's output: what remains of it goes to the null device, so the command ends with its
+  own exit status instead of a traceback.
+
 * :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
   terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
   plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``),
@@ -21,6 +25,8 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import io
 import math
 import os
@@ -35,7 +41,7 @@ from rich.markup import escape
 from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "FiniteFloat", "OneLineErrorGroup",
-           "check_output", "output_console", "output_table"]
+           "check_output", "output_console", "output_gone", "output_table"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from).
@@ -43,6 +49,22 @@ DEFAULT_INPUTS = "motors"
 DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
+
+
+def output_gone(exc: BaseException) -> bool:
+    """True when ``exc`` (raised writing to stdout or stderr) says the output has nowhere to go:
+    EIO (the terminal closed: a hang-up) or EPIPE (the reader of a pipe quit). Standard output
+    and error are then pointed at the null device, so later writes (the error line, logging,
+    the interpreter's flush at exit) neither fail nor print a traceback."""
+    if not isinstance(exc, OSError) or exc.errno not in (errno.EIO, errno.EPIPE):
+        return False
+    with contextlib.suppress(OSError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        for fd in (1, 2):
+            with contextlib.suppress(OSError):
+                os.dup2(null, fd)
+        os.close(null)
+    return True
 
 
 class _TrimmedLines(io.TextIOBase):
@@ -190,11 +212,21 @@ class OneLineErrorGroup(click.Group):
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt:  # Ctrl-C: one line and the shell's code for SIGINT
-            click.echo("error: interrupted (Ctrl-C)", err=True)
+            _say("error: interrupted (Ctrl-C)")
             sys.exit(130)
         except Exception as exc:  # click's Exit and Abort are not user errors: they propagate
             msg = self.user_error_message(exc, ctx=ctx)
             if msg is None:
                 raise
-        click.echo(f"error: {msg}", err=True)
+        _say(f"error: {msg}")
         sys.exit(2)
+
+
+def _say(line: str) -> None:
+    """The error line on stderr; a terminal or pipe that is gone takes nothing (the exit status
+    still tells)."""
+    try:
+        click.echo(line, err=True)
+    except OSError as exc:
+        if not output_gone(exc):
+            raise

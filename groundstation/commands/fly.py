@@ -26,7 +26,7 @@ from typing import Any
 
 import click
 
-from cfcommon.cli import FiniteFloat
+from cfcommon.cli import FiniteFloat, output_gone
 from cfsession.schema import StreamSpec
 from groundstation.errors import GroundStationError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
@@ -327,10 +327,15 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
             if folder.is_dir() and not any(folder.iterdir()):
                 folder.rmdir()
         raise
-    if as_json:
-        click.echo(json.dumps(result.summary, indent=2))
-    else:
-        click.echo("\n".join(summary_lines(result.summary)))
+    try:
+        if as_json:
+            click.echo(json.dumps(result.summary, indent=2))
+        else:
+            click.echo("\n".join(summary_lines(result.summary)))
+    except OSError as exc:  # the terminal closed (the hang-up that aborted the flight?): the
+        if not output_gone(exc):  # exit status below still tells how the flight ended
+            raise
+        url = None
     if url and sys.stdin.isatty():
         _keep_serving(url)
     elif url:

@@ -181,3 +181,57 @@ def test_one_hangup_delivered_twice_keeps_the_descent(sim_uri, tmp_path):
     s = check_closed_with_stop(result)
     assert not any("during the abort" in e.text for e in safety_events(s))
     check_descent(s, thrust_ceiling=34000, n=20)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork") or not hasattr(signal, "SIGHUP"),
+                    reason="POSIX terminal")
+def test_a_terminal_closed_mid_flight_aborts_and_exits_2(tmp_path):
+    """`fly` on a terminal that closes mid-flight (its window shut, SSH dropped): SIGHUP aborts
+    with the descent and the stop, the file closes cleanly, and the exit status is 2. After
+    the hang-up every write to the terminal fails (EIO); the summary's write escaped as a
+    traceback and exit 1 (review)."""
+    import pty
+    import re
+    import select
+    import sys
+    import time
+
+    from cfsession import open_session
+
+    def hovering(text: bytes) -> bool:  # the progress bar's phase column, styles removed
+        return b"\rhover " in re.sub(rb"\x1b\[[0-9;?]*[A-Za-z]", b"", text)
+
+    exe = os.path.join(os.path.dirname(sys.executable), "groundstation")
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: fly on the pty, which is its controlling terminal
+        try:
+            os.execv(exe, [exe, "fly", "hover-check", "--uri", "sim://0?speed=2&seed=1",
+                           "--out", str(tmp_path)])
+        finally:
+            os._exit(127)
+    seen, deadline = b"", time.monotonic() + 60
+    try:
+        while not hovering(seen) and time.monotonic() < deadline:
+            ready, _, _ = select.select([fd], [], [], 0.2)
+            if ready:
+                try:
+                    seen += os.read(fd, 4096)
+                except OSError:  # the child has closed the terminal: it ended
+                    break
+    finally:
+        os.close(fd)  # the terminal closes: SIGHUP to its session
+    assert hovering(seen), seen[-500:]
+    waited = 0.0
+    while (done := os.waitpid(pid, os.WNOHANG))[0] == 0 and waited < 60:
+        time.sleep(0.1)
+        waited += 0.1
+    if done[0] == 0:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        pytest.fail("fly did not end after its terminal closed")
+    assert os.waitstatus_to_exitcode(done[1]) == 2
+    [path] = tmp_path.glob("*.h5")
+    s = open_session(path)
+    assert s.closed_cleanly and s["setpoints"].data["thrust"][-1] == 0
+    texts = [e.text for e in s.events()]
+    assert "SIGHUP received" in texts and any("stop setpoint sent" in t for t in texts)
