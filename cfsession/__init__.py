@@ -8,9 +8,11 @@ session can be read with numpy and h5py alone.
 >>> s["gyro"].values().shape                                         # doctest: +SKIP
 
 :mod:`cfsession.schema` (stream kinds, fields, units, version), :mod:`cfsession.writer`
-(:class:`SessionWriter`, the only writer), :mod:`cfsession.reader` (:func:`open_session`, the only
-reader), :mod:`cfsession.channels` (which log variables channel names select, for offline and
-live identification alike), :mod:`cfsession.errors` (:class:`SessionError`).
+(:class:`SessionWriter`, the only writer; it writes through :mod:`cfsession.diskfile` and
+settles the closed file with :mod:`cfsession.saving`), :mod:`cfsession.reader`
+(:func:`open_session`, the only reader), :mod:`cfsession.channels` (which log variables channel
+names select, for offline and live identification alike), :mod:`cfsession.errors`
+(:class:`SessionError`).
 """
 
 from importlib.metadata import PackageNotFoundError, version
