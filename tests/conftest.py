@@ -5,11 +5,13 @@ the loop (a ``sitl`` parameter, or anything under ``tests/sitl/``) goes to one x
 most one real-time firmware runs at a time and the other worker keeps the rest of the suite;
 that scope is sent first, being the longest, then the longest other files. Connects cache the
 firmware's TOCs in a folder of the run (:func:`pytest_configure`). Each xdist worker gives
-BLAS its share of the cores (:func:`_blas_threads`).
+BLAS its share of the cores (:func:`_blas_threads`); a worker lowers its own priority once it
+runs a test outside the firmware's scope (:func:`pytest_runtest_setup`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -61,6 +63,28 @@ the collection order put several of them near the end."""
 def _is_sitl(nodeid: str) -> bool:
     path, _, params = nodeid.partition("[")
     return path.startswith("tests/sitl/") or "sitl" in params.rstrip("]").split("-")
+
+
+_NICE = 10
+"""Niceness a worker takes for the tests outside the firmware's scope (and the commands they
+start): the real-time firmware and the ground station flying it get the CPU first when both
+workers want it."""
+_niced = False
+
+
+def pytest_runtest_setup(item):
+    """In an xdist worker, lower this process's priority (:data:`_NICE`, once: it cannot be
+    raised again unprivileged) at its first test outside the firmware's scope. The firmware
+    runs in real time, so a flight whose host starves it for 0.5 s reads as link loss (a
+    signal test aborted on "no log packet for 0.68 s" beside two CPU-bound processes); the
+    other tests count simulated time or wait for conditions, and only run slower. The
+    firmware's scope runs first in its worker (:func:`pytest_xdist_make_scheduler`), so only
+    the other worker is lowered while it runs."""
+    global _niced
+    if os.environ.get("PYTEST_XDIST_WORKER") and not _is_sitl(item.nodeid) and not _niced:
+        _niced = True
+        with contextlib.suppress(OSError):  # not allowed: the tests run at the usual priority
+            os.nice(_NICE)
 
 
 def pytest_xdist_make_scheduler(config, log):
