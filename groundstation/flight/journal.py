@@ -6,8 +6,10 @@ polls the sources and hands every pending row to the listeners (:class:`Listener
 first). Times are flight time: seconds on the flight clock since the journal began.
 
 **Causes.** The first cause recorded (:meth:`Journal.cause`) is the flight's abort cause; later
-ones are recorded as events "during the abort". A listener that raises is dropped with an event
-and the flight goes on; the recorder raising is a cause (a flight that is not recorded aborts).
+ones are recorded as events "during the abort" (and end the descent: the operator's second
+signal); :meth:`Journal.trouble` (a full disk, a failed recording) never ends a descent. A listener
+that raises is dropped with an event and the flight goes on; the recorder raising is trouble (a
+flight that is not recorded aborts).
 """
 
 from __future__ import annotations
@@ -53,6 +55,17 @@ class Journal:
         self.event(text if len(self.causes) == 1 else f"during the abort: {text}",
                    level=level, source="safety")
 
+    def trouble(self, text: str) -> None:
+        """A reason to end the flight that is no reason to hurry an abort already under way (a
+        disk that refuses room, a recording that failed): the flight's cause when it is the
+        first, else an event "during the abort". A new cause ends the descent at once (the
+        operator's second signal); this never does, so the landing the reserve was kept for
+        is flown."""
+        if self.causes:
+            self.event(f"during the abort: {text}", level="error", source="safety")
+        else:
+            self.cause(text)
+
     def phase(self, *, phase_id: int, name: str, kind: str, planned_s: float) -> None:
         self.pending["phases"].append((self.now(), phase_id, name.encode()[:32],
                                        kind.encode()[:16]))
@@ -60,7 +73,7 @@ class Journal:
 
     def _listener_failed(self, what: str, recorder: bool) -> None:
         if recorder:
-            self.cause(f"recording failed: {what}")
+            self.trouble(f"recording failed: {what}")
         else:
             self.event(f"{what}; listener dropped, flight continues", level="error")
 

@@ -106,7 +106,7 @@ class _Runner:
         install_drivers()  # a link driver may bring its own clock (sim://): register it first
         self.clock = clock_for_uri(uri)
         self.journal = Journal(clock=self.clock, recorder=recorder, listeners=listeners)
-        recorder.on_trouble = self.journal.cause  # a full disk: land while the reserve lasts
+        recorder.on_trouble = self.journal.trouble  # a full disk: land while the reserve lasts
         # its inbox is the only hand-off from cflib's threads: log rows, link events, aborts
         self.telemetry = Telemetry(journal=self.journal, limits=limits)
         self.start_ns = time.time_ns()

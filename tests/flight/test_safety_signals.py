@@ -235,3 +235,41 @@ def test_a_terminal_closed_mid_flight_aborts_and_exits_2(tmp_path):
     assert s.closed_cleanly and s["setpoints"].data["thrust"][-1] == 0
     texts = [e.text for e in s.events()]
     assert "SIGHUP received" in texts and any("stop setpoint sent" in t for t in texts)
+
+
+def test_a_full_disk_during_the_descent_does_not_cut_it_short(sim_uri, tmp_path, monkeypatch):
+    """The disk refusing the file room during an abort's descent is an event, not a second
+    cause: the descent the reserve was kept for is flown in full. As a cause it ended the
+    descent like an operator's second Ctrl-C, and the stop came at hover thrust, 10 of the 20
+    descent setpoints flown (review)."""
+    from cfsession.writer import SessionWriter
+
+    plan, uri = _pitch_only(), sim_uri()
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    full = {"now": False}
+    monkeypatch.setattr(SessionWriter, "trouble", property(
+        lambda self: "disk full: no room left in the test's folder" if full["now"] else ""))
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + 20:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    class DiskFillsInTheDescent:
+        descent = 0
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints":
+                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+                full["now"] = full["now"] or self.descent >= 3
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook,
+                      listeners=[DiskFillsInTheDescent()])
+    assert result.aborted and result.cause == "SIGINT received"
+    wait_for_stop(uri)
+    s = check_closed_with_stop(result)
+    check_descent(s, thrust_ceiling=34000, n=20)
+    texts = [e.text for e in safety_events(s)]
+    assert any(t.startswith("during the abort: disk full") for t in texts), texts
