@@ -24,6 +24,35 @@ def _pitch_only():
     return plan_variant("pitch-only", **{f"{_SETTLE}3.0": f"{_SETTLE}1.0"})
 
 
+class InTheDescent:
+    """A listener that does ``action()`` once the abort's descent has streamed ``after``
+    setpoints (tick -1, thrust above 0)."""
+
+    def __init__(self, *, after: int, action) -> None:
+        self.after, self.action, self.descent, self.done = after, action, 0, False
+
+    def begin(self, **_kw) -> None: ...
+    def end(self, **_kw) -> None: ...
+
+    def rows(self, *, stream, rows) -> None:
+        if stream == "setpoints":
+            self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+            if self.descent >= self.after and not self.done:
+                self.done = True
+                self.action()
+
+
+def signal_in_excitation(plan, sig: int, *, after: int = 20):
+    """A tick hook that sends ``sig`` to this process ``after`` ticks into the excitation."""
+    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+
+    def hook(k: int) -> None:
+        if k == excitation.start_tick + after:
+            os.kill(os.getpid(), sig)
+
+    return hook
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM,
                                  *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])])
 def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
@@ -74,29 +103,10 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
 
 def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
     plan, uri = _pitch_only(), flight_uri()
-    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    hook = signal_in_excitation(plan, signal.SIGINT)
 
-    def hook(k: int) -> None:
-        if k == excitation.start_tick + 20:
-            os.kill(os.getpid(), signal.SIGINT)
-
-    class SecondCtrlC:
-        """Presses Ctrl-C again once the descent has streamed a few setpoints."""
-
-        descent, pressed = 0, False
-
-        def begin(self, **_kw) -> None: ...
-        def end(self, **_kw) -> None: ...
-
-        def rows(self, *, stream, rows) -> None:
-            if stream == "setpoints":
-                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
-                if self.descent >= 5 and not self.pressed:
-                    self.pressed = True
-                    os.kill(os.getpid(), signal.SIGINT)
-
-    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook,
-                      listeners=[SecondCtrlC()])
+    second = InTheDescent(after=5, action=lambda: os.kill(os.getpid(), signal.SIGINT))
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook, listeners=[second])
     assert result.aborted
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
@@ -130,11 +140,7 @@ def test_a_flight_started_under_nohup_outlives_the_hangup(sim_uri, tmp_path):
     a closed terminal: it stays ignored while flying (the review found the flight's handler
     aborting it at the first hangup)."""
     plan, uri = _pitch_only(), sim_uri()
-    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
-
-    def hook(k: int) -> None:
-        if k == excitation.start_tick + 20:
-            os.kill(os.getpid(), signal.SIGHUP)
+    hook = signal_in_excitation(plan, signal.SIGHUP)
 
     previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
     try:
@@ -152,30 +158,11 @@ def test_one_hangup_delivered_twice_keeps_the_descent(sim_uri, tmp_path):
     jobs): that is one hangup, not an operator's second request, so the descent is flown in
     full (a second SIGINT stops it at once: the test above)."""
     plan, uri = _pitch_only(), sim_uri()
-    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
+    hook = signal_in_excitation(plan, signal.SIGHUP)
 
-    def hook(k: int) -> None:
-        if k == excitation.start_tick + 20:
-            os.kill(os.getpid(), signal.SIGHUP)
-
-    class SecondHangup:
-        """The same hangup again once the descent has streamed a few setpoints."""
-
-        descent, sent = 0, False
-
-        def begin(self, **_kw) -> None: ...
-        def end(self, **_kw) -> None: ...
-
-        def rows(self, *, stream, rows) -> None:
-            if stream == "setpoints":
-                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
-                if self.descent >= 3 and not self.sent:
-                    self.sent = True
-                    os.kill(os.getpid(), signal.SIGHUP)
-
-    second = SecondHangup()
+    second = InTheDescent(after=3, action=lambda: os.kill(os.getpid(), signal.SIGHUP))
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook, listeners=[second])
-    assert second.sent
+    assert second.done
     assert result.aborted and "SIGHUP" in result.cause
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
@@ -245,28 +232,12 @@ def test_a_full_disk_during_the_descent_does_not_cut_it_short(sim_uri, tmp_path,
     from cfsession.writer import SessionWriter
 
     plan, uri = _pitch_only(), sim_uri()
-    excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     full = {"now": False}
     monkeypatch.setattr(SessionWriter, "trouble", property(
         lambda self: "disk full: no room left in the test's folder" if full["now"] else ""))
-
-    def hook(k: int) -> None:
-        if k == excitation.start_tick + 20:
-            os.kill(os.getpid(), signal.SIGINT)
-
-    class DiskFillsInTheDescent:
-        descent = 0
-
-        def begin(self, **_kw) -> None: ...
-        def end(self, **_kw) -> None: ...
-
-        def rows(self, *, stream, rows) -> None:
-            if stream == "setpoints":
-                self.descent += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
-                full["now"] = full["now"] or self.descent >= 3
-
-    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook,
-                      listeners=[DiskFillsInTheDescent()])
+    fills = InTheDescent(after=3, action=lambda: full.update(now=True))
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[fills],
+                      tick_hook=signal_in_excitation(plan, signal.SIGINT))
     assert result.aborted and result.cause == "SIGINT received"
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
