@@ -8,7 +8,8 @@
 # (sitl-socketlink-nodrop.patch: the socket link dropped ~5 % of cflib's requests, which hangs
 # cflib's UDP driver, as it never resends; sitl-socketlink-loopback.patch: the firmware's socket
 # binds 127.0.0.1, not every interface; sitl-kalman-pose-residual.patch: upstream's fix #1531 of
-# the Kalman filter's external-pose attitude residual, which diverged beyond |yaw| = 90 deg).
+# the Kalman filter's external-pose attitude residual, which diverged beyond |yaw| = 90 deg;
+# sitl-idle-sleep.patch: an idle hook that sleeps a tick, as the idle task spun half a core).
 set -eu
 HERE=$(cd "$(dirname "$0")" && pwd)
 SRC=${SITL_SRC:-../shared/sitl}
