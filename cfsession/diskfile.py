@@ -23,7 +23,8 @@ from typing import Any
 
 from cfsession.errors import SessionError
 
-__all__ = ["OPEN_FLAGS", "RESERVE_BYTES", "SessionFile", "check_room", "disk_problem"]
+__all__ = ["OPEN_FLAGS", "RESERVE_BYTES", "SessionFile", "check_room", "check_writable",
+           "disk_problem"]
 
 log = logging.getLogger("cfsession.writer")  # the writer's file: logged as the writer
 
@@ -53,8 +54,9 @@ def _fsize_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
-def disk_problem(exc: OSError, folder: Path) -> str:
-    """One line for a write (or an allocation) in ``folder`` that the disk refused."""
+def disk_problem(exc: OSError, folder: Path, *, wanted: int = 0) -> str:
+    """One line for a write (or an allocation of ``wanted`` bytes) in ``folder`` that the disk
+    refused."""
     if exc.errno == errno.EFBIG:
         limit = _fsize_limit()
         if limit is not None:
@@ -62,7 +64,8 @@ def disk_problem(exc: OSError, folder: Path) -> str:
                     f"{limit} bytes (ulimit -f)")
         return f"file too large for the file system of {folder}"
     if exc.errno in _FULL:
-        return f"{_FULL[exc.errno]}: no room left in {folder} ({exc.strerror or exc})"
+        room = f" for the session's next {wanted >> 10} KiB" if wanted else ""
+        return f"{_FULL[exc.errno]}: no room left in {folder}{room} ({exc.strerror or exc})"
     return f"cannot write in {folder} ({exc.strerror or exc})"
 
 
@@ -80,6 +83,19 @@ def check_room(path: str | os.PathLike[str], nbytes: int = 2 * RESERVE_BYTES) ->
         log.debug("cannot allocate in %s: %s", path, exc)  # no allocation on this file system
     finally:
         os.close(fd)
+
+
+def check_writable(path: str | os.PathLike[str]) -> None:
+    """Fail early (one line) if a session cannot be created at ``path``."""
+    p = Path(path)
+    if p.exists():
+        raise SessionError(f"{p}: already exists; choose another output path")
+    parent = p.parent if str(p.parent) else Path(".")
+    probe = parent
+    while not probe.exists():
+        probe = probe.parent
+    if not os.access(probe, os.W_OK):
+        raise SessionError(f"{parent}: not writable; choose another --out folder")
 
 
 def _pwrite(fd: int, data: memoryview, pos: int) -> int:
@@ -110,10 +126,11 @@ class SessionFile:
     * ``reserve`` bytes beyond the end written are kept allocated (``posix_fallocate``, a
       reserve's worth at a time). When the disk, a quota or the file size limit refuses more,
       :attr:`problem` is set and writing goes on into what is allocated.
-    * A write that fails all the same (another process took the space, an I/O error) sets
-      :attr:`problem` and :attr:`failed`; the file's bytes are read into memory and everything
-      from then on (that write included) goes to :attr:`memory`, so HDF5 finishes the file
-      there and the writer can save it whole at close if there is room again.
+    * A write (or a read back) that fails all the same (another process took the space, an
+      I/O error) sets :attr:`problem` and :attr:`failed`; the file's bytes are read into
+      memory (zeros for what cannot be read) and everything from then on (that write
+      included) goes to :attr:`memory`, so HDF5 finishes the file there and the writer can
+      save it whole at close if there is room again.
     * Past the end reads as zeros, as HDF5's own drivers read it.
     * A signal handler that raises (Ctrl-C) while HDF5 is inside one of these calls does not
       interrupt it: the call completes (each is idempotent) and :meth:`raise_interrupt`
@@ -129,6 +146,7 @@ class SessionFile:
         self.disk_size = 0  # bytes the descriptor's file has (written or allocated)
         self.memory: bytearray | None = None
         self.problem: OSError | None = None  # the first refusal (allocation or write)
+        self.refused = 0  # bytes the allocation that was the first refusal asked for
         self.failed: OSError | None = None  # the write that failed: memory since
         self.interrupt: BaseException | None = None
 
@@ -143,7 +161,7 @@ class SessionFile:
 
     def read(self, n: int = -1) -> bytes:
         n = max(self.size - self.pos, 0) if n is None or n < 0 else n
-        data = self._completed(self._read, self.pos, n)
+        data = self._completed(self._read_back, self.pos, n)
         self.pos += n
         return data
 
@@ -208,6 +226,15 @@ class SessionFile:
                 data += more
         return data.ljust(n, b"\0")
 
+    def _read_back(self, pos: int, n: int) -> bytes:
+        """What HDF5 reads: a read the disk refuses (EIO) is a failed write's path (memory
+        from then on, :attr:`problem`), never an error inside HDF5."""
+        try:
+            return self._read(pos, n)
+        except OSError as exc:
+            self._to_memory(exc)
+            return self._read(pos, n)
+
     def _write(self, pos: int, data: bytes | bytearray | memoryview) -> None:
         end = pos + len(data)
         if self.memory is None:
@@ -254,18 +281,20 @@ class SessionFile:
         except OSError as exc:
             self.reserve = 0  # writing goes on into what there is
             if exc.errno in _FULL:
-                self.problem = self.problem or exc
+                if self.problem is None:
+                    self.problem, self.refused = exc, want - self.disk_size
             else:  # a file system without allocation (EOPNOTSUPP): no reserve there
                 log.debug("no space reserved: %s", exc)
             return
         self.disk_size = want
 
     def _to_memory(self, exc: OSError) -> None:
-        log.debug("write failed (%s); the session continues in memory", exc)
+        log.debug("writing failed (%s); the session continues in memory", exc)
         self.problem = self.problem or exc
         self.failed = exc
-        try:
-            image = bytearray(self._read(0, self.size))
-        except OSError:  # unreadable too: what HDF5 reads back of it is zeros
-            image = bytearray(self.size)
+        image, step = bytearray(self.size), 1 << 16
+        for pos in range(0, self.size, step):  # what cannot be read back: zeros
+            with contextlib.suppress(OSError):
+                part = self._read(pos, min(step, self.size - pos))
+                image[pos:pos + len(part)] = part
         self.memory = image

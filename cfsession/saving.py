@@ -4,32 +4,29 @@ where it was deleted, or saved from memory after a failed write.
 :class:`Settlement` is the last step of :meth:`cfsession.writer.SessionWriter.close`
 (``docs/session-format.md``, "A folder moved or deleted while writing" and "When the disk
 fills"): it checks that the writer's path still names the file it wrote and puts the session's
-bytes where they belong. Every copy is written atomically: into a file created exclusively
-(``O_EXCL``, random name) in the target's folder, written through that descriptor (through
-:class:`~cfsession.diskfile.SessionFile`, so a disk that fills is an :class:`OSError`, never a
-failing HDF5 file), ``fsync``-ed, then renamed onto the target; a planted symbolic link is never
-followed.
+bytes where they belong. Every copy is compressed in memory, then written atomically
+(:mod:`cfsession.copies`): into a file created exclusively (``O_EXCL``, random name) in the
+target's folder, ``fsync``-ed, renamed onto the target; a planted symbolic link is never
+followed. Two fall-backs keep a session that would otherwise be lost: saved from memory with no
+room for a second copy, it is written over the partial file in place if it fits there; written
+again with its folder impossible to make again (a file took its name), it goes to the nearest
+folder that takes it (:func:`fallbacks`).
 """
 
 from __future__ import annotations
 
-import contextlib
-import errno
-import io
 import logging
 import math
 import os
 import stat
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
-import h5py
-
-from cfsession.diskfile import OPEN_FLAGS, SessionFile
+from cfsession.copies import compressed_image, overwrite_in_place, repack, save_image
+from cfsession.diskfile import SessionFile
 from cfsession.errors import SessionError
 
-__all__ = ["Settlement", "whereabouts"]
+__all__ = ["Settlement", "fallbacks", "whereabouts"]
 
 log = logging.getLogger("cfsession.writer")  # the writer's close: logged as the writer
 
@@ -52,9 +49,8 @@ class Settlement:
         self.saved_until: float | None = None
         self.mode = _mode_of(sink.fd)
 
-    def settle(self, *, trouble: str, disk_full: bool) -> Path:
-        """Where the closed session ends up; ``trouble``: the writer's, ``disk_full``: whether
-        the disk or a quota refused room (no compressed copy is tried then)."""
+    def settle(self, *, trouble: str) -> Path:
+        """Where the closed session ends up; ``trouble``: the writer's."""
         sink, original = self.sink, self.path
         current, gone = whereabouts(sink.fd, original)
         if current is not None and current != original:
@@ -65,40 +61,73 @@ class Settlement:
         if current is None:  # the open file still holds it
             return self._write_again(original, gone=gone, source="the still open file")
         sink.close()  # Windows replaces no open file
-        if self.compress and not disk_full:
+        if self.compress:
             try:
-                _repack(current)
+                skipped = repack(current)
             except Exception as exc:  # the uncompressed file is complete: never lose it
                 log.debug("compressing %s", current, exc_info=True)
                 log.warning("could not compress %s (%s); kept uncompressed", current,
                             _one_line(exc))
-        elif self.compress:
-            log.info("%s not compressed: the disk is full", current)
+            else:
+                if skipped:
+                    log.info("%s not compressed: %s", current, skipped)
         return current
 
     def _write_again(self, original: Path, *, gone: str, source: str) -> Path:
         """The closed file's bytes to a new file at ``original`` (its folder made again, ``-2``
-        ... if taken); one-line :class:`SessionError` if that fails."""
+        ... if taken), else in the nearest folder that takes it (:func:`fallbacks`); one-line
+        :class:`SessionError` if none does."""
         try:
-            target = _save_image(self.sink.image(), original, compress=self.compress,
-                                 mode=self.mode)
+            image = self.sink.image()
+            data = compressed_image(image) if self.compress else image
         except Exception as exc:
-            log.debug("writing %s again", original, exc_info=True)
+            log.debug("reading %s back", original, exc_info=True)
             raise SessionError(f"{original} {gone}, and writing it again failed "
                                f"({_one_line(exc)}): the session is lost") from None
-        self.notes.append(f"{original} {gone}; the session was written again, from {source}, "
-                          f"to {target}")
-        return target
+        first: Exception | None = None
+        for folder in [original.parent, *fallbacks(original)]:
+            try:
+                target = save_image(data, folder / original.name, mode=self.mode)
+            except Exception as exc:
+                log.debug("writing %s again in %s", original, folder, exc_info=True)
+                first = first or exc
+                continue
+            if first is None:
+                self.notes.append(f"{original} {gone}; the session was written again, from "
+                                  f"{source}, to {target}")
+            else:
+                self.notes.append(f"{original} {gone}, and writing it again there failed "
+                                  f"({_one_line(first)}); the session was written, from "
+                                  f"{source}, to {target} instead")
+            return target
+        raise SessionError(f"{original} {gone}, and writing it again failed "
+                           f"({_one_line(first)}), here or in another folder: the session is "
+                           f"lost") from None
 
     def _save_from_memory(self, target: Path, *, trouble: str, gone: str) -> Path:
         """After a failed write: the whole session from memory, compressed, to ``target``
-        (replacing what reached the disk there, or a new file if it is gone)."""
+        (replacing what reached the disk there, through a copy beside it or, with no room for
+        one, over it in place; or a new file if it is gone)."""
         if gone:
             return self._write_again(target, gone=gone, source="memory")
+        ids = _ids_of(self.sink.fd)
         self.sink.close()  # Windows replaces no open file
+        how = "(compressed)"
         try:
-            saved = _save_image(self.sink.image(), target, compress=True, mode=self.mode,
-                                replace=True)
+            data = compressed_image(self.sink.image())
+            try:
+                saved = save_image(data, target, mode=self.mode, replace=True)
+            except OSError as exc:  # no room for a second copy: over the partial file
+                log.debug("saving %s from memory beside it", target, exc_info=True)
+                if ids is None:
+                    raise
+                try:
+                    overwrite_in_place(target, data, ids=ids)
+                except OSError as again:
+                    raise OSError(again.errno, f"{_one_line(exc)}; over the partial file: "
+                                               f"{_one_line(again)}") from None
+                saved, how = target, (f"(compressed, {len(data) >> 10} KiB) over the partial "
+                                      f"file, no room being left for a copy beside it,")
         except Exception as exc:
             log.debug("saving %s from memory", target, exc_info=True)
             if self.newest == -math.inf:
@@ -111,8 +140,40 @@ class Settlement:
                                f"({trouble}; saving the rest at close failed: "
                                f"{_one_line(exc)})") from None
         self.notes.append(f"{trouble}; the whole session, kept in memory since, was saved "
-                          f"(compressed) to {saved} at close")
+                          f"{how} to {saved} at close")
         return saved
+
+
+def fallbacks(original: Path) -> list[Path]:
+    """Folders to put a session in when its own (``original``'s) cannot be made again: the
+    nearest existing folder above it if writable, the current folder, the temporary folder."""
+    found: list[Path] = []
+    for parent in original.parent.parents:
+        if parent.is_dir():
+            found.append(parent)
+            break
+    found += [Path.cwd(), Path(tempfile.gettempdir())]
+    out: list[Path] = []
+    for folder in found:
+        if (os.access(folder, os.W_OK | os.X_OK) and not _same(folder, original.parent)
+                and not any(_same(folder, f) for f in out)):
+            out.append(folder)
+    return out
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _ids_of(fd: int) -> tuple[int, int] | None:
+    try:
+        st = os.fstat(fd)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 def whereabouts(fd: int, path: Path) -> tuple[Path | None, str]:
@@ -156,127 +217,3 @@ def _mode_of(fd: int) -> int:
         return 0o644
 
 
-def _claim_new(path: Path) -> Path:
-    """Create an empty file exclusively at ``path`` or the first free ``stem-N`` name."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    for n in range(1, 1001):
-        candidate = path if n == 1 else path.with_name(f"{path.stem}-{n}{path.suffix}")
-        try:
-            os.close(os.open(candidate, os.O_CREAT | os.O_EXCL | os.O_WRONLY | OPEN_FLAGS,
-                             0o600))
-        except FileExistsError:
-            continue
-        return candidate
-    raise FileExistsError(errno.EEXIST, f"{path} and 999 other names taken")
-
-
-def _save_image(image: bytes, target: Path, *, compress: bool, mode: int,
-                replace: bool = False) -> Path:
-    """A closed session's bytes to ``target``: compressed (:func:`_copy_compressed`) or as they
-    are, through a temporary file renamed onto ``target`` (over it with ``replace``, else onto a
-    name claimed exclusively). Returns the name written."""
-    if not replace:
-        target = _claim_new(target)
-    try:
-        if compress:
-            with h5py.File(io.BytesIO(image), "r") as src:
-                tmp = _write_compressed(src, target, mode=mode)
-        else:
-            tmp = _write_tmp(target, mode=mode, fill=lambda fd: _write_all(fd, image))
-        os.replace(tmp, target)
-    except BaseException:
-        if not replace:
-            with contextlib.suppress(OSError):
-                target.unlink()
-        raise
-    return target
-
-
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        view = view[os.write(fd, view):]
-
-
-def _write_tmp(path: Path, *, mode: int, fill: Callable[[int], None]) -> Path:
-    """A file created exclusively (``O_EXCL``, random name) beside ``path``, ``fill(fd)``-ed,
-    ``fsync``-ed, with ``mode``; removed again if anything fails."""
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".repack")
-    tmp = Path(tmp_name)
-    try:
-        try:
-            if hasattr(os, "fchmod"):
-                os.fchmod(fd, mode)
-            else:  # Windows before Python 3.13
-                os.chmod(tmp, mode)
-            fill(fd)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    return tmp
-
-
-def _write_compressed(src: h5py.File, path: Path, *, mode: int) -> Path:
-    """``src`` compressed into a new temporary file beside ``path`` (:func:`_write_tmp`),
-    through :class:`~cfsession.diskfile.SessionFile`: a disk that fills is an
-    :class:`OSError`, never a failing HDF5 file."""
-
-    def fill(fd: int) -> None:
-        sink = SessionFile(fd)
-        with h5py.File(sink, "w", libver="latest") as dst:
-            _copy_compressed(src, dst)
-        sink.raise_interrupt()
-        if sink.failed is not None:
-            raise sink.failed
-
-    return _write_tmp(path, mode=mode, fill=fill)
-
-
-def _repack(path: Path) -> None:
-    """Rewrite ``path`` with gzip-compressed chunks, atomically: into a file created exclusively
-    (``O_EXCL``, random name) in the same folder and written through that descriptor, so no
-    name planted beforehand (a symlink) is ever followed; then renamed over ``path``, unless
-    ``path`` has become a symlink meanwhile. The rewrite keeps ``path``'s permission bits (the
-    umask's, from when it was created): ``mkstemp`` makes its file owner-only."""
-    st = os.lstat(path)
-    mode = stat.S_IMODE(st.st_mode) & 0o777 if stat.S_ISREG(st.st_mode) else 0o600
-    with h5py.File(path, "r") as src:
-        tmp = _write_compressed(src, path, mode=mode)
-    try:
-        if path.is_symlink():
-            raise SessionError(f"{path}: became a symbolic link while closing; left as it is "
-                               f"(the data are in {tmp})")
-        os.replace(tmp, path)
-    except BaseException:
-        if tmp.exists() and not path.is_symlink():
-            tmp.unlink()
-        raise
-
-
-def _copy_compressed(src: h5py.File, dst: h5py.File) -> None:
-    """Every stream of ``src`` into ``dst`` with gzip-compressed chunks, attributes kept."""
-    for key, value in src.attrs.items():
-        dst.attrs[key] = value
-    if isinstance(value := src.attrs.get("summary"), str):
-        dst.attrs["summary"] = value.rstrip()
-    for name, group in src.items():
-        out = dst.create_group(name)
-        for key, value in group.attrs.items():
-            out.attrs[key] = value
-        data = group["data"]
-        ds = out.create_dataset(
-            "data",
-            data=data[()],
-            maxshape=(None,),
-            chunks=data.chunks,
-            compression="gzip",
-            compression_opts=4,
-            shuffle=True,
-            fillvalue=data.fillvalue,
-        )
-        for key, value in data.attrs.items():
-            ds.attrs[key] = value

@@ -40,7 +40,14 @@ import h5py
 import numpy as np
 
 from cfsession import __version__
-from cfsession.diskfile import OPEN_FLAGS, RESERVE_BYTES, SessionFile, check_room, disk_problem
+from cfsession.diskfile import (
+    OPEN_FLAGS,
+    RESERVE_BYTES,
+    SessionFile,
+    check_room,
+    check_writable,
+    disk_problem,
+)
 from cfsession.errors import SessionError
 from cfsession.saving import Settlement
 from cfsession.schema import (
@@ -183,7 +190,10 @@ class SessionWriter:
         the file (the reserve's room); after a failed write they are kept in memory and saved
         at close if there is room then (:meth:`close`). Whoever flies should land now."""
         exc = self._io.problem or self._sync_error
-        return "" if exc is None else disk_problem(exc, self.path.parent)
+        if exc is None:
+            return ""
+        wanted = self._io.refused if exc is self._io.problem else 0
+        return disk_problem(exc, self.path.parent, wanted=wanted)
 
     @property
     def disk_full(self) -> bool:
@@ -332,11 +342,12 @@ class SessionWriter:
         or deleted while the file was open: on POSIX the open file lives on). Moved: the
         session's new name is returned. Deleted (or moved where its name cannot be found):
         it is written again, from the open file, to :attr:`path` (the folder created again;
-        ``-2`` ... if the name is taken meanwhile). After a failed write (:attr:`trouble`) the
-        whole file, kept in memory, is saved compressed if there is room now. Each of these is
-        one line in :attr:`notes` (and a logged warning). If there is no room, the file keeps
-        what reached it, rows up to :attr:`saved_until` (``host_time``), and ``close`` raises a
-        one-line :class:`SessionError` saying so (:attr:`path` names the file); so it does
+        ``-2`` ... if taken), else where it can (:func:`~cfsession.saving.fallbacks`). After a
+        failed write (:attr:`trouble`) the whole file, kept in memory, is saved compressed if
+        there is room (over the partial file if none beside it). Each is a line in :attr:`notes`
+        (and a logged warning). If there is no room, the file keeps what reached it, rows up to
+        :attr:`saved_until` (``host_time``), and ``close`` raises a one-line
+        :class:`SessionError` saying so (:attr:`path` names the file); so it does
         when the session cannot be saved anywhere (:attr:`saved_until` stays ``None``)."""
         if self.closed:
             return self.path
@@ -347,7 +358,10 @@ class SessionWriter:
                 a["closed_cleanly"] = np.int8(1)
                 if duration_s is not None:
                     a["duration_s"] = np.float64(duration_s)
-                text = json.dumps(dict(summary or {}), sort_keys=True, default=str)
+                stored = dict(summary or {})
+                if "file" in stored:  # its name only (a folder may move): docs/session-format.md
+                    stored["file"] = self.path.name
+                text = json.dumps(stored, sort_keys=True, default=str)
                 a["summary"] = text[:4096].ljust(4096)
                 self._file.flush()
             finally:
@@ -373,7 +387,7 @@ class SessionWriter:
         settlement = Settlement(self._io, self.path, compress=self.compress_on_close,
                                 newest=self._newest, notes=self.notes)
         try:
-            return settlement.settle(trouble=trouble, disk_full=self.disk_full)
+            return settlement.settle(trouble=trouble)
         finally:
             if settlement.saved_until is not None:  # part of it kept: where, until when
                 self.saved_until, self.path = settlement.saved_until, settlement.path
@@ -389,15 +403,3 @@ class SessionWriter:
     ) -> None:
         self.close()
 
-
-def check_writable(path: str | os.PathLike[str]) -> None:
-    """Fail early (one line) if a session cannot be created at ``path``."""
-    p = Path(path)
-    if p.exists():
-        raise SessionError(f"{p}: already exists; choose another output path")
-    parent = p.parent if str(p.parent) else Path(".")
-    probe = parent
-    while not probe.exists():
-        probe = probe.parent
-    if not os.access(probe, os.W_OK):
-        raise SessionError(f"{parent}: not writable; choose another --out folder")

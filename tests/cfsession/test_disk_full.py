@@ -113,7 +113,7 @@ def test_a_file_size_limit_with_a_reserve_is_told_while_the_landing_still_fits(t
 # --------------------------------------------------------------- injected at the system call
 class _Disk:
     """``os.pwrite`` / ``os.posix_fallocate`` that fail with ENOSPC while :attr:`full`, but
-    for the descriptors in :attr:`spare`."""
+    for the files (inode numbers) in :attr:`spare`."""
 
     def __init__(self, monkeypatch) -> None:
         self.full, self.spare = False, set()
@@ -122,7 +122,7 @@ class _Disk:
         monkeypatch.setattr(writer_mod.os, "posix_fallocate", self.fallocate)
 
     def _refuse(self, fd: int) -> None:
-        if self.full and fd not in self.spare:
+        if self.full and os.fstat(fd).st_ino not in self.spare:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     def pwrite(self, fd, data, pos):
@@ -196,7 +196,8 @@ def test_a_full_disk_while_compressing_keeps_the_file_uncompressed(tmp_path, mon
     disk = _Disk(monkeypatch)
     w = SessionWriter(tmp_path / "s.h5", streams=[GYRO, *standard_streams()])
     _fill(w, 0, 500)
-    disk.full, disk.spare = True, {w._io.fd}  # room for the session, none for its copy
+    disk.full = True  # room for the session, none for its copy
+    disk.spare = {os.fstat(w._io.fd).st_ino}
     with caplog.at_level("WARNING", logger="cfsession.writer"):
         assert w.close() == tmp_path / "s.h5"
     (warning,) = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]

@@ -1,15 +1,20 @@
 """A session's folder renamed or deleted while the file is open (on POSIX the open file lives
 on): ``close`` never names a file that is not there. Moved: the session is where it went, and
-``close`` returns that name. Deleted: it is written again from the open file to its name."""
+``close`` returns that name. Deleted: it is written again from the open file to its name, or
+to the nearest folder that takes it when its own cannot be made again. The summary stored in
+the file names the file, never a folder that may have moved."""
 
 from __future__ import annotations
 
 import shutil
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import cfsession.saving as saving
 from cfsession import SessionError, SessionWriter, open_session
 from cfsession.schema import log_block_spec
 from cfsession.writer import standard_streams
@@ -71,7 +76,22 @@ def test_a_deleted_file_whose_name_was_taken_is_written_to_the_next_name(tmp_pat
     _whole(tmp_path / "s-2.h5")
 
 
-def test_a_deleted_folder_that_cannot_be_made_again_is_one_line(tmp_path):
+def test_a_deleted_folder_whose_name_was_taken_puts_the_session_in_the_folder_above(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    shutil.rmtree(out)
+    out.write_text("a file now")
+    _finish(w)
+    assert w.close() == tmp_path / "s.h5" == w.path
+    assert w.notes == [f"{out / 's.h5'} was deleted while being written (its folder removed?), "
+                       "and writing it again there failed (File exists); the session was "
+                       f"written, from the still open file, to {tmp_path / 's.h5'} instead"]
+    assert out.read_text() == "a file now"
+    _whole(tmp_path / "s.h5")
+
+
+def test_a_session_no_folder_takes_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setattr(saving, "fallbacks", lambda original: [])
     out = tmp_path / "out"
     w = _writer(out)
     shutil.rmtree(out)
@@ -80,3 +100,28 @@ def test_a_deleted_folder_that_cannot_be_made_again_is_one_line(tmp_path):
         w.close()
     assert str(out / "s.h5") in str(err.value) and "\n" not in str(err.value)
     assert out.read_text() == "a file now"
+
+
+def test_the_folders_tried_are_the_nearest_above_then_here_then_the_temporary_one(
+        tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path / "..")
+    tried = saving.fallbacks(tmp_path / "a" / "b" / "s.h5")
+    assert tried[:2] == [tmp_path, tmp_path.parent]
+    assert tried[2:] == [] or tried[2:] == [Path(tempfile.gettempdir())]
+
+
+def test_the_stored_summary_names_the_file_not_a_folder_that_may_move(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    out.rename(tmp_path / "moved")
+    w.close(summary={"file": str(out / "s.h5"), "plan": "p"})
+    s = open_session(tmp_path / "moved" / "s.h5")
+    assert s.json_meta("summary") == {"file": "s.h5", "plan": "p"}
+
+
+def test_a_session_written_again_under_another_name_stores_that_name(tmp_path):
+    w = _writer(tmp_path)
+    (tmp_path / "s.h5").unlink()
+    (tmp_path / "s.h5").write_bytes(b"another file")
+    assert w.close(summary={"file": str(tmp_path / "s.h5")}) == tmp_path / "s-2.h5"
+    assert open_session(tmp_path / "s-2.h5").json_meta("summary") == {"file": "s-2.h5"}

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+import cfsession.saving as saving
 import cfsession.writer as writer_mod
 import groundstation.commands.fly as fly_cli
 import groundstation.recorder as recorder_mod
@@ -74,7 +75,8 @@ def test_a_full_disk_aborts_and_the_landing_is_recorded(sim_uri, tmp_path, monke
     res = _fly(uri, tmp_path)
     line = one_line_error(res)
     assert line.startswith(f"error: flight aborted: disk full: no room left in {tmp_path} "
-                           "(No space left on device); session saved to ")
+                           "for the session's next ")  # the reserve: room for the landing
+    assert " KiB (No space left on device); session saved to " in line
     wait_for_stop(uri)
     path = Path(line.rsplit(" ", 1)[1])
     result = FlightResult(path=path, cause="disk full")
@@ -156,10 +158,38 @@ def test_a_renamed_folder_is_where_the_summary_says(sim_uri, tmp_path, monkeypat
     check_closed_with_stop(FlightResult(path=path))
 
 
-def test_a_session_that_cannot_be_written_again_is_one_line(sim_uri, tmp_path, monkeypatch):
-    """The folder deleted and a file put in its place: the flight lands all the same, and
-    the command says the session is lost instead of naming a file that is not there."""
+def test_a_folder_replaced_by_a_file_puts_the_session_in_the_folder_above(sim_uri, tmp_path,
+                                                                         monkeypatch):
+    """The folder deleted and a file put in its place: the flight lands, and the session goes
+    to the nearest folder above that takes it; the summary names it and a warning says why
+    (exit 0, as for any deleted folder: the session is whole where the summary says)."""
     out = tmp_path / "out"
+
+    def replace_folder():
+        shutil.rmtree(out)
+        out.write_text("not a folder")
+
+    _act_at_tick(monkeypatch, 30, replace_folder)
+    uri = sim_uri()
+    res = _fly(uri, out, "--json")
+    assert res.exit_code == 0, res.output
+    summary = _summary(res)
+    path = Path(summary["file"])
+    assert path.parent == tmp_path and path.name.startswith("hover-check-")
+    (note,) = summary["file_notes"]
+    assert note == (f"{out / path.name} was deleted while being written (its folder removed?), "
+                    "and writing it again there failed (File exists); the session was written, "
+                    f"from the still open file, to {path} instead")
+    assert out.read_text() == "not a folder"
+    s = check_closed_with_stop(FlightResult(path=path))
+    assert s["setpoints"].data["tick"].max() == 99
+
+
+def test_a_session_that_cannot_be_written_anywhere_is_one_line(sim_uri, tmp_path, monkeypatch):
+    """No folder takes it: the command says the session is lost instead of naming a file that
+    is not there."""
+    out = tmp_path / "out"
+    monkeypatch.setattr(saving, "fallbacks", lambda original: [])
 
     def replace_folder():
         shutil.rmtree(out)
@@ -183,6 +213,7 @@ def test_the_recorded_file_reads_back_after_a_moved_folder(sim_uri, tmp_path, mo
     path = _summary(res)["file"]
     info = CliRunner().invoke(main, ["info", path])
     assert info.exit_code == 0 and "closed cleanly" in info.output
+    assert f"file {Path(path).name}\n" in info.output and str(out) not in info.output
     assert open_session(path)["setpoints"].data["tick"].max() == 99
 
 
