@@ -38,8 +38,8 @@ clean:
 
 FUZZ_CASES ?= 2000
 # Bigger fuzz campaign (tests/fuzz/harness.py runs the targets of tests/fuzz/targets.py): the
-# session reader, the UDP simulator, the importers and model files, FUZZ_CASES cases each, seed
-# from the date; a case past 10 s is a hang, a process that dies (a crash in native code) a
-# failure.
+# session reader, the UDP simulator, the importers, model files and flight plans, FUZZ_CASES
+# cases each, seed from the date; a case past 10 s is a hang, a process that dies (a crash in
+# native code) a failure.
 fuzz: $(STAMP)
 	$(BIN)/python -m tests.fuzz.harness --cases $(FUZZ_CASES)

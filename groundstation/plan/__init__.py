@@ -50,9 +50,10 @@ from groundstation.plan.sections import (
     read_vehicle,
 )
 from groundstation.plan.settings import LiveIdConfig, read_live_id, read_parameters
-from groundstation.plan.toml import TomlSource, TomlTable
+from groundstation.plan.toml import TomlSource, TomlTable, shown
 
 __all__ = [
+    "MAX_PLAN_S",
     "MAX_RATE_RANGE_DEG_S",
     "SETPOINT_CHANNELS",
     "SHIPPED_PLANS_DIR",
@@ -76,6 +77,9 @@ SHIPPED_PLANS_DIR = Path(__file__).resolve().parents[2] / "flightplans"
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}")
 """A plan name: it becomes part of the session file name, so no path separators, no leading dot,
 at most 64 characters."""
+MAX_PLAN_S = 3600.0
+"""The longest plan, s: an hour, many batteries' worth (at 100 Hz, 360 000 setpoints); a plan
+of thousands of long phases would otherwise compile into gigabytes of setpoints."""
 _TOP_KEYS = (
     "name",
     "description",
@@ -216,11 +220,14 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     """Validate TOML ``text``; ``source`` prefixes errors, ``name`` is the default plan name."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+    except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
         msg = str(exc).splitlines()[0]
         pos = re.search(r"\(at line (\d+), column (\d+)\)", msg)
         at = f"{source}:{pos.group(1)}" if pos else source
         raise PlanError(f"{at}: invalid TOML: {msg}; fix the syntax on that line") from None
+    except RecursionError:  # tomllib parses nested arrays and inline tables by recursion
+        raise PlanError(f"{source}: invalid TOML: arrays or inline tables nested too deeply to "
+                        "read; a plan nests them a few levels at most") from None
     src = TomlSource(text=text, source=source)
     top = TomlTable(src, (), data).allow(set(_TOP_KEYS))
     plan_name = _plan_name(top, default=name)
@@ -246,15 +253,23 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     if len(raw_phases) < 2:
         raise src.error(("phase",), "a plan needs a takeoff and a landing [[phase]]; add them")
     phases: list[PhaseSpec] = []
+    ticks = 0
     for i, raw in enumerate(raw_phases):
         where = "first" if i == 0 else "last" if i == len(raw_phases) - 1 else "middle"
         phases.append(read_phase(TomlTable(src, ("phase", i), raw), where=where, vehicle=vehicle,
                                  hover_thrust=hover, rate_hz=rate))
+        ticks += phases[-1].n_ticks
+        if ticks > MAX_PLAN_S * rate + 1e-6:
+            raise src.error(
+                ("phase", i, "duration"),
+                f"the phases up to this one last {ticks / rate:g} s, more than a plan may fly "
+                f"({MAX_PLAN_S:g} s; a battery lasts minutes); shorten or remove phases",
+            )
         named = [p.name for p in phases[:-1]]
         if phases[-1].name in named:
             raise src.error(
                 ("phase", i, "name"),
-                f"'{phases[-1].name}' is already the name of "
+                f"{shown(phases[-1].name)} is already the name of "
                 f"phase[{named.index(phases[-1].name)}]; rename it",
             )
     plan = Plan(

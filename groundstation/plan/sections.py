@@ -9,6 +9,7 @@ plan's ``[vehicle]`` limits instead of clamping them.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,7 +24,7 @@ from groundstation.plan.schedule import (
     Safety,
     VehicleLimits,
 )
-from groundstation.plan.toml import TomlSource, TomlTable
+from groundstation.plan.toml import TomlSource, TomlTable, shown
 
 __all__ = [
     "KINDS",
@@ -51,6 +52,8 @@ _PHASE_KEYS = {
     "hover": {"thrust"},
     "excitation": set(SETPOINT_CHANNELS),
 }
+_LOG_VARIABLE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_]*")
+"""A firmware log variable, ``group.name`` (C identifiers)."""
 _AXIS_LIMIT = {"roll": "max_roll_deg", "pitch": "max_pitch_deg", "yaw_rate": "max_yaw_rate_deg_s"}
 
 
@@ -179,13 +182,13 @@ def read_altitude_hold(t: TomlTable, *, vehicle: VehicleLimits, hover_thrust: in
     raw = t.data.get("kinds", list(d.kinds))
     bad = [k for k in raw if k not in ("hover", "excitation")] if isinstance(raw, list) else raw
     if bad or not raw:
-        raise t.src.error((*t.path, "kinds"), f"{bad or raw!r} is not a valid value: kinds must "
-                          'be a non-empty list of phase kinds from "hover" and "excitation", '
+        raise t.src.error((*t.path, "kinds"), f"{shown(bad or raw)} is not a valid value: kinds "
+                          'must be a non-empty list of phase kinds from "hover" and "excitation", '
                           'e.g. ["hover"]; take-off and landing follow the plan')
     kinds = tuple(raw)
     variable = t.get("variable", str, default=d.variable)
-    if "." not in variable:
-        raise t.src.error((*t.path, "variable"), f"'{variable}' is not a log variable "
+    if not _LOG_VARIABLE.fullmatch(variable):
+        raise t.src.error((*t.path, "variable"), f"{shown(variable)} is not a log variable "
                           "'group.name', e.g. 'stateEstimate.z'")
     cfg = AltitudeHoldConfig(
         variable=variable,
@@ -297,6 +300,12 @@ def read_signal(
                     f"{f:g} Hz is out of range for a {spec['sweep']} sweep; use a value {low} "
                     f"and < {nyquist:g} Hz (Nyquist of the setpoint rate {rate_hz:g} Hz)",
                 )
+        if log_sweep and spec["f_start_hz"] == spec["f_end_hz"]:
+            raise t.src.error(
+                (*t.path, "f_end_hz"),
+                f"a log sweep from {spec['f_start_hz']:g} to {spec['f_end_hz']:g} Hz has no "
+                'ratio to sweep; use another f_end_hz, or sweep = "linear" for a sine',
+            )
     return ExcitationSpec(**spec)
 
 

@@ -15,7 +15,7 @@ import re
 from dataclasses import dataclass
 
 from groundstation.plan.param_types import KNOWN_TYPES, value_problem
-from groundstation.plan.toml import TomlTable
+from groundstation.plan.toml import TomlTable, shown
 
 __all__ = ["MAX_PARAMETERS", "LiveIdConfig", "read_live_id", "read_parameters"]
 
@@ -42,16 +42,16 @@ def _channel_names(t: TomlTable, key: str, default: tuple[str, ...]) -> tuple[st
     raw = t.data.get(key, list(default))
     ok = isinstance(raw, list) and raw and all(isinstance(x, str) for x in raw)
     if not ok:
-        raise t.src.error((*t.path, key), f"{raw!r} is not a valid value: {key} must be a "
+        raise t.src.error((*t.path, key), f"{shown(raw)} is not a valid value: {key} must be a "
                           'non-empty array of channel names, e.g. ["gyro"] or ["gyro.x", "gyro.y"]')
     for name in raw:
         if not _CHANNEL.fullmatch(name):
-            raise t.src.error((*t.path, key), f"{name!r} is not a channel name; use a log "
+            raise t.src.error((*t.path, key), f"{shown(name)} is not a channel name; use a log "
                               'stream ("gyro"), STREAM.FIELD ("gyro.x") or a logged variable '
                               '("motor.m1")')
     if len(set(raw)) != len(raw):
         twice = sorted({x for x in raw if raw.count(x) > 1})
-        raise t.src.error((*t.path, key), f"{twice} named twice; name each channel once")
+        raise t.src.error((*t.path, key), f"{shown(twice)} named twice; name each channel once")
     return tuple(raw)
 
 
@@ -65,7 +65,7 @@ def read_live_id(t: TomlTable) -> LiveIdConfig:
     both = sorted({y for y in outputs for x in inputs  # "motors" holds "motors.m1"
                    if y == x or y.startswith(f"{x}.") or x.startswith(f"{y}.")})
     if both:
-        raise t.src.error((*t.path, "outputs"), f"{both} is both an input and an output; "
+        raise t.src.error((*t.path, "outputs"), f"{shown(both)} is both an input and an output; "
                           "pick one")
     cfg = LiveIdConfig(
         inputs=inputs, outputs=outputs,
@@ -98,11 +98,11 @@ def read_parameters(t: TomlTable) -> tuple[tuple[str, float], ...]:
     for group, names in t.data.items():
         path = (*t.path, group)
         if not _IDENT.fullmatch(group) or not isinstance(names, dict):
-            raise t.src.error(path, f"{group!r} is not a parameter group table; write "
+            raise t.src.error(path, f"{shown(group)} is not a parameter group table; write "
                               "GROUP.NAME = number, e.g. pid_attitude.yaw_kd = 0.0")
         for name in names:
             if not _IDENT.fullmatch(name) or isinstance(names[name], dict):
-                raise t.src.error((*path, name), f"'{group}.{name}' is not a firmware "
+                raise t.src.error((*path, name), f"{shown(f'{group}.{name}')} is not a firmware "
                                   "parameter name; write GROUP.NAME = number")
             value = TomlTable(t.src, path, names).get(name, float)
             full = f"{group}.{name}"

@@ -16,6 +16,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+import reprlib
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,7 +26,7 @@ from tomlkit.items import Array, InlineTable
 
 from groundstation.errors import PlanError
 
-__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines", "set_keys"]
+__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines", "set_keys", "shown"]
 
 _KEY = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
 _DOTTED = re.compile(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*")
@@ -166,11 +167,32 @@ def ensure_tables(text: str, *, path: tuple[str, ...]) -> str:
     return doc.as_string() if changed else text
 
 
+_SHOWN = reprlib.Repr()
+_SHOWN.maxstring = _SHOWN.maxother = _SHOWN.maxlong = 60
+_SHOWN.maxlevel, _SHOWN.maxlist, _SHOWN.maxdict = 2, 4, 4
+
+
+def shown(value: Any) -> str:
+    """``value`` as an error message quotes it: its repr (line breaks and other unprintable
+    characters escaped), cut to about 60 characters and 2 levels of nesting, so a plan's long,
+    deep or multi-line value keeps the error on one short line."""
+    return _SHOWN.repr(value)
+
+
+_BARE = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+
 def dotted(path: tuple) -> str:
-    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    """``phase[2].roll.amplitude``; a key TOML must quote (or a very long one) as :func:`shown`
+    quotes it, so a key with a line break keeps the error on one line."""
+    return "".join(
+        f"[{p}]" if isinstance(p, int) else f".{p}" if _BARE.fullmatch(p) else f".{shown(p)}"
+        for p in path
+    ).lstrip(".")
 
 
 REQUIRED = object()
+_INT64 = (-(1 << 63), (1 << 63) - 1)
 _KINDS = {
     float: "a number",
     int: "an integer",
@@ -215,7 +237,7 @@ class TomlTable:
 
     def __init__(self, src: TomlSource, path: tuple, data: Any) -> None:
         if not isinstance(data, dict):
-            raise src.error(path, f"must be a table, got {type(data).__name__} {data!r}")
+            raise src.error(path, f"must be a table, got {type(data).__name__} {shown(data)}")
         self.src, self.path, self.data = src, path, data
 
     def allow(self, allowed: set[str]) -> TomlTable:
@@ -226,7 +248,7 @@ class TomlTable:
                 names = ", ".join(sorted(allowed))
                 hint = f"did you mean '{near[0]}'? " if near else ""
                 raise self.src.error(
-                    (*self.path, key), f"unknown key '{key}'; {hint}allowed keys: {names}"
+                    (*self.path, key), f"unknown key {shown(key)}; {hint}allowed keys: {names}"
                 )
         return self
 
@@ -242,6 +264,10 @@ class TomlTable:
             return default
         value = self.data[key]
         numeric = isinstance(value, int | float) and not isinstance(value, bool)
+        if numeric and isinstance(value, int) and not _INT64[0] <= value <= _INT64[1]:
+            # TOML's integers are 64-bit, tomllib reads any size: float() of 10**400 overflows
+            raise self.src.error(path, f"{shown(value)} is beyond TOML's 64-bit integers; use "
+                                 f"{_KINDS.get(kind, 'a value')} in range{_unit(unit)}")
         if kind in (float, int) and numeric and not math.isfinite(value):
             # TOML's nan/inf compare false with every limit: refuse them before any range check
             want = "a finite number" if kind is float else "an integer"
@@ -253,8 +279,7 @@ class TomlTable:
             return int(value)
         if kind in (str, dict, list) and isinstance(value, kind):
             return value
-        want = _KINDS[kind]
-        raise self.src.error(path, f"{value!r} is not {want}{_unit(unit)}")
+        raise self.src.error(path, f"{shown(value)} is not {_KINDS[kind]}{_unit(unit)}")
 
     def number(
         self,
@@ -283,7 +308,7 @@ class TomlTable:
     def choice(self, key: str, options: tuple[str, ...], *, default: Any = REQUIRED) -> str:
         value = self.get(key, str, default=default)
         if value not in options:
-            raise self.src.error((*self.path, key), f"'{value}' is not one of {list(options)}")
+            raise self.src.error((*self.path, key), f"{shown(value)} is not one of {list(options)}")
         return value
 
     def ticks(

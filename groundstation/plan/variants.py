@@ -14,7 +14,7 @@ from typing import Any
 
 from groundstation.errors import PlanError
 from groundstation.plan import Plan, parse_plan
-from groundstation.plan.excitation import mls_bits, prbs_shift
+from groundstation.plan.excitation import advance_state, prbs_shift
 from groundstation.plan.toml import set_keys
 
 __all__ = ["advance_prbs", "advanced_seed", "reseed_prbs"]
@@ -23,11 +23,7 @@ __all__ = ["advance_prbs", "advanced_seed", "reseed_prbs"]
 def advanced_seed(*, register_length: int, seed: int, chips: int) -> int:
     """Register state ``chips`` chips after ``seed``: the seed's bits are the first n chips,
     least significant bit first, so the new seed is :math:`\\sum_i a_{d+i} 2^i`."""
-    n = register_length
-    period = (1 << n) - 1
-    d = chips % period
-    bits = mls_bits(register_length=n, seed=seed, n_chips=d + n)[d:]
-    return int(sum(int(b) << i for i, b in enumerate(bits)))
+    return advance_state(register_length=register_length, seed=seed, chips=chips)
 
 
 def advance_prbs(plan: Plan, *, chips: int) -> Plan:

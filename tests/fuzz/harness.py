@@ -1,15 +1,15 @@
 """Fuzz harness: mutated inputs into the tools that read what others made.
 
-The targets (session reader, UDP simulator, importers, model files) are :mod:`tests.fuzz.targets`,
-one function each in its :data:`~tests.fuzz.targets.TARGETS`; what damages or crafts their
-inputs is :mod:`tests.fuzz.mutators`. This module runs them: :func:`supervise` runs a target's
-cases in a child process (``python -m tests.fuzz.harness --child``) that prints one JSON line
-per case, and gives each case ``timeout_s`` of wall time: a case that takes longer is a hang
-(the child is killed; the case's seed and index replay it). HDF5 holds a global lock, so a hang
-cannot be timed out inside one process.
+The targets (session reader, UDP simulator, importers, model files, flight plans) are
+:mod:`tests.fuzz.targets`, one function each in its :data:`~tests.fuzz.targets.TARGETS`; what
+damages or crafts their inputs is :mod:`tests.fuzz.mutators`. This module runs them:
+:func:`supervise` runs a target's cases in a child process (``python -m tests.fuzz.harness
+--child``) that prints one JSON line per case, and gives each case ``timeout_s`` of wall time:
+a case that takes longer is a hang (the child is killed; the case's seed and index replay it).
+HDF5 holds a global lock, so a hang cannot be timed out inside one process.
 
     python -m tests.fuzz.harness --target session --cases 2000 --seed 7
-    make fuzz          # every target (session, udp, importers, model), FUZZ_CASES each
+    make fuzz          # every target (session, udp, importers, model, plan), FUZZ_CASES each
 """
 
 from __future__ import annotations

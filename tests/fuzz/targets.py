@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from tests.fuzz.mutators import crafted_session, datagram, mutate
+from tests.fuzz.mutators import crafted_session, datagram, mutate, plan_text
 
 Target = Callable[[random.Random, Path], str]
 
@@ -246,5 +246,70 @@ def model_reader(rng: random.Random, work: Path) -> str:
     return "read"
 
 
+# ------------------------------------------------------------------------- flight plans
+
+PLAN_MEMORY_BYTES = 1 << 30
+"""Address space a plan case may add to the child's (a refused plan needs none of it; the
+largest valid schedule, 360 000 setpoints, a few MB): beyond it numpy raises MemoryError, a
+failure, rather than the host swapping."""
+
+
+@functools.cache
+def _plan_bases() -> tuple[str, ...]:
+    """The shipped plans' texts; on first use, the child's address space is capped
+    (:data:`PLAN_MEMORY_BYTES` above what it has mapped), so a plan that asks for a huge
+    schedule fails its case instead of exhausting the host."""
+    import resource
+
+    from groundstation.cli import main  # noqa: F401  (mapped before the cap)
+    from groundstation.plan import SHIPPED_PLANS_DIR
+
+    try:  # Linux: the pages mapped now
+        with open("/proc/self/statm") as fh:
+            mapped = int(fh.read().split()[0]) * resource.getpagesize()
+    except OSError:
+        mapped = None
+    if mapped is not None:
+        resource.setrlimit(resource.RLIMIT_AS, (mapped + PLAN_MEMORY_BYTES, resource.RLIM_INFINITY))
+    return tuple(p.read_text() for p in sorted(SHIPPED_PLANS_DIR.glob("*.toml")))
+
+
+def plan_reader(rng: random.Random, work: Path) -> str:
+    """A shipped plan's TOML bent (:func:`~tests.fuzz.mutators.plan_text`) through what a user
+    runs: ``load_plan``, the schedule (compiled, an abort's descent), ``plan check``'s summary,
+    and ``groundstation plan check`` itself (text or ``--json``), which must agree: ``ok`` or
+    ``refused`` with one line (exit 2). A plan that loads must compile: an error there, even a
+    PlanError, is a failure (the loader checks every value, naming its key and line)."""
+    from click.testing import CliRunner
+
+    from groundstation.cli import main
+    from groundstation.commands.plan import summarize
+    from groundstation.errors import PlanError
+    from groundstation.plan import load_plan
+
+    path = work / "case.toml"
+    path.write_bytes(plan_text(rng, rng.choice(_plan_bases())))
+    try:
+        plan = load_plan(path)
+    except PlanError as exc:
+        one_line(exc)
+        outcome = "refused"
+    else:
+        schedule = plan.compile()
+        schedule.abort_schedule(rng.randrange(len(schedule) + 1))
+        json.dumps(summarize(plan, schedule))
+        outcome = "ok"
+    args = ["plan", "check", *(["--json"] if rng.random() < 0.3 else []), str(path)]
+    result = CliRunner().invoke(main, args)
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    cli = {0: "ok", 2: "refused"}.get(result.exit_code, f"exit {result.exit_code}")
+    assert cli == outcome, f"plan check says {cli}, load_plan {outcome}: {result.output[-500:]}"
+    if cli == "refused":
+        assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: "), (
+            result.stderr[:500])
+    return outcome
+
+
 TARGETS: dict[str, Target] = {"session": session_reader, "udp": udp_simulator,
-                              "importers": importers, "model": model_reader}
+                              "importers": importers, "model": model_reader, "plan": plan_reader}

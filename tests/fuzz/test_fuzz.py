@@ -14,7 +14,7 @@ import pytest
 
 from .harness import date_seed, supervise
 
-CASES = {"session": 250, "udp": 100}
+CASES = {"session": 250, "udp": 100, "plan": 120}
 
 
 @pytest.mark.parametrize("target", sorted(CASES))
