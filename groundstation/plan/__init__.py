@@ -221,6 +221,11 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     try:
         data = tomllib.loads(text)
     except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
+        long = None if isinstance(exc, tomllib.TOMLDecodeError) else re.search(r"\d{4301,}", text)
+        if long is not None:  # Python's own limit, worded for Python programmers: say it here
+            line = text.count("\n", 0, long.start()) + 1
+            raise PlanError(f"{source}:{line}: invalid TOML: a number of {len(long.group())} "
+                            "digits; a plan's numbers have a few") from None
         msg = str(exc).splitlines()[0]
         pos = re.search(r"\(at line (\d+), column (\d+)\)", msg)
         at = f"{source}:{pos.group(1)}" if pos else source
