@@ -24,8 +24,8 @@ import h5py
 from cfsession.diskfile import OPEN_FLAGS
 from cfsession.errors import SessionError
 
-__all__ = ["claim_new", "compressed_image", "free_bytes", "overwrite_in_place", "renamed",
-           "repack", "save_image"]
+__all__ = ["WriteBackFailed", "claim_new", "compressed_image", "free_bytes",
+           "overwrite_in_place", "renamed", "repack", "save_image"]
 
 ROOM_SLACK = 64 << 10
 """Free space beyond a copy's size that :func:`repack` wants before it tries (a file system's
@@ -110,13 +110,26 @@ def save_image(data: bytes, target: Path, *, mode: int, replace: bool = False) -
     return target
 
 
+class WriteBackFailed(OSError):
+    """Writing over a file in place failed (``reason``), and so did writing its old contents
+    back (``back``): the file is damaged."""
+
+    def __init__(self, code: int, reason: str, back: str) -> None:
+        super().__init__(code, f"{reason}; writing the partial file back failed too ({back}): "
+                               f"the file is damaged")
+        self.reason, self.back = reason, back
+
+
 def overwrite_in_place(path: Path, data: bytes, *, ids: tuple[int, int]) -> None:
     """``data`` over the file ``path`` (it must still be the file ``ids``, ``(st_dev,
     st_ino)``), ``fsync``-ed. For when there is no room for a copy
     beside it: ``data`` must fit in the room the file holds plus what is free. It is written
     over the file's first bytes (room already held: a file system that does not copy on write
-    needs none more), then the rest cut off; if writing fails, what the file held is written
-    back before the error is raised."""
+    needs none more), ``fsync``-ed, then the rest cut off and ``fsync``-ed again. If writing
+    fails after changing any byte, what the file held is written back before the error is
+    raised; if that fails too, :class:`WriteBackFailed` (the file is damaged). Not atomic: a
+    process killed (or power lost) while ``data`` is being written leaves neither the old
+    contents nor the new."""
     fd = os.open(path, os.O_RDWR | OPEN_FLAGS)
     try:
         st = os.fstat(fd)
@@ -128,20 +141,31 @@ def overwrite_in_place(path: Path, data: bytes, *, ids: tuple[int, int]) -> None
             raise OSError(errno.ENOSPC, f"the compressed session ({len(data) >> 10} KiB) does "
                                         f"not fit in the {room >> 10} KiB there are")
         before = _read_all(fd, st.st_size)
+        written = [0]
         try:
-            _put(fd, data)
-        except BaseException:
-            with contextlib.suppress(OSError):
+            _put(fd, data, written)
+        except BaseException as exc:
+            if not written[0]:  # not a byte changed: the file is as it was
+                raise
+            try:
                 _put(fd, before)
+            except OSError as back:
+                reason = (exc.strerror if isinstance(exc, OSError) and exc.strerror
+                          else str(exc) or type(exc).__name__)
+                raise WriteBackFailed(getattr(exc, "errno", None) or errno.EIO, reason,
+                                      back.strerror or str(back)) from exc
             raise
     finally:
         os.close(fd)
 
 
-def _put(fd: int, data: bytes) -> None:
+def _put(fd: int, data: bytes, written: list[int] | None = None) -> None:
     """``data`` over the file from its start (into the room it holds: no new room needed for
-    what fits in its size), the rest cut off, ``fsync``-ed."""
-    _write_all(fd, data)
+    what fits in its size), ``fsync``-ed, then the rest cut off and ``fsync``-ed again (the new
+    bytes are on the disk before the old ones beyond them go). ``written[0]``: how many bytes
+    of ``data`` were written, as it goes."""
+    _write_all(fd, data, written)
+    os.fsync(fd)
     os.ftruncate(fd, len(data))
     os.fsync(fd)
 
@@ -158,8 +182,9 @@ def _read_all(fd: int, size: int) -> bytes:
     return b"".join(parts)
 
 
-def _write_all(fd: int, data: bytes) -> None:
-    """``data`` at the start of ``fd``, in positioned writes (``pwrite``)."""
+def _write_all(fd: int, data: bytes, written: list[int] | None = None) -> None:
+    """``data`` at the start of ``fd``, in positioned writes (``pwrite``); ``written[0]``: the
+    bytes written so far."""
     view, pos = memoryview(data), 0
     while pos < len(view):
         if hasattr(os, "pwrite"):
@@ -170,6 +195,8 @@ def _write_all(fd: int, data: bytes) -> None:
         if n <= 0:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         pos += n
+        if written is not None:
+            written[0] = pos
 
 
 def _write_tmp(path: Path, *, mode: int, data: bytes) -> Path:

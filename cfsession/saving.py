@@ -15,14 +15,22 @@ folder that takes it (:func:`fallbacks`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
-from cfsession.copies import compressed_image, overwrite_in_place, repack, save_image
+from cfsession.copies import (
+    WriteBackFailed,
+    compressed_image,
+    overwrite_in_place,
+    repack,
+    save_image,
+)
 from cfsession.diskfile import SessionFile
 from cfsession.errors import SessionError
 
@@ -85,7 +93,7 @@ class Settlement:
             raise SessionError(f"{original} {gone}, and writing it again failed "
                                f"({_one_line(exc)}): the session is lost") from None
         first: Exception | None = None
-        for folder in [original.parent, *fallbacks(original)]:
+        for folder in _own_then_fallbacks(original):  # the fallbacks only once it failed
             try:
                 target = save_image(data, folder / original.name, mode=self.mode)
             except Exception as exc:
@@ -123,11 +131,20 @@ class Settlement:
                     raise
                 try:
                     overwrite_in_place(target, data, ids=ids)
+                except WriteBackFailed as again:  # the partial file is damaged: never claim it
+                    log.debug("writing %s back", target, exc_info=True)
+                    raise SessionError(
+                        f"{trouble}; saving the session at close failed ({_one_line(exc)}; "
+                        f"over the partial file: {again.reason[:200]}) and writing the partial "
+                        f"file back failed too ({again.back[:200]}): {target} is damaged, its "
+                        f"data are lost") from None
                 except OSError as again:
                     raise OSError(again.errno, f"{_one_line(exc)}; over the partial file: "
                                                f"{_one_line(again)}") from None
                 saved, how = target, (f"(compressed, {len(data) >> 10} KiB) over the partial "
                                       f"file, no room being left for a copy beside it,")
+        except SessionError:
+            raise
         except Exception as exc:
             log.debug("saving %s from memory", target, exc_info=True)
             if self.newest == -math.inf:
@@ -144,21 +161,54 @@ class Settlement:
         return saved
 
 
+def _own_then_fallbacks(original: Path) -> Iterator[Path]:
+    """``original``'s folder, then (computed only if that one failed) :func:`fallbacks`."""
+    yield original.parent
+    try:
+        more = fallbacks(original)
+    except Exception:  # never let looking for another folder lose the session
+        log.debug("finding folders for %s", original, exc_info=True)
+        more = [Path(tempfile.gettempdir())]
+    yield from more
+
+
 def fallbacks(original: Path) -> list[Path]:
-    """Folders to put a session in when its own (``original``'s) cannot be made again: the
-    nearest existing folder above it if writable, the current folder, the temporary folder."""
+    """Folders to put a session in when its own (``original``'s) cannot be made again, in
+    order: the nearest existing folder above it, the current folder (if it still exists), the
+    temporary folder (``tempfile.gettempdir()``); each only if writable, never the file
+    system's root, nor ``original``'s own folder."""
     found: list[Path] = []
     for parent in original.parent.parents:
-        if parent.is_dir():
+        if _is_dir(parent):
             found.append(parent)
             break
-    found += [Path.cwd(), Path(tempfile.gettempdir())]
+    with contextlib.suppress(OSError):  # the current folder deleted: none
+        found.append(Path.cwd())
+    found = [f for f in found if _below_root(f)]
+    found.append(Path(tempfile.gettempdir()))
     out: list[Path] = []
     for folder in found:
         if (os.access(folder, os.W_OK | os.X_OK) and not _same(folder, original.parent)
                 and not any(_same(folder, f) for f in out)):
             out.append(folder)
     return out
+
+
+def _is_dir(p: Path) -> bool:
+    try:
+        return p.is_dir()
+    except OSError:  # no permission to look
+        return False
+
+
+def _below_root(p: Path) -> bool:
+    """``p`` is not the file system's root (``/``, a Windows drive's); False when that cannot
+    be told (relative, with the current folder deleted)."""
+    try:
+        p = p.absolute()
+    except OSError:
+        return False
+    return p.parent != p
 
 
 def _same(a: Path, b: Path) -> bool:

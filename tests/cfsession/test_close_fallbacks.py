@@ -85,6 +85,46 @@ def test_a_failure_writing_over_the_partial_file_writes_it_back(tmp_path, monkey
     assert _sequence_ok(s) == 500 and s.problems
 
 
+def test_a_failed_write_back_says_the_partial_file_is_damaged(tmp_path, monkeypatch):
+    """A file system that copies on write (btrfs, ZFS) needs new room to write over a file:
+    half the compressed session reaches it, then the disk is full, writing the old bytes back
+    too. The error never claims the file holds the flight up to some time."""
+    w, _ = _failed_midway(tmp_path, monkeypatch)
+    ino, real, calls = (tmp_path / "s.h5").stat().st_ino, os.pwrite, []
+
+    def pwrite(fd, data, pos):
+        if w._io.fd == -1 and len(data) > 1000 and os.fstat(fd).st_ino == ino:  # in place
+            calls.append(len(data))
+            if len(calls) == 1:
+                return real(fd, bytes(data)[: len(data) // 2], pos)
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(fd, data, pos)
+
+    monkeypatch.setattr(os, "pwrite", pwrite)
+    with pytest.raises(SessionError) as err:
+        w.close()
+    text = str(err.value)
+    assert len(calls) >= 3 and "\n" not in text  # the new image, then the old one back
+    assert "holds the session up to" not in text and w.saved_until is None
+    assert text.endswith("writing the partial file back failed too (No space left on "
+                         f"device): {tmp_path / 's.h5'} is damaged, its data are lost")
+    assert "over the partial file: No space left on device" in text
+
+
+def test_writing_in_place_syncs_the_new_bytes_before_cutting_the_old_ones_off(
+        tmp_path, monkeypatch):
+    path = tmp_path / "f"
+    path.write_bytes(bytes(10000))
+    done: list[str] = []
+    for name in ("pwrite", "fsync", "ftruncate"):
+        real = getattr(os, name)
+        monkeypatch.setattr(os, name, lambda *a, _n=name, _r=real: (done.append(_n), _r(*a))[1])
+    st = path.stat()
+    copies.overwrite_in_place(path, b"new" * 100, ids=(st.st_dev, st.st_ino))
+    assert done == ["pwrite", "fsync", "ftruncate", "fsync"]
+    assert path.read_bytes() == b"new" * 100
+
+
 def _reserve_refused(monkeypatch) -> None:
     """``posix_fallocate`` refuses (ENOSPC) room beyond a file's first 64 KiB."""
     real = os.posix_fallocate

@@ -6,6 +6,7 @@ the file names the file, never a folder that may have moved."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
 import tempfile
@@ -125,3 +126,58 @@ def test_a_session_written_again_under_another_name_stores_that_name(tmp_path):
     (tmp_path / "s.h5").write_bytes(b"another file")
     assert w.close(summary={"file": str(tmp_path / "s.h5")}) == tmp_path / "s-2.h5"
     assert open_session(tmp_path / "s-2.h5").json_meta("summary") == {"file": "s-2.h5"}
+
+
+def test_a_deleted_current_folder_is_no_reason_to_lose_the_session(tmp_path):
+    """Flying from inside the sessions folder (``cd sessions; fly ... --out /abs/sessions``),
+    the folder deleted: the current folder is gone, and the session is written again to its
+    own folder all the same (the fall-backs are only looked for after that fails)."""
+    out = tmp_path / "out"
+    w = _writer(out)
+    here = os.getcwd()
+    try:
+        os.chdir(out)
+        shutil.rmtree(out)
+        _finish(w)
+        assert w.close() == out / "s.h5"
+    finally:
+        os.chdir(here)
+    assert len(w.notes) == 1 and "written again, from the still open file" in w.notes[0]
+    _whole(out / "s.h5")
+
+
+def test_a_deleted_current_folder_and_a_taken_folder_name_go_to_the_folder_above(tmp_path):
+    out = tmp_path / "out"
+    w = _writer(out)
+    here = os.getcwd()
+    try:
+        os.chdir(out)
+        shutil.rmtree(out)
+        out.write_text("a file now")
+        _finish(w)
+        assert w.close() == tmp_path / "s.h5"
+        assert saving.fallbacks(out / "s.h5") == [tmp_path, Path(tempfile.gettempdir())]
+    finally:
+        os.chdir(here)
+    assert "instead" in w.notes[0]
+    _whole(tmp_path / "s.h5")
+
+
+def test_the_file_system_root_is_never_a_folder_tried(tmp_path, monkeypatch):
+    monkeypatch.setattr(saving.os, "access", lambda path, mode: True)  # as root
+    monkeypatch.chdir(tmp_path)
+    assert saving.fallbacks(Path("/sessions/x.h5")) == [tmp_path, Path(tempfile.gettempdir())]
+    monkeypatch.chdir("/")
+    assert saving.fallbacks(Path("/sessions/x.h5")) == [Path(tempfile.gettempdir())]
+
+
+def test_only_the_nearest_existing_folder_above_is_tried_and_only_if_writable(
+        tmp_path, monkeypatch):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    monkeypatch.setattr(saving.os, "access",
+                        lambda path, mode: not saving._same(path, locked))
+    monkeypatch.chdir(tmp_path / "..")
+    tried = saving.fallbacks(locked / "gone" / "s.h5")
+    assert locked not in tried and tmp_path not in tried  # never further up than the nearest
+    assert tried == [tmp_path.parent, Path(tempfile.gettempdir())]
