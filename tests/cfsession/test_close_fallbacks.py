@@ -20,7 +20,7 @@ import cfsession.copies as copies
 from cfsession import SessionError, SessionWriter, open_session
 from cfsession.writer import standard_streams
 
-from .test_disk_full import GYRO, _Disk, _fill, _sequence_ok
+from .test_disk_full import GYRO, _Disk, _fill, _sequence_ok, failed_midway
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX system calls")
 
@@ -28,12 +28,7 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX system ca
 def _failed_midway(tmp_path, monkeypatch) -> tuple[SessionWriter, _Disk]:
     """A session of 1000 rows of which the first 500 reached the disk, the rest in memory;
     the disk still full, but for the partial file's own room."""
-    disk = _Disk(monkeypatch)
-    w = SessionWriter(tmp_path / "s.h5", streams=[GYRO, *standard_streams()],
-                      flush_interval=1e9)
-    _fill(w, 0, 500)
-    disk.full = True
-    _fill(w, 500, 500)
+    w, disk = failed_midway(tmp_path, monkeypatch)
     assert w._io.memory is not None
     disk.spare = {os.fstat(w._io.fd).st_ino}  # its room is held; no other file gets any
     return w, disk

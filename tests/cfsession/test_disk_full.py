@@ -157,13 +157,20 @@ def test_a_failed_write_goes_on_in_memory_and_is_saved_whole_when_there_is_room(
     assert s.closed_cleanly and not s.problems and _sequence_ok(s) == 1000
 
 
-def test_a_disk_that_stays_full_keeps_the_rows_written_before(tmp_path, monkeypatch):
+def failed_midway(tmp_path, monkeypatch) -> tuple[SessionWriter, _Disk]:
+    """A session of 1000 rows of which the first 500 reached the disk before it filled, the
+    rest kept in memory; the disk still full."""
     disk = _Disk(monkeypatch)
     w = SessionWriter(tmp_path / "s.h5", streams=[GYRO, *standard_streams()],
                       flush_interval=1e9)
     _fill(w, 0, 500)
     disk.full = True
     _fill(w, 500, 500)
+    return w, disk
+
+
+def test_a_disk_that_stays_full_keeps_the_rows_written_before(tmp_path, monkeypatch):
+    w, _ = failed_midway(tmp_path, monkeypatch)
     with pytest.raises(SessionError, match=r"holds the session up to 9\.9 s only") as err:
         w.close(duration_s=20.0)
     assert "disk full: no room left in" in str(err.value) and "\n" not in str(err.value)

@@ -6,7 +6,6 @@ the file names the file, never a folder that may have moved."""
 
 from __future__ import annotations
 
-import os
 import shutil
 import sys
 import tempfile
@@ -128,37 +127,30 @@ def test_a_session_written_again_under_another_name_stores_that_name(tmp_path):
     assert open_session(tmp_path / "s-2.h5").json_meta("summary") == {"file": "s-2.h5"}
 
 
-def test_a_deleted_current_folder_is_no_reason_to_lose_the_session(tmp_path):
+def test_a_deleted_current_folder_is_no_reason_to_lose_the_session(tmp_path, monkeypatch):
     """Flying from inside the sessions folder (``cd sessions; fly ... --out /abs/sessions``),
     the folder deleted: the current folder is gone, and the session is written again to its
     own folder all the same (the fall-backs are only looked for after that fails)."""
     out = tmp_path / "out"
     w = _writer(out)
-    here = os.getcwd()
-    try:
-        os.chdir(out)
-        shutil.rmtree(out)
-        _finish(w)
-        assert w.close() == out / "s.h5"
-    finally:
-        os.chdir(here)
+    monkeypatch.chdir(out)  # restored after the test
+    shutil.rmtree(out)
+    _finish(w)
+    assert w.close() == out / "s.h5"
     assert len(w.notes) == 1 and "written again, from the still open file" in w.notes[0]
     _whole(out / "s.h5")
 
 
-def test_a_deleted_current_folder_and_a_taken_folder_name_go_to_the_folder_above(tmp_path):
+def test_a_deleted_current_folder_and_a_taken_folder_name_go_to_the_folder_above(
+        tmp_path, monkeypatch):
     out = tmp_path / "out"
     w = _writer(out)
-    here = os.getcwd()
-    try:
-        os.chdir(out)
-        shutil.rmtree(out)
-        out.write_text("a file now")
-        _finish(w)
-        assert w.close() == tmp_path / "s.h5"
-        assert saving.fallbacks(out / "s.h5") == [tmp_path, Path(tempfile.gettempdir())]
-    finally:
-        os.chdir(here)
+    monkeypatch.chdir(out)
+    shutil.rmtree(out)
+    out.write_text("a file now")
+    _finish(w)
+    assert w.close() == tmp_path / "s.h5"
+    assert saving.fallbacks(out / "s.h5") == [tmp_path, Path(tempfile.gettempdir())]
     assert "instead" in w.notes[0]
     _whole(tmp_path / "s.h5")
 
