@@ -97,6 +97,7 @@ class Commander:
         """The end of a plan flown through: the stop one period after setpoint ``k - 1``."""
         self.telemetry.wait(self.deadline(k))
         self.stop("landed")
+        self.journal.landed = True
         self.journal.event("flight complete")
 
     def abort(self, k: int) -> None:

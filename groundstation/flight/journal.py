@@ -37,6 +37,7 @@ class Journal:
         self.pending: dict[str, list[tuple]] = defaultdict(list)
         self.causes: list[str] = []
         self.end_excitation = ""  # a source's request to end the excitation
+        self.landed = False  # the plan flown through and the stop sent (Commander.land)
         self.listeners = Listeners(recorder=recorder, others=listeners,
                                    on_error=self._listener_failed)
 
@@ -60,9 +61,12 @@ class Journal:
         disk that refuses room, a recording that failed): the flight's cause when it is the
         first, else an event "during the abort". A new cause ends the descent at once (the
         operator's second signal); this never does, so the landing the reserve was kept for
-        is flown."""
+        is flown. After the landing (the motors stopped, the file's tail recording) it is an
+        event too: the flight was not aborted."""
         if self.causes:
             self.event(f"during the abort: {text}", level="error", source="safety")
+        elif self.landed:
+            self.event(f"after landing: {text}", level="error", source="safety")
         else:
             self.cause(text)
 

@@ -244,3 +244,28 @@ def test_a_full_disk_during_the_descent_does_not_cut_it_short(sim_uri, tmp_path,
     check_descent(s, thrust_ceiling=34000, n=20)
     texts = [e.text for e in safety_events(s)]
     assert any(t.startswith("during the abort: disk full") for t in texts), texts
+
+
+def test_a_full_disk_after_the_landing_is_no_abort(sim_uri, tmp_path, monkeypatch):
+    """The disk refusing room while the file records its tail after a landed flight (the stop
+    sent): an event "after landing", and the flight is not reported aborted (it was)."""
+    from cfsession.writer import SessionWriter
+
+    full = {"now": False}
+    monkeypatch.setattr(SessionWriter, "trouble", property(
+        lambda self: "disk full: no room left in the test's folder" if full["now"] else ""))
+
+    class FillsAfterLanding:
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "events" and any(b"flight complete" in bytes(r[3]) for r in rows):
+                full["now"] = True
+
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=sim_uri(),
+                      listeners=[FillsAfterLanding()])
+    assert full["now"] and not result.aborted, result.cause
+    s = check_closed_with_stop(result)
+    texts = [e.text for e in safety_events(s)]
+    assert texts == ["after landing: disk full: no room left in the test's folder"], texts
