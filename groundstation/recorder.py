@@ -79,6 +79,9 @@ def check_folder(out: str | Path) -> Path:
     """Create the session folder ``out`` if missing and check that files can be created in
     it; one-line :class:`SessionError` otherwise."""
     folder = Path(out)
+    if str(out) == "-":  # the usual name for standard output: not a folder anyone means
+        raise SessionError("--out -: sessions are files in a folder, not a stream on standard "
+                           "output; give a folder (its full path for one named '-')")
     if folder.exists() and not folder.is_dir():
         raise SessionError(f"{folder}: is a file, not a folder; choose another --out folder")
     try:

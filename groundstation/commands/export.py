@@ -180,6 +180,10 @@ def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
         path = out or session.with_suffix(".mat")
         return check_output(path, option="--out", suffixes=(".mat",), inputs=[session],
                             overwrite=force, force_flag="--force")
+    if out is not None and str(out) == "-":  # the usual name for standard output
+        raise click.BadParameter(f"'-' (standard output): {to} export writes one file per "
+                                 "stream into a folder; give a folder (its full path for "
+                                 "one named '-')", param_hint="--out")
     folder = out or session.with_name(f"{session.stem}-{to}")
     if folder.exists() and not folder.is_dir():
         raise click.BadParameter(f"{str(folder)!r} is a file; give a folder", param_hint="--out")

@@ -91,3 +91,20 @@ def test_a_folder_without_write_permission(session, tmp_path):
 def test_a_missing_format_lists_the_choices_on_one_line(session):
     line = _one_line(_run(session))
     assert "Missing option '--to'" in line and "csv, mat or parquet" in line
+
+
+@pytest.mark.parametrize("to", ["csv", "parquet"])
+def test_standard_output_as_the_folder_is_refused(session, tmp_path, monkeypatch, to):
+    """`--out -` is the usual name for standard output; export wrote a folder named '-'."""
+    monkeypatch.chdir(tmp_path)
+    msg = _one_line(_run(session, "--to", to, "--out", "-"))
+    assert "'-' (standard output)" in msg and "give a folder" in msg
+    assert not (tmp_path / "-").exists()
+
+
+def test_fly_refuses_standard_output_as_its_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    msg = _one_line(CliRunner().invoke(main, ["fly", "hover-check", "--uri",
+                                              "sim://0?speed=inf", "--out", "-"]))
+    assert msg.startswith("error: --out -: sessions are files in a folder")
+    assert not (tmp_path / "-").exists()
