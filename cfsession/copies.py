@@ -21,7 +21,7 @@ from pathlib import Path
 
 import h5py
 
-from cfsession.diskfile import OPEN_FLAGS
+from cfsession.diskfile import OPEN_FLAGS, read_all, write_all
 from cfsession.errors import SessionError
 
 __all__ = ["WriteBackFailed", "claim_new", "compressed_image", "free_bytes",
@@ -140,7 +140,7 @@ def overwrite_in_place(path: Path, data: bytes, *, ids: tuple[int, int]) -> None
         if len(data) > room:
             raise OSError(errno.ENOSPC, f"the compressed session ({len(data) >> 10} KiB) does "
                                         f"not fit in the {room >> 10} KiB there are")
-        before = _read_all(fd, st.st_size)
+        before = read_all(fd, st.st_size)
         written = [0]
         try:
             _put(fd, data, written)
@@ -164,39 +164,10 @@ def _put(fd: int, data: bytes, written: list[int] | None = None) -> None:
     what fits in its size), ``fsync``-ed, then the rest cut off and ``fsync``-ed again (the new
     bytes are on the disk before the old ones beyond them go). ``written[0]``: how many bytes
     of ``data`` were written, as it goes."""
-    _write_all(fd, data, written)
+    write_all(fd, data, written=written)
     os.fsync(fd)
     os.ftruncate(fd, len(data))
     os.fsync(fd)
-
-
-def _read_all(fd: int, size: int) -> bytes:
-    os.lseek(fd, 0, os.SEEK_SET)
-    parts, got = [], 0
-    while got < size:
-        part = os.read(fd, size - got)
-        if not part:
-            break
-        parts.append(part)
-        got += len(part)
-    return b"".join(parts)
-
-
-def _write_all(fd: int, data: bytes, written: list[int] | None = None) -> None:
-    """``data`` at the start of ``fd``, in positioned writes (``pwrite``); ``written[0]``: the
-    bytes written so far."""
-    view, pos = memoryview(data), 0
-    while pos < len(view):
-        if hasattr(os, "pwrite"):
-            n = os.pwrite(fd, view[pos:], pos)
-        else:  # Windows
-            os.lseek(fd, pos, os.SEEK_SET)
-            n = os.write(fd, view[pos:])
-        if n <= 0:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        pos += n
-        if written is not None:
-            written[0] = pos
 
 
 def _write_tmp(path: Path, *, mode: int, data: bytes) -> Path:
@@ -210,7 +181,7 @@ def _write_tmp(path: Path, *, mode: int, data: bytes) -> Path:
                 os.fchmod(fd, mode)
             else:  # Windows before Python 3.13
                 os.chmod(tmp, mode)
-            _write_all(fd, data)
+            write_all(fd, data)
             os.fsync(fd)
         finally:
             os.close(fd)
@@ -232,7 +203,7 @@ def repack(path: Path) -> str:
     mode = stat.S_IMODE(st.st_mode) & 0o777 if stat.S_ISREG(st.st_mode) else 0o600
     fd = os.open(path, os.O_RDONLY | OPEN_FLAGS)
     try:
-        data = compressed_image(_read_all(fd, os.fstat(fd).st_size))
+        data = compressed_image(read_all(fd, os.fstat(fd).st_size))
     finally:
         os.close(fd)
     free = free_bytes(path.parent)

@@ -24,7 +24,7 @@ from typing import Any
 from cfsession.errors import SessionError
 
 __all__ = ["OPEN_FLAGS", "RESERVE_BYTES", "SessionFile", "check_room", "check_writable",
-           "disk_problem"]
+           "disk_problem", "read_all", "write_all"]
 
 log = logging.getLogger("cfsession.writer")  # the writer's file: logged as the writer
 
@@ -110,6 +110,32 @@ def _pread(fd: int, n: int, pos: int) -> bytes:
         return os.pread(fd, n, pos)
     os.lseek(fd, pos, os.SEEK_SET)
     return os.read(fd, n)
+
+
+def write_all(fd: int, data: bytes | bytearray | memoryview, *, at: int = 0,
+              written: list[int] | None = None) -> None:
+    """All of ``data`` into ``fd`` from offset ``at``, in positioned writes (a short write goes
+    on; none at all is ENOSPC). ``written[0]``: the bytes of ``data`` written so far."""
+    view, done = memoryview(data).cast("B"), 0
+    while done < len(view):
+        n = _pwrite(fd, view[done:], at + done)
+        if n <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        done += n
+        if written is not None:
+            written[0] = done
+
+
+def read_all(fd: int, size: int) -> bytes:
+    """Up to ``size`` bytes of ``fd`` from its start (fewer at its end)."""
+    parts, got = [], 0
+    while got < size:
+        part = _pread(fd, size - got, got)
+        if not part:
+            break
+        parts.append(part)
+        got += len(part)
+    return b"".join(parts)
 
 
 def _fallocate(fd: int, offset: int, length: int) -> None:
@@ -239,13 +265,8 @@ class SessionFile:
         end = pos + len(data)
         if self.memory is None:
             self.allocate(end)
-            view, done = memoryview(data).cast("B"), 0
             try:
-                while done < len(view):
-                    n = _pwrite(self.fd, view[done:], pos + done)
-                    if n <= 0:
-                        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-                    done += n
+                write_all(self.fd, data, at=pos)
                 self.disk_size = max(self.disk_size, end)
                 return
             except OSError as exc:
