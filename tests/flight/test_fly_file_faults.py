@@ -129,14 +129,19 @@ def test_a_file_size_limit_aborts_with_one_line_and_a_readable_file(tmp_path):
     assert safety_events(s)[0].text.startswith("file size limit reached")
 
 
-def test_a_deleted_folder_is_made_again_with_the_session(sim_uri, tmp_path, monkeypatch):
-    out = tmp_path / "out"
-    _act_at_tick(monkeypatch, 30, lambda: shutil.rmtree(out))
-    uri = sim_uri()
+def _fly_while(monkeypatch, uri: str, out: Path, action) -> tuple[dict, Path]:
+    """``fly --json`` into ``out`` with ``action()`` done at tick 30: the summary and the file
+    it names (the flight completed, exit 0)."""
+    _act_at_tick(monkeypatch, 30, action)
     res = _fly(uri, out, "--json")
     assert res.exit_code == 0, res.output
     summary = _summary(res)
-    path = Path(summary["file"])
+    return summary, Path(summary["file"])
+
+
+def test_a_deleted_folder_is_made_again_with_the_session(sim_uri, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    summary, path = _fly_while(monkeypatch, sim_uri(), out, lambda: shutil.rmtree(out))
     assert path.parent == out and path.exists()
     (note,) = summary["file_notes"]
     assert "was deleted while being written" in note and str(path) in note
@@ -146,12 +151,7 @@ def test_a_deleted_folder_is_made_again_with_the_session(sim_uri, tmp_path, monk
 
 def test_a_renamed_folder_is_where_the_summary_says(sim_uri, tmp_path, monkeypatch):
     out, moved = tmp_path / "out", tmp_path / "moved"
-    _act_at_tick(monkeypatch, 30, lambda: out.rename(moved))
-    uri = sim_uri()
-    res = _fly(uri, out, "--json")
-    assert res.exit_code == 0, res.output
-    summary = _summary(res)
-    path = Path(summary["file"])
+    summary, path = _fly_while(monkeypatch, sim_uri(), out, lambda: out.rename(moved))
     assert path.parent == moved and path.exists() and not out.exists()
     assert summary["file_notes"] == [f"{out / path.name} was moved while being written; the "
                                      f"session is now {path}"]
