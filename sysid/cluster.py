@@ -530,7 +530,7 @@ def completed(client: Any, futures: Iterable[Any], *,
         next_check = time.monotonic() + watch.poll_s
 
 
-def task_result(client: Any, future: Any) -> Any:
+def task_result(client: Any, future: Any, *, workers: _WorkerWatch | None = None) -> Any:
     """``future.result()``: the task's value, or the exception the task raised; a
     :class:`SchedulerLost` when the result could not be fetched because the scheduler went
     away meanwhile (the connection closed or reset, the future cancelled with it) or did not
@@ -538,26 +538,41 @@ def task_result(client: Any, future: Any) -> Any:
     :class:`TaskCancelled` when the future was cancelled while the scheduler still answers
     (its result was lost with the workers holding it, and so was the data it needs); a
     :class:`ClusterError` when the result did not come in that time but the scheduler
-    answers."""
-    timeout = RESULT_WAITS * connect_timeout_s()
-    try:
-        return future.result(timeout=timeout)
-    except (Exception, asyncio.CancelledError) as exc:
-        lost = _worker_lost(exc)
-        if lost is not None:
-            raise lost from None
-        if future.status == "error" or not isinstance(
-                exc, (OSError, TimeoutError, concurrent.futures.CancelledError,
-                      asyncio.CancelledError)):
-            raise  # the task's own failure, or its result does not load here
-        label = _label(client, _watch())
-        if future.cancelled():
-            raise _cancelled(client, future, label) from None
-        if isinstance(exc, TimeoutError):  # no lost scheduler if it answers now
-            worker_count(client, label=label)  # (SchedulerLost when it does not)
+    answers.
+
+    A finished task whose worker left before its result was fetched is run again by the
+    scheduler (its future goes back to pending): that is waited for as a running task is,
+    with the cluster checked every :data:`POLL_S` (``workers``, a :class:`_WorkerWatch`
+    carrying the run's no-worker wait), so a cluster left without workers ends the run
+    after the worker wait, not after the result limit."""
+    watch = _watch()
+    workers = workers or _WorkerWatch(client, watch)
+    limit = RESULT_WAITS * connect_timeout_s()
+    deadline = time.monotonic() + limit
+    while True:
+        try:
+            return future.result(timeout=max(min(watch.poll_s, deadline - time.monotonic()),
+                                             0.0))
+        except (Exception, asyncio.CancelledError) as exc:
+            lost = _worker_lost(exc)
+            if lost is not None:
+                raise lost from None
+            if future.status == "error" or not isinstance(
+                    exc, (OSError, TimeoutError, concurrent.futures.CancelledError,
+                          asyncio.CancelledError)):
+                raise  # the task's own failure, or its result does not load here
+            label = _label(client, watch)
+            if future.cancelled():
+                raise _cancelled(client, future, label) from None
+            if not isinstance(exc, TimeoutError):
+                raise _lost(client, label) from None
+        workers.check()  # SchedulerLost, or the end of the worker wait
+        now = time.monotonic()
+        if future.status in ("pending", "lost"):  # run again (its worker left): not late
+            deadline = now + limit
+        elif now >= deadline:  # no lost scheduler: it answered just now
             raise ClusterError(f"{label}: a finished task's result was not handed over within "
-                               f"{timeout:g} s (the worker holding it left?)") from None
-        raise _lost(client, label) from None
+                               f"{limit:g} s (the worker holding it left?)")
 
 
 def _worker_lost(exc: BaseException) -> WorkerLost | None:
@@ -624,7 +639,7 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
             lost: set[Any] = set()
             for fut in completed(client, futures, cancelled=lost.add, workers=workers):
                 try:
-                    result = task_result(client, fut)
+                    result = task_result(client, fut, workers=workers)
                 except TaskCancelled:  # finished, its result lost before it was fetched
                     lost.add(fut)
                     continue

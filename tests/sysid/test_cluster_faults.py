@@ -506,6 +506,59 @@ def test_result_not_handed_over_while_the_scheduler_answers_is_no_lost_scheduler
     assert str(err.value) == ("cluster: a finished task's result was not handed over within "
                               "1 s (the worker holding it left?)")
 
+def _finished_then_orphaned(cluster: Any, client: Any) -> Any:
+    """A task that finished on the cluster's only worker, which then left before its result
+    was fetched (the scheduler marks it lost and will run it again)."""
+    fut = client.submit(int, 42, pure=False)
+    deadline = time.monotonic() + DEADLINE_S
+    while fut.status != "finished" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    [worker] = cluster.workers.values()
+    cluster.sync(worker.close, executor_wait=False, reason="test")
+    while fut.status != "lost" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert fut.status == "lost"
+    return fut
+
+
+def test_result_lost_with_its_worker_and_none_left_ends_at_the_worker_wait(
+        threads: tuple[Any, Any], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Not at the result limit (ten connect timeouts: 100 s by default, 20 s here)."""
+    cluster, client = threads
+    monkeypatch.setenv(CONNECT_ENV, "2")
+    fut = _finished_then_orphaned(cluster, client)
+    warnings: list[str] = []
+    t0 = time.monotonic()
+    with watching(label="cluster", worker_wait_s=1.0, poll_s=0.1, notify=warnings.append), \
+            pytest.raises(ClusterError) as err:
+        task_result(client, fut)
+    assert time.monotonic() - t0 < 15.0
+    assert str(err.value).startswith("cluster: the scheduler had no workers for 1 s; ")
+    assert warnings[0].startswith("cluster: the scheduler has no workers; waiting up to 1 s")
+
+
+def test_result_lost_with_its_worker_is_computed_again_by_one_that_joins(
+        threads: tuple[Any, Any]) -> None:
+    cluster, client = threads
+    fut = _finished_then_orphaned(cluster, client)
+    joined: list[Any] = []
+
+    def notify(msg: str) -> None:
+        if "no workers" in msg:
+            async def start() -> Any:
+                return await distributed.Worker(cluster.scheduler_address, nthreads=1)
+
+            joined.append(cluster.sync(start))
+
+    try:
+        with watching(label="cluster", worker_wait_s=30.0, poll_s=0.1, notify=notify):
+            assert task_result(client, fut) == 42
+    finally:
+        for w in joined:
+            cluster.sync(w.close)
+    assert len(joined) == 1
+
+
 @pytest.fixture
 def killable() -> Iterator[tuple[subprocess.Popen[str], str]]:
     """A one-process cluster (:func:`tests.sysid.cluster_fakes.serve`) and its address."""
