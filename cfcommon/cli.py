@@ -40,8 +40,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-__all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "FiniteFloat", "OneLineErrorGroup",
-           "check_output", "output_console", "output_gone", "output_table"]
+__all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLineErrorGroup",
+           "check_output", "drop_failing_stdout", "output_console", "output_gone",
+           "output_table"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from).
@@ -49,6 +50,24 @@ DEFAULT_INPUTS = "motors"
 DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
+
+
+#: What a write gets when the disk, a quota or ``ulimit -f`` has no room for it (also standard
+#: output redirected to a full disk or ``/dev/full``).
+NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def drop_failing_stdout() -> None:
+    """Point standard output at the null device when what it holds cannot be written (a full
+    disk under a redirection): the interpreter's flush at exit then does not fail again with
+    a second message. Output that can still be written is flushed first."""
+    try:
+        sys.stdout.flush()
+    except OSError:
+        with contextlib.suppress(OSError):
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 1)
+            os.close(null)
 
 
 def output_gone(exc: BaseException) -> bool:
@@ -207,6 +226,19 @@ class OneLineErrorGroup(click.Group):
         if isinstance(exc, FileNotFoundError | PermissionError | IsADirectoryError):
             return f"{exc.strerror}: {exc.filename}"
         return None
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        """click's ``main``; a write refused for want of room (standard output redirected to a
+        full disk or ``/dev/full``, ``--help`` included) is one line and exit status 2."""
+        try:
+            return super().main(*args, **kwargs)
+        except OSError as exc:
+            if exc.errno not in NO_ROOM:
+                raise
+            drop_failing_stdout()
+            where = f" {exc.filename}" if exc.filename else ""
+            _say(f"error: cannot write{where}: {exc.strerror}")
+            sys.exit(2)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:

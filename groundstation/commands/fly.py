@@ -26,7 +26,7 @@ from typing import Any
 
 import click
 
-from cfcommon.cli import FiniteFloat, output_gone
+from cfcommon.cli import NO_ROOM, FiniteFloat, drop_failing_stdout, output_gone
 from cfsession.schema import StreamSpec
 from groundstation.errors import GroundStationError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
@@ -327,13 +327,17 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
             if folder.is_dir() and not any(folder.iterdir()):
                 folder.rmdir()
         raise
+    unwritten = None
     try:
         if as_json:
             click.echo(json.dumps(result.summary, indent=2))
         else:
             click.echo("\n".join(summary_lines(result.summary)))
     except OSError as exc:  # the terminal closed (the hang-up that aborted the flight?): the
-        if not output_gone(exc):  # exit status below still tells how the flight ended
+        if exc.errno in NO_ROOM:  # exit status below still tells how the flight ended;
+            drop_failing_stdout()  # a full disk under a redirection says so after it
+            unwritten = exc.strerror
+        elif not output_gone(exc):
             raise
         url = None
     if url and sys.stdin.isatty():
@@ -347,6 +351,9 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
         raise GroundStationError(f"flight aborted: {result.cause}; {lost}" if result.cause
                                  else lost)
     result.raise_if_aborted()
+    if unwritten:
+        raise GroundStationError(f"cannot write the flight's summary to standard output "
+                                 f"({unwritten}); the session is {result.path}")
 
 
 def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,

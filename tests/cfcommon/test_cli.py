@@ -73,3 +73,22 @@ def test_check_output_refuses_read_only_folder(tmp_path) -> None:
     ro.chmod(0o500)
     with pytest.raises(click.BadParameter, match="not writable"):
         check_output(ro / "v.rrd", option="--rrd", suffixes=(".rrd",))
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="Linux's always-full device")
+@pytest.mark.parametrize("argv", [["groundstation", "plan", "check", "hover-check"],
+                                  ["groundstation", "--help"], ["sysid", "--version"],
+                                  ["sysid", "order", "--help"]])
+def test_output_to_a_full_disk_is_one_line_and_exit_2(argv) -> None:
+    """Standard output redirected to a full disk (``/dev/full``): one line on stderr and exit
+    2, for a command's output and for click's own (``--help``, ``--version``); it was a
+    traceback and exit 1."""
+    import subprocess
+    import sys
+
+    exe = os.path.join(os.path.dirname(sys.executable), argv[0])
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([exe, *argv[1:]], stdout=full, stderr=subprocess.PIPE,
+                              text=True, timeout=60)
+    assert (done.returncode, done.stderr) == (2, "error: cannot write: No space left on "
+                                                 "device\n")

@@ -269,3 +269,30 @@ def test_a_full_disk_after_the_landing_is_no_abort(sim_uri, tmp_path, monkeypatc
     s = check_closed_with_stop(result)
     texts = [e.text for e in safety_events(s)]
     assert texts == ["after landing: disk full: no room left in the test's folder"], texts
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="Linux's always-full device")
+@pytest.mark.parametrize("json_out", [False, True])
+def test_a_summary_that_finds_the_disk_full_is_one_line_after_a_whole_flight(tmp_path,
+                                                                           json_out):
+    """`fly ... > file` on a full disk: the flight is flown and saved whole, and the summary it
+    could not write is one line naming the session and exit 2 (it was a traceback)."""
+    import subprocess
+    import sys
+
+    from cfsession import open_session
+
+    exe = os.path.join(os.path.dirname(sys.executable), "groundstation")
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([exe, "fly", "hover-check", "--uri", "sim://0?speed=inf&seed=1",
+                               "--out", str(tmp_path), *(["--json"] if json_out else [])],
+                              stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    [path] = tmp_path.glob("*.h5")
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[-1] == (
+        "error: cannot write the flight's summary to standard output (No space left on "
+        f"device); the session is {path}")
+    assert "Traceback" not in done.stderr
+    s = open_session(path)
+    assert s.closed_cleanly and s["setpoints"].data["thrust"][-1] == 0
+    assert not [e.text for e in s.events() if "abort" in e.text.lower()]
