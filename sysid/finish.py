@@ -11,12 +11,18 @@ Both IEM and PO-MOESP end with an estimate :math:`\\hat\\Gamma_f` ``(f l, n)`` a
    :math:`\\hat L_p = \\hat\\Gamma_f^\\dagger \\widehat{\\Gamma_f L_p}`; B, D, K by regression on
    them (:func:`sysid.realize.bdk_from_states`), given the final A. If ``A - K C`` is unstable,
    K is the Kalman gain of the state residuals.
-3. ``focus="simulation"``: B, D and one x0 per flight re-estimated by output error with A, C
-   fixed (:func:`sysid.output_error.output_error_bd`); K kept from step 2.
+3. B, D and one x0 per flight re-estimated with A, C (and K) held, by least squares on
 
-Which focus when (``docs/sysid.md``, "Focus"): *prediction* keeps the closed-loop-consistent
-regression (the inputs' correlation with the noise is absorbed by the innovation regressor);
-use it for closed-loop flight data and for k-step prediction. *Simulation* minimises the
+   * ``focus="prediction"``: the one-step prediction error of the predictor
+     ``(A - K C, B - K D, K, C, D)`` (:func:`sysid.realize.predictor_fit` with K held); kept
+     from step 2 when ``A - K C`` is unstable or nearly defective (:data:`ONE_STEP_MAX_COND`);
+   * ``focus="simulation"``: the output (simulation) error
+     (:func:`sysid.output_error.output_error_bd`).
+
+Which focus when (``docs/sysid.md``, "Focus"): *prediction* stays consistent in closed loop
+(K from the state regression, whose innovation regressor absorbs the inputs' correlation with
+the noise; the one-step fit's regressors are past data); use it for closed-loop flight data and
+for k-step prediction. *Simulation* minimises the
 simulation error of the deterministic part; it is what open-loop data with colored inputs want
 (MATLAB ``n4sid`` ``Focus="simulation"``), and is biased by feedback.
 """
@@ -35,11 +41,13 @@ from sysid.factor import DataProducts
 from sysid.model import StateSpaceModel
 from sysid.output_error import output_error_bd
 from sysid.realize import (
+    PredictorFit,
     Signals,
     ac_from_gamma,
     bdk_from_states,
     build_model,
     kalman_gain_from_residuals,
+    predictor_fit,
 )
 from sysid.stability import Stability, check_stability, stabilize
 
@@ -49,6 +57,9 @@ __all__ = ["FOCUS_MODES", "Finished", "Focus", "check_flags", "check_focus", "fi
 log = logging.getLogger(__name__)
 
 Focus = Literal["prediction", "simulation"]
+#: Largest condition number of ``A - K C``'s eigenvectors for the prediction focus's one-step
+#: B, D fit (above it, nearly repeated poles: the state regression's B, D are kept).
+ONE_STEP_MAX_COND = 1e4
 FOCUS_MODES: tuple[str, ...] = ("prediction", "simulation")
 
 
@@ -118,6 +129,11 @@ def finish(*, gamma: np.ndarray, gamma_lp: np.ndarray, sig: Signals, feedthrough
             notes["K"] = "Kalman gain (DARE) of the state residuals"
     n = a.shape[0]
     x0 = [np.zeros(n) for _ in flights]
+    if focus == "prediction" and bd is None:
+        fit = _one_step_bd(a=a, c=c, k=k, flights=flights, feedthrough=feedthrough)
+        if fit is not None:
+            b, d, x0 = fit.b_k + k @ fit.d, fit.d, fit.x0
+            notes["bd"] = "one-step prediction error (prediction focus), x0 per flight"
     if focus == "simulation":
         if bd is not None:
             raise ParameterError("B, D fixed by the thesis variant cannot be re-estimated: "
@@ -126,6 +142,25 @@ def finish(*, gamma: np.ndarray, gamma_lp: np.ndarray, sig: Signals, feedthrough
         notes["bd"] = "output error (simulation focus), x0 per flight"
     return Finished(a=a, b=b, c=c, d=d, k=k, noise_cov=noise_cov, x0=x0, moved=moved,
                     notes=notes)
+
+
+def _one_step_bd(*, a: np.ndarray, c: np.ndarray, k: np.ndarray,
+                 flights: Sequence[tuple[np.ndarray, np.ndarray]], feedthrough: bool
+                 ) -> PredictorFit | None:
+    """Step 3 for the prediction focus: ``B_K = B - K D``, D and x0 by least squares on the
+    one-step prediction error of the predictor ``(A - K C, B_K, K, C, D)`` with A, C, K held
+    (:func:`sysid.realize.predictor_fit`); None (the state regression's B, D kept) when
+    ``A - K C`` is not stable, or close to defective (its eigenvectors' condition number above
+    :data:`ONE_STEP_MAX_COND`: the modal regressors' normal equations square it)."""
+    a_k = a - k @ c
+    lam, vec = np.linalg.eig(a_k)
+    if not np.max(np.abs(lam), initial=0.0) < 1.0 or np.linalg.cond(vec) > ONE_STEP_MAX_COND:
+        return None
+    try:
+        return predictor_fit(a_k=a_k, c=c, flights=list(flights), feedthrough=feedthrough,
+                             k=k)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,

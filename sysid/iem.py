@@ -26,8 +26,10 @@ version on the explicit arrays, kept as the reference.
 **Departures from the thesis.** (1) The SVD is taken of
 :math:`\\widehat{\\Gamma_f L_p} Z_p` (``weighting="data"``, the predicted future outputs,
 invariant to how the past is scaled) rather than of :math:`\\widehat{\\Gamma_f L_p}` alone
-(``weighting="none"``, eq. 3.32). (2) B, D, K come from a regression on the estimated states
-(``bk_method="state"``, see :mod:`sysid.realize`); the thesis' step 5 (``bk_method="thesis"``)
+(``weighting="none"``, eq. 3.32). (2) K comes from a regression on the estimated states
+(``bk_method="state"``, see :mod:`sysid.realize`), and B, D from the one-step prediction error
+(or, ``focus="simulation"``, the output error) with A, C, K held (:mod:`sysid.finish`); the
+thesis' step 5 (``bk_method="thesis"``)
 is biased under feedback and K then comes from the state regression with B, D fixed.
 """
 
@@ -288,12 +290,13 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
         order: model order n. past, future: horizons p, f in samples.
         feedthrough: estimate D (and use the current input in the row regressions); False
             means D = 0, right for a loop without delay (u(k) already reacts to y(k)).
-        variant: a preset for the choices below. "consistent" (default): state regression
-            for B, D, K, data weighting, no refinement. "thesis": Table 4.3 exactly (thesis
-            B/D from eq. 3.15, no weighting), for reproducing the thesis; biased in closed
-            loop. Arguments given explicitly override the preset.
-        focus: "prediction" (default): B, D, K from the closed-loop-consistent state
-            regression, the right choice for flight data and k-step prediction.
+        variant: a preset for the choices below. "consistent" (default): K from the state
+            regression and B, D as ``focus`` says, data weighting, no refinement. "thesis":
+            Table 4.3 exactly (thesis B/D from eq. 3.15, no weighting), for reproducing the
+            thesis; biased in closed loop. Arguments given explicitly override the preset.
+        focus: "prediction" (default): K from the closed-loop-consistent state
+            regression, then B, D and x0 by least squares on the one-step prediction error
+            with A, C, K held; the right choice for flight data and k-step prediction.
             "simulation": B, D and x0 re-estimated by output error with A, C (and K) from the
             subspace step; for open-loop data with colored inputs; biased under feedback
             (:mod:`sysid.finish`, ``docs/sysid.md``).

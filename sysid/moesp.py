@@ -108,8 +108,8 @@ def po_moesp(data: IOData | Sequence[IOData], *, order: int, past: int, future: 
             is colored (a validation fit of -18 000 % on DaISy ``CD_player_arm``); K = 0.
         focus: "simulation" (default, as MATLAB ``n4sid`` with simulation focus): B, D and x0
             by least squares on the output error given A and C; K from the state regression.
-            "prediction": B, D, K by regression on the states of the oblique projection
-            (N4SID style), for one-step prediction.
+            "prediction": K by regression on the states of the oblique projection (N4SID
+            style), then B, D and x0 by the one-step prediction error with A, C, K held.
         stability: as in :func:`sysid.iem` (:mod:`sysid.stability`).
         pem: then refine by prediction error with the criterion of ``focus``, as in
             :func:`sysid.iem` (simulation: an output-error model, K = 0).

@@ -156,7 +156,7 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     if fit is None:
         raise OrderError(f"PARSIM-K: the predictor A_K of order {order} is not safely "
                              "diagonalisable; try another order")
-    b_k, d, k, errors = fit
+    b_k, d, k, _, errors = fit
     a = a_k + k @ c
     a, moved = stabilize(a, mode=stability)
     b = b_k + k @ d

@@ -175,5 +175,5 @@ def pem_refine(*, matrices: Matrices, flights: list[tuple[np.ndarray, np.ndarray
         # an output-error model (MATLAB ssest, DisturbanceModel="none"): K = 0 and the
         # covariance of the simulation errors
         return (a_m, fit[0], cm, fit[1], np.zeros_like(k), cov), status + "; output error, K = 0"
-    b_k, d, k_new, _ = fit
+    b_k, d, k_new = fit[:3]
     return (a_m + k_new @ cm, b_k + k_new @ d, cm, d, k_new, cov), status

@@ -34,7 +34,7 @@ import functools
 import importlib.metadata
 import logging
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -44,6 +44,7 @@ from sysid.errors import OrderError
 from sysid.model import StateSpaceModel
 
 __all__ = [
+    "PredictorFit",
     "Signals",
     "ac_from_gamma",
     "bd_thesis",
@@ -239,12 +240,26 @@ def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
     return None if fit is None else fit[:3]
 
 
+class PredictorFit(NamedTuple):
+    """:func:`predictor_fit`'s result: ``b_k (n, m)``, ``d (l, m)``, ``k (n, l)``, one
+    ``x0 (n,)`` per flight, and the one-step errors ``y - yhat`` ``(N, l)`` of each flight
+    (empty unless asked for)."""
+
+    b_k: np.ndarray
+    d: np.ndarray
+    k: np.ndarray
+    x0: list[np.ndarray]
+    errors: list[np.ndarray]
+
+
 def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
                   flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool,
-                  residuals: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]] | None:
+                  residuals: bool = False, k: np.ndarray | None = None
+                  ) -> PredictorFit | None:
     """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples,
     and (``residuals=True``) the prediction errors ``y - yhat`` ``(N, l)`` of each flight.
+    Given ``k`` ``(n, l)``, K is held at it and only ``B_K, D, x_0`` are fitted (the same
+    normal equations, partitioned).
 
     With ``A_K = A - K C`` and C fixed, the predictor (thesis eq. 3.23's ``A_K, B_K``)
 
@@ -310,7 +325,16 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
         lhs += jac.T @ gram @ jac
         rhs += jac.T @ fty[:, out]
         jacs.append(jac)
-    theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    if k is None:
+        theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    else:  # K's entries are parameters m n .. (m + l) n: column c - m of K, entry j at c n + j
+        held = np.arange(m * n, n_bk)
+        free = np.setdiff1d(np.arange(n_par), held)
+        theta = np.empty(n_par)
+        theta[held] = np.asarray(k, dtype=float).T.reshape(-1)
+        theta[free] = np.linalg.lstsq(lhs[np.ix_(free, free)],
+                                      rhs[free] - lhs[np.ix_(free, held)] @ theta[held],
+                                      rcond=None)[0]
     errs = []
     if residuals:
         coef = np.stack([jac @ theta for jac in jacs], axis=1)  # (n_feat, l)
@@ -318,7 +342,8 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
     # parameter index c * n + j is entry j of column c of [B_K, K]
     bk_all = theta[:n_bk].reshape(cc, n).T
     d = theta[n_bk:n_bk + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
-    return bk_all[:, :m], d, bk_all[:, m:], errs
+    x0 = [theta[n_bk + n_d + n * f:n_bk + n_d + n * (f + 1)] for f in range(n_fl)]
+    return PredictorFit(bk_all[:, :m], d, bk_all[:, m:], x0, errs)
 
 
 def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,

@@ -22,7 +22,7 @@ def _cost(model: sysid.StateSpaceModel, data: sysid.IOData) -> float:
     ys = np.asarray(model.provenance["scaling"]["y_scale"])
     fit = predictor_fit(a_k=model.A - model.K @ model.C, c=model.C / ys[:, None],
                         flights=[(data.u, data.y / ys)], feedthrough=False, residuals=True)
-    return float(np.sum(fit[3][0] ** 2))
+    return float(np.sum(fit.errors[0] ** 2))
 
 
 def test_modal_form_is_the_same_predictor_with_normalised_c():
@@ -43,7 +43,7 @@ def test_modal_form_is_the_same_predictor_with_normalised_c():
                          residuals=True)
     modal = predictor_fit(a_k=a_mod, c=c_mod, flights=flights, feedthrough=False,
                           residuals=True)
-    np.testing.assert_allclose(modal[3][0], orig[3][0], atol=1e-8)
+    np.testing.assert_allclose(modal.errors[0], orig.errors[0], atol=1e-8)
 
 
 def test_pem_moves_a_perturbed_model_to_the_truth():

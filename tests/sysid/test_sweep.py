@@ -50,8 +50,9 @@ def test_po_moesp_order_selection_open_loop_mimo() -> None:
 
 def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData]) -> None:
     # IEM assumes (A - KC)^p ~ 0; here |eig(A - KC)| = 0.51, so p = 1 leaves 51 % of the
-    # state unexplained while p = 3 leaves 13 %. The default one-step refit largely repairs a
-    # short past (80.9 % vs 81.6 %), so the sweep is tested on the subspace estimate itself.
+    # state unexplained while p = 3 leaves 13 %. The prediction focus's one-step B, D fit
+    # (whole records, x0 fitted) repairs much of a short past's B, D: 79.9 % against 81.6 %
+    # (the state regression's B, D gave under 76.6 %); its A, C stay the subspace estimate's.
     ident, val = pbsid_data
     calls: list[tuple[int, int]] = []
     result = sweep(ident, pasts=[1, 3, 10], futures=[3, 10], orders=[4], validation=val,
@@ -64,7 +65,7 @@ def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData])
     best = result.best()
     assert best.past >= 3
     short = max(r.mean_fit for r in result.rows if r.past == 1)
-    assert short < best.mean_fit - 5.0
+    assert short < best.mean_fit - 1.0
     assert "past future order" in result.table() and result.fits.shape == (6, 2)
     assert result.scoring == "1-step prediction"
 
