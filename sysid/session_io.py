@@ -198,6 +198,9 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
 
 #: Warn when the grid is this many times finer than the slowest logged stream.
 _UPSAMPLE_WARN = 5.0
+#: Refuse a grid this many times finer than the slowest logged stream (a typo of dt: 1e-7 s on
+#: a 50 Hz log asked for 61 GiB).
+_UPSAMPLE_MAX = 1000.0
 #: A stream is low-passed before the hold when the grid is this much coarser than its period.
 _DECIMATE_FROM = 1.25
 
@@ -271,6 +274,10 @@ def load_experiments(
                             "unknown; pass dt")
         dt = slowest
         log.info("%s: grid dt = %g s, the logged period", session.path, dt)
+    if slowest > 0 and dt < slowest / _UPSAMPLE_MAX:
+        raise ParameterError(f"dt={dt:g} s is {slowest / dt:.0f}x finer than the logged period "
+                             f"{slowest:g} s; pass dt >= {slowest / _UPSAMPLE_MAX:g} (at most "
+                             f"{_UPSAMPLE_MAX:g}x finer)")
     offset = clock_offset(session, [c.stream for c in chans])
     streams = [_stream(session, c) for c in chans]
     common = min(s.t[-1] for s in streams) - max(s.t[0] for s in streams)

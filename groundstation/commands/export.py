@@ -118,12 +118,14 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
     """One ``.mat`` file: iddata's ``u``, ``y``, ``Ts``, names and units, and every stream."""
     from scipy.io import savemat
 
-    from sysid.errors import SysIdError
+    from sysid.errors import ParameterError, SysIdError
     from sysid.session_io import load_session
 
     try:
         data = load_session(session.path, inputs=inputs, outputs=outputs, window=window, dt=dt,
                             detrend=None)
+    except ParameterError as exc:  # a value given (--dt): its own advice
+        raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}") from None
     except SysIdError as exc:
         raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}; choose "
                                  "--inputs/--outputs/--window") from None
