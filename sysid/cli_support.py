@@ -119,8 +119,8 @@ def split_names(text: str) -> list[str]:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
-WINDOW_HELP = ("Window: auto (the excitation phase, else the airborne-N phases, each its own "
-               "experiment), a phase name or kind, T0:T1 (session seconds), PHASE@T0:T1 "
+WINDOW_HELP = ("Window: auto (the excitation phases, else the airborne-N phases, each its "
+               "own experiment), a phase name or kind, T0:T1 (session seconds), PHASE@T0:T1 "
                "(seconds from the phase start; PHASE@T0: to its end) or all. "
                "SESSION=WINDOW applies to that session only (file name or path); repeatable.")
 

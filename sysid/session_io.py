@@ -25,8 +25,8 @@ No other ``sysid`` module imports :mod:`cfsession`; none imports :mod:`groundsta
    (:func:`sysid.preprocess.resample_streams`) starting where every channel has a sample,
    then optional mean/linear detrending.
 
-**Windows** (:data:`Window`, :func:`parse_window`): ``"auto"`` is the excitation phase when
-the session has one, else every phase named ``airborne-1``, ``airborne-2``, ... (imported logs:
+**Windows** (:data:`Window`, :func:`parse_window`): ``"auto"`` is every excitation phase
+when the session has one, else every phase named ``airborne-1``, ``airborne-2``, ... (imported logs:
 motors on and airborne), each its own experiment (:func:`load_experiments`); a phase name or
 kind; ``T0:T1`` host seconds; ``PHASE@T0:T1`` seconds from the start of PHASE (``PHASE@T0:``
 to its end); ``"all"``. The result has ``u (N, m)``, ``y (N, l)``, the channel
@@ -176,8 +176,15 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
         if window != AUTO:
             return [(window, _phase(session, window))]
         phases = session.phases()
-        if any("excitation" in (p.name, p.kind) for p in phases):
-            return [("excitation", session.phase_window("excitation"))]
+        excited = [p for p in phases if "excitation" in (p.name, p.kind)]
+        if excited:  # each its own experiment: a PRBS, the hover after it, then a chirp
+            seen: dict[str, int] = {}  # joined held out little but the chirp
+            spans = []
+            for p in excited:
+                seen[p.name] = seen.get(p.name, 0) + 1
+                label = p.name if seen[p.name] == 1 else f"{p.name}-{seen[p.name]}"
+                spans.append((label, (p.start_s, p.end_s)))
+            return spans
         airborne = [(p.name, (p.start_s, p.end_s)) for p in phases
                     if _AIRBORNE.fullmatch(p.name)]
         if airborne:
@@ -245,8 +252,8 @@ def load_experiments(
     Args:
         path: the session file.
         inputs, outputs: channel selections (streams, ``stream.field`` or ``group.variable``).
-        window: see :data:`Window`; ``"auto"`` (default) is the excitation phase, else the
-            airborne segments.
+        window: see :data:`Window`; ``"auto"`` (default) is every excitation phase, else
+            every airborne segment, each its own experiment.
         dt: grid period in seconds; None (default) is the logged period of the selected
             streams (the slowest when they differ).
         detrend: ``"mean"``, ``"linear"`` or None, per experiment.

@@ -74,6 +74,25 @@ def test_auto_is_the_excitation_else_each_airborne_segment(files) -> None:
         load_session(files["imported"], window="auto")
 
 
+def test_auto_takes_each_excitation_phase_as_its_own_experiment(tmp_path) -> None:
+    """A flight with a PRBS, a hover and a chirp (roll-only, pitch-only, yaw-only): two
+    experiments, so the held-out 30 % of each validates (joined, the held-out part was the
+    chirp's end alone); the kind as a window still joins them, hover included."""
+    path = write_flight(tmp_path / "two.h5", system=known_system(), seed=5, phases=[
+        (0.0, "takeoff", "takeoff"), (5.0, "prbs", "excitation"), (25.0, "rest", "hover"),
+        (27.0, "chirp", "excitation"), (37.0, "land", "landing")]).path
+    exps = load_experiments(path, dt=0.02)
+    assert [e.source.rsplit("#", 1)[1] for e in exps] == ["prbs", "chirp"]
+    assert [round(e.n_samples * 0.02) for e in exps] == [20, 10]
+    joined = load_session(path, window="excitation", dt=0.02)
+    assert round(joined.n_samples * 0.02) == 32  # the 2 s hover between them included
+    same = write_flight(tmp_path / "same.h5", system=known_system(), seed=5, phases=[
+        (0.0, "takeoff", "takeoff"), (5.0, "excitation", "excitation"),
+        (25.0, "excitation", "excitation"), (37.0, "land", "landing")]).path
+    assert [e.source.rsplit("#", 1)[1] for e in load_experiments(same, dt=0.02)] == [
+        "excitation", "excitation-2"]
+
+
 def test_phase_relative_and_per_session_windows(files) -> None:
     rel = load_session(files["imported"], window=PhaseRelative("airborne-2", 2.0, 12.0))
     absolute = load_session(files["imported"], window=(28.0, 38.0))
