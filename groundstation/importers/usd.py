@@ -29,6 +29,8 @@ __all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "read_usd"]
 log = logging.getLogger(__name__)
 
 _MAGIC = 0xBC
+#: A file that ends inside its header (a copy cut short) holds no record to salvage.
+_NO_RECORDS = " (the file ends before its first record: nothing to import or salvage)"
 _SALVAGE = ("; import with --allow-damaged (allow_damaged=True from Python) to salvage the "
             "records")
 _TYPES = {"B": np.uint8, "b": np.int8, "H": np.uint16, "h": np.int16, "I": np.uint32,
@@ -70,7 +72,7 @@ class UsdLog:
 def _cstring(data: bytes, idx: int, *, path: Path, what: str) -> tuple[str, int]:
     end = data.find(b"\0", idx)
     if end < 0:
-        raise UsdFormatError(f"{path}: header truncated inside {what} at byte {idx}")
+        raise UsdFormatError(f"{path}: header truncated inside {what} at byte {idx}{_NO_RECORDS}")
     try:
         return data[idx:end].decode("ascii"), end + 1
     except UnicodeDecodeError:
@@ -101,13 +103,6 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     computed = zlib.crc32(body) & 0xFFFFFFFF
     crc_ok = computed == stored_crc
     problems: list[str] = []
-    if not crc_ok:
-        msg = f"CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x})"
-        if not allow_damaged:
-            raise UsdFormatError(f"{path}: {msg}; the file is damaged or truncated{_SALVAGE}")
-        _problem(path, problems, f"{msg}: the file is damaged or truncated, and a CRC over the "
-                 "whole file cannot say where; every record that decodes is kept as read, so "
-                 "any value may be wrong")
     version, n_types = struct.unpack_from("<HH", data, 1)
     if version not in (1, 2):
         raise UsdFormatError(f"{path}: uSD log version {version} is not supported (1 or 2)")
@@ -116,12 +111,12 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     seen_names: set[str] = set()
     for _ in range(n_types):
         if idx + 2 > len(body):
-            raise UsdFormatError(f"{path}: header truncated in the event-type table")
+            raise UsdFormatError(f"{path}: header truncated in the event-type table{_NO_RECORDS}")
         (event_id,) = struct.unpack_from("<H", body, idx)
         name, idx = _cstring(body, idx + 2, path=path, what="event name")
         shown = repr(name[:64])
         if idx + 2 > len(body):
-            raise UsdFormatError(f"{path}: header truncated in event {shown}")
+            raise UsdFormatError(f"{path}: header truncated in event {shown}{_NO_RECORDS}")
         (count,) = struct.unpack_from("<H", body, idx)
         idx += 2
         names, fmt = [], "<"
@@ -141,6 +136,14 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         except SessionError as exc:
             raise UsdFormatError(str(exc)) from None
         layouts[event_id] = (name, struct.Struct(fmt), names, fmt[1:])
+    if not crc_ok:  # after the header: a file cut inside it has nothing to salvage, and its
+        # header's own error says so
+        msg = f"CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x})"
+        if not allow_damaged:
+            raise UsdFormatError(f"{path}: {msg}; the file is damaged or truncated{_SALVAGE}")
+        _problem(path, problems, f"{msg}: the file is damaged or truncated, and a CRC over the "
+                 "whole file cannot say where; every record that decodes is kept as read, so "
+                 "any value may be wrong")
     head = struct.Struct("<HI" if version == 1 else "<HQ")
     scale = 1e-3 if version == 1 else 1e-6
     rows: dict[int, list[tuple]] = {k: [] for k in layouts}

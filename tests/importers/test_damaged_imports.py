@@ -133,3 +133,20 @@ def test_the_reader_lists_an_imported_log_s_damage(tmp_path, caplog, attrs, says
     problems = open_session(s.path).problems
     assert any(p.startswith("imported log: ") and says in p for p in problems), problems
     assert len(problems) <= 21
+
+
+@pytest.mark.parametrize("allow", [False, True])
+def test_a_log_cut_inside_its_header_says_nothing_can_be_salvaged(tmp_path, allow):
+    """Cut inside the header the CRC mismatches too; its advice (--allow-damaged) then led to
+    a second error: the header's truncation is said first, with no advice that cannot work."""
+    data, first, _ = _log()
+    src = tmp_path / "log06"
+    src.write_bytes(bytes(data[:first - 3]))
+    res = CliRunner().invoke(gs, ["import", str(src), "--out", str(tmp_path / "o"),
+                                  *(["--allow-damaged"] if allow else [])])
+    assert res.exit_code == 2
+    line = res.output.strip().splitlines()[-1]
+    assert line.startswith(f"error: {src}: header truncated"), line
+    assert line.endswith("(the file ends before its first record: nothing to import or "
+                         "salvage)")
+    assert "--allow-damaged" not in res.output
