@@ -17,6 +17,7 @@ import numpy as np
 
 from cfcommon.cli import FiniteFloat, output_console
 from sysid.cli_support import (
+    DETREND_OPTION,
     JSON_OPTION,
     RRD_OPTION,
     WINDOW_HELP,
@@ -47,8 +48,7 @@ __all__ = ["check_fit_samples", "compare_cmd", "resid"]
               help="Simulate over windows of this many seconds, each from its own x0.")
 @click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
               help=WINDOW_HELP)
-@click.option("--detrend", default="mean", show_default=True,
-              type=click.Choice(["mean", "linear", "none"]))
+@DETREND_OPTION
 @click.option("--residuals", "with_residuals", is_flag=True,
               help="Also print the residual analysis (as `sysid resid`).")
 @JSON_OPTION
@@ -158,8 +158,7 @@ def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
               help="Confidence of the bounds and verdicts.")
 @click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
               help=WINDOW_HELP)
-@click.option("--detrend", default="mean", show_default=True,
-              type=click.Choice(["mean", "linear", "none"]))
+@DETREND_OPTION
 @JSON_OPTION
 @RRD_OPTION
 def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence: float,

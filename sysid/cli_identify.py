@@ -75,7 +75,9 @@ def samples_line(flights: Sequence[IOData], *, dt: float,
 @click.option("--future", type=click.IntRange(min=2),
               help="Future horizon, samples (default: chosen by validation).")
 @click.option("--feedthrough/--no-feedthrough", default=None,
-              help="Estimate D (default: no for iem, yes for po-moesp and parsim-k).")
+              help="Estimate D (default: no for iem, yes for po-moesp and parsim-k; when the "
+                   "model is chosen, a direct term is also tried where the data show no "
+                   "feedback, and kept when it scores better on held-out data).")
 @click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
               help="Score the model on this session (1-step and windowed simulation); "
                    "repeatable.")

@@ -39,8 +39,11 @@ class MethodChoice(click.Choice):
 
 
 METHOD_OPTION = click.option(
-    "--method", type=MethodChoice(), default=DEFAULT_METHOD, show_default=True,
-    help="; ".join(f"{name}: {m.description}" for name, m in METHODS.items()) + ".")
+    "--method", type=MethodChoice(), default=DEFAULT_METHOD,
+    help="; ".join(f"{name}: {m.description}" for name, m in METHODS.items()) + ". Default: "
+         f"{DEFAULT_METHOD}; where the command chooses the model (identify without all of "
+         "--past/--future/--order, sweep, batch) parsim-k is also tried at the chosen horizons "
+         "unless --method is given.")
 FOCUS_OPTION = click.option(
     "--focus", type=click.Choice(list(FOCUS_MODES)), default=None,
     help="prediction: closed-loop-consistent one-step predictor (default for iem); "

@@ -38,6 +38,7 @@ from sysid.stability import NEAR_BAND
 from sysid.validate import simulation_window
 
 __all__ = [
+    "DETREND_OPTION",
     "JSON_OPTION",
     "MODEL_SUFFIXES",
     "RRD_OPTION",
@@ -125,6 +126,12 @@ WINDOW_HELP = ("Window: auto (the excitation phases, else the airborne-N phases,
                "SESSION=WINDOW applies to that session only (file name or path); repeatable.")
 
 
+DETREND_OPTION = click.option(
+    "--detrend", default="mean", show_default=True, type=click.Choice(["mean", "linear", "none"]),
+    help="Removed from each channel of each experiment first: its mean, a straight line (slow "
+         "drift), or nothing.")
+
+
 def session_options(func: Callable) -> Callable:
     """Options shared by every command that reads sessions."""
     opts = [
@@ -138,8 +145,7 @@ def session_options(func: Callable) -> Callable:
         click.option("--dt", default=None, type=FiniteFloat(min=1e-4),
                      help="Grid period in seconds (default: the logged period; faster streams "
                           "are low-passed before the hold)."),
-        click.option("--detrend", default="mean", show_default=True,
-                     type=click.Choice(["mean", "linear", "none"])),
+        DETREND_OPTION,
     ]
     for opt in reversed(opts):
         func = opt(func)

@@ -127,7 +127,7 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
     _candidates(con, rows, names=names, chosen=sel.best,
                 title=f"best {shown} candidates of {len(sel.result.rows)}"
                       + ("" if len(rows) == shown else
-                         f" and the chosen one (bold, {sel.model.provenance.get('method')})")
+                         f" and the chosen one (last, {sel.model.provenance.get('method')})")
                       + f" (fit [%], {sel.scoring} of held-out data)")
     dt = sel.model.dt
     con.print(f"{sel.rule}; grid pasts {sel.grid['pasts']}, futures {sel.grid['futures']}, "
