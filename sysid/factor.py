@@ -168,9 +168,23 @@ def _warn_if_offset(flights: Sequence[IOData], *, u_std: np.ndarray, y_std: np.n
                                                                      strict=True)
            if abs(mu) > ratio * sd]
     if off:
-        log.warning("channels far from zero mean: %s; identify deviations from the operating "
-                    "point: detrend first (sysid.detrend_data, or load_session(detrend='mean'))",
-                    ", ".join(off))
+        _warn_once(f"channels far from zero mean: {', '.join(off)}; identify deviations from "
+                   "the operating point: detrend first (sysid.detrend_data, or "
+                   "load_session(detrend='mean'))")
+
+
+_WARNED: dict[str, None] = {}
+
+
+def _warn_once(message: str) -> None:
+    """``log.warning(message)`` unless the last warnings (up to 64) said it already: a
+    selection builds the products of the same data several times (held-out split, refit)."""
+    if message in _WARNED:
+        return
+    _WARNED[message] = None
+    while len(_WARNED) > 64:
+        del _WARNED[next(iter(_WARNED))]
+    log.warning("%s", message)
 
 
 def build_products(data: IOData | Sequence[IOData], *, past: int, future: int,

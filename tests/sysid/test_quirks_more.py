@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import warnings
 from functools import partial
 
@@ -136,3 +137,15 @@ def test_channels_far_from_zero_are_named_with_the_mean_removal_as_remedy() -> N
         u[round(1000 * (1 - share)):, 0] = 1.0
         found = find_offsets([sysid.IOData(u=u, y=system.simulate(u), dt=0.01)])
         assert ("u0" in [o.name for o in found]) is named, (share, found)
+
+
+def test_the_offset_warning_of_the_products_is_logged_once_per_selection(caplog) -> None:
+    """A selection builds the products of the same data several times (held-out split, the
+    grid, the refit): the raw-API user saw the same warning three times."""
+    rng = np.random.default_rng(11)
+    u = 7.25 + rng.standard_normal((600, 1))  # an offset no other test uses: logged afresh
+    y = np.convolve(u[:, 0] - 7.25, [0.0, 0.5, 0.3], mode="full")[:600, None] + 3.5
+    with caplog.at_level(logging.WARNING, logger="sysid.factor"):
+        sysid.identify(sysid.IOData(u=u, y=y, dt=0.1), orders=[2], pasts=[4], futures=[4])
+    said = [r.getMessage() for r in caplog.records if r.name == "sysid.factor"]
+    assert len(said) == 1 and said[0].startswith("channels far from zero mean: u0 (mean 7.2")
