@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import json
+import math
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -383,8 +384,22 @@ def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
         listeners.append(PlainProgress(duration_s=plan.duration, status=status))
     result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag,
                       limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
-                      connect_timeout_s=timeout_s)
+                      connect_timeout_s=timeout_s,
+                      tick_hook=lid.in_step() if lid is not None and _flat_out(uri) else None)
     return result, url
+
+
+def _flat_out(uri: str) -> bool:
+    """Whether ``uri`` is a simulator running flat out (``sim://...?speed=inf``): its clock
+    has no wall-time meaning, so the live identification is kept in step with it."""
+    if not uri.startswith("sim://"):
+        return False
+    from groundstation.sim.uri import parse_uri
+
+    try:
+        return math.isinf(parse_uri(uri).speed)
+    except GroundStationError:  # a bad URI: the connection says so
+        return False
 
 
 def _keep_serving(url: str) -> None:

@@ -171,6 +171,21 @@ class LiveIdListener:
             self._queued += 1
             self._wake.set()
 
+    def in_step(self, *, timeout_s: float = 2.5) -> Callable[[int], None]:
+        """A tick hook holding each setpoint until the worker has handled the rows so far
+        (:attr:`caught_up`; at most ``timeout_s`` of wall time). ``sim://`` paces its clock on
+        the runner, so a simulated flight runs in step with the identification however busy
+        the host: every due update is computed. ``fly`` uses it on a flat-out simulator
+        (``speed=inf``), where the identification could otherwise never keep up; a real
+        flight never waits on it."""
+
+        def hook(_k: int) -> None:
+            give_up = time.monotonic() + timeout_s
+            while not self.caught_up and time.monotonic() < give_up:
+                time.sleep(0.001)
+
+        return hook
+
     @property
     def caught_up(self) -> bool:
         """Whether the worker has taken every batch queued so far and run the update that
@@ -288,6 +303,10 @@ class LiveIdListener:
 
     def _maybe_update(self) -> None:
         (start, stop), latest = self._grid.window, self._grid.latest
+        if start is not None and stop is None and not self.updates:
+            n, need = self.ident.n_samples, self.ident.min_samples
+            self.status = (f"live id: excitation on, {n}/{need} samples for the first update"
+                           if n < need else "live id: first update running")
         if start is None or stop is not None or self.ident.n_samples < self.ident.min_samples:
             return
         period = self.config.update_period

@@ -104,17 +104,8 @@ def _recorded_samples(s, model):
 
 
 def in_step(lid: LiveIdListener, *, timeout_s: float = 2.5):
-    """A tick hook holding each setpoint until ``lid``'s worker has handled the rows so far
-    (:attr:`LiveIdListener.caught_up`; at most ``timeout_s`` of wall time). ``sim://`` paces
-    its clock on the runner (holding up to 3 s), so the flight runs in step with the
-    identification in simulated time however busy the host: every due update is computed."""
-
-    def hook(k: int) -> None:
-        give_up = time.monotonic() + timeout_s
-        while not lid.caught_up and time.monotonic() < give_up:
-            time.sleep(0.001)
-
-    return hook
+    """:meth:`LiveIdListener.in_step`: the flight in step with the identification."""
+    return lid.in_step(timeout_s=timeout_s)
 
 
 @pytest.fixture
@@ -126,7 +117,7 @@ def cli_in_step(monkeypatch):
 
     def fly(**kw):
         lid = next(x for x in kw["listeners"] if isinstance(x, LiveIdListener))
-        return real(**kw, tick_hook=in_step(lid))
+        return real(**{**kw, "tick_hook": in_step(lid)})
 
     monkeypatch.setattr(fly_command, "fly_plan", fly)
 
@@ -284,6 +275,24 @@ def test_the_summary_prints_the_flight_time_saved(sim_uri, tmp_path, cli_in_step
     assert res.exit_code == 0, res.output
     assert "s of flight saved (" in res.stdout and "live id" in res.stdout
     assert "| live id" in res.stderr  # the plain progress line carries the status
+
+
+def test_a_flat_out_simulator_keeps_the_live_identification_in_step(sim_uri, tmp_path):
+    """``fly --uri 'sim://0?speed=inf' --until-converged`` (no test hook): the simulation
+    waits for each update, so every due update is computed and the excitation is cut on
+    convergence. Before, the flat-out flight outran its updates (2 of them, 88 skipped) and
+    the progress line said "waiting for the excitation" through the whole excitation (it now
+    counts the first update's samples, then says it runs)."""
+    plan = tmp_path / "p.toml"
+    plan.write_text(load_plan("prbs-3axis").text + f"\n[live_id]\n{SMALL}", encoding="utf-8")
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", sim_uri(speed="inf"), "--out",
+                                    str(tmp_path), "--until-converged", "--converged-tol",
+                                    "0.05", "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    assert summary["live_id"]["skipped"] == 0 and summary["live_id"]["updates"] >= 3
+    assert "converged" in summary["excitation_cut"]["reason"]
+    assert "upd (0 skipped)" in res.stderr.splitlines()[-1]
 
 
 class _Slow:
