@@ -351,7 +351,10 @@ def _save_h5(model: StateSpaceModel, path: Path, *, into: Path) -> None:
     for attr, text in texts.items():
         _within(path, f"its {attr} text", len(text.encode()),
                  (MAX_TEXT_BYTES, "MAX_TEXT_BYTES"), ".json")
-    with h5py.File(into, "w") as f:
+    # built in memory, then written by plain file I/O: a full disk is then an OSError of
+    # that write, where HDF5 failing inside its own writes crashed in its cleanup (exit 139)
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
         f.attrs["format"] = d["format"]
         f.attrs["version"] = d["version"]
         f.attrs["dt"] = model.dt
@@ -365,6 +368,7 @@ def _save_h5(model: StateSpaceModel, path: Path, *, into: Path) -> None:
             ds = f.create_dataset(name, data=np.asarray(value))
             ds.attrs["row_units"] = json.dumps(units[name][0])
             ds.attrs["col_units"] = json.dumps(units[name][1])
+    into.write_bytes(buffer.getvalue())
 
 
 

@@ -123,3 +123,33 @@ def test_more_states_than_load_reads_are_not_written(tmp_path, suffix):
     assert not path.exists()
 
 
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX file size limit (ulimit -f)")
+@pytest.mark.parametrize("suffix", [".h5", ".json", ".mat"])
+def test_a_disk_without_room_is_one_line_and_no_file(tmp_path, suffix):
+    """``ulimit -f`` (as a full disk or a quota): HDF5 failing inside its own writes crashed in
+    its cleanup, pages of tracebacks and exit 139; now one line and no file, in every format."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(f"""
+        import resource, sys
+        from tests.sysid.model_files import sample_model
+        from sysid.errors import ModelFileError
+        from sysid.model_io import save
+        resource.setrlimit(resource.RLIMIT_FSIZE, (256, 256))
+        try:
+            save(sample_model(), {str(tmp_path / ("m" + suffix))!r})
+        except ModelFileError as exc:
+            print(exc)
+            sys.exit(2)
+        """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, cwd=os.path.dirname(os.path.dirname(os.path.dirname(
+                              os.path.abspath(__file__)))))
+    assert (done.returncode, done.stderr) == (2, ""), done.stderr[-2000:]
+    target = str(tmp_path / ("m" + suffix))
+    assert done.stdout == f"cannot write model file {target!r}: File too large\n"
+    assert list(tmp_path.iterdir()) == []
