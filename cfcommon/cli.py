@@ -42,7 +42,7 @@ from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLineErrorGroup",
            "check_output", "drop_failing_stdout", "output_console", "output_gone",
-           "output_table"]
+           "output_table", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from).
@@ -68,6 +68,19 @@ def drop_failing_stdout() -> None:
             null = os.open(os.devnull, os.O_WRONLY)
             os.dup2(null, 1)
             os.close(null)
+
+
+def writing_stdout(exc: BaseException) -> bool:
+    """Whether ``exc`` was raised writing standard output: the innermost Python frame of its
+    traceback holds ``sys.stdout`` (``click.echo``'s ``file``) or is this module's stdout
+    wrapper (rich's console writes through it)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return any(v is sys.stdout or (isinstance(v, _TrimmedLines) and not v._stderr)
+               for v in tb.tb_frame.f_locals.values())
 
 
 def output_gone(exc: BaseException) -> bool:
@@ -236,8 +249,9 @@ class OneLineErrorGroup(click.Group):
             if exc.errno not in NO_ROOM:
                 raise
             drop_failing_stdout()
-            where = f" {exc.filename}" if exc.filename else ""
-            _say(f"error: cannot write{where}: {exc.strerror}")
+            where = (exc.filename if exc.filename else "standard output"
+                     if writing_stdout(exc) else "an output file (it may be cut short)")
+            _say(f"error: cannot write {where}: {exc.strerror}")
             sys.exit(2)
 
     def invoke(self, ctx: click.Context) -> Any:
@@ -260,5 +274,5 @@ def _say(line: str) -> None:
     try:
         click.echo(line, err=True)
     except OSError as exc:
-        if not output_gone(exc):
+        if not output_gone(exc) and exc.errno not in NO_ROOM:
             raise

@@ -90,5 +90,40 @@ def test_output_to_a_full_disk_is_one_line_and_exit_2(argv) -> None:
     with open("/dev/full", "w") as full:
         done = subprocess.run([exe, *argv[1:]], stdout=full, stderr=subprocess.PIPE,
                               text=True, timeout=60)
-    assert (done.returncode, done.stderr) == (2, "error: cannot write: No space left on "
-                                                 "device\n")
+    assert (done.returncode, done.stderr) == (2, "error: cannot write standard output: No "
+                                                 "space left on device\n")
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="Linux's always-full device")
+def test_standard_error_on_a_full_disk_too_keeps_exit_2() -> None:
+    import subprocess
+    import sys
+
+    exe = os.path.join(os.path.dirname(sys.executable), "sysid")
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([exe, "--version"], stdout=full, stderr=full, timeout=60)
+    assert done.returncode == 2
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX file size limit (ulimit -f)")
+def test_an_output_file_without_room_is_not_called_standard_output(tmp_path) -> None:
+    """A file a command writes cut short by the disk (here ``ulimit -f``): one line naming an
+    output file, not standard output (which the review found it named for both)."""
+    import resource
+    import subprocess
+    import sys
+
+    from tests.viz.sessions import write_session
+
+    session = write_session(tmp_path / "flight.h5")
+    (tmp_path / "out").mkdir()
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+
+    exe = os.path.join(os.path.dirname(sys.executable), "groundstation")
+    done = subprocess.run([exe, "export", str(session), "--to", "csv", "--out",
+                           str(tmp_path / "out" / "csv")], capture_output=True, text=True,
+                          timeout=120, preexec_fn=limit)
+    assert (done.returncode, done.stderr) == (
+        2, "error: cannot write an output file (it may be cut short): File too large\n")
