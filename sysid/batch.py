@@ -38,11 +38,12 @@ import numpy as np
 
 from sysid.auto import select
 from sysid.data import IOData
-from sysid.errors import ClusterError, SysIdError, first_line
+from sysid.errors import ClusterError, ParameterError, SysIdError, first_line
 from sysid.methods import Method, Options
 from sysid.session_io import SessionFileError
 
-__all__ = ["GROUP_BY", "BatchRow", "GroupBy", "group_sessions", "run_batch", "write_summary"]
+__all__ = ["GROUP_BY", "BatchRow", "GroupBy", "check_model_paths", "group_sessions", "model_path",
+           "run_batch", "write_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +199,33 @@ def _names(names: Sequence[str], shown: int = 5) -> str:
     return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
 
 
+def model_path(out_dir: Path, group: str) -> Path:
+    """Where a group's model goes: ``out_dir/GROUP.h5``."""
+    return out_dir / f"{group}.h5"
+
+
+def check_model_paths(groups: dict[str, list[Path]], *, out_dir: Path,
+                      rows: Sequence[BatchRow] = ()) -> None:
+    """:class:`ParameterError` when a group's model would be written over a session the batch
+    reads (``--group-by session`` names a group after its file: ``--out`` the sessions' own
+    folder replaced every recorded flight with its model)."""
+    inputs = [Path(p) for paths in groups.values() for p in paths]
+    inputs += [Path(p) for row in rows for p in row.sessions]
+    for name in groups:
+        target = model_path(out_dir, name)
+        if any(_same_file(target, src) for src in inputs):
+            raise ParameterError(f"--out {out_dir}: the model of group {name!r} ({target.name}) "
+                                 f"would replace the session {target}, an input of this batch; "
+                                 "choose another folder for the models")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
 def run_batch(
     groups: dict[str, list[Path]], *, out_dir: Path,
     load: Callable[[list[Path]], list[list[IOData]]], method: Method, options: Options,
@@ -224,7 +252,12 @@ def run_batch(
     names = list(groups)
     done_rows: dict[str, BatchRow] = {}
     total, done = len(groups), 0
-    out_dir.mkdir(parents=True, exist_ok=True)
+    check_model_paths(groups, out_dir=out_dir, rows=known)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ParameterError(f"--out {out_dir}: exists and is not a folder; choose a folder "
+                             "for the models and the summary") from None
     write_summary(known, out_dir)
     pending: dict[str, tuple[BatchRow, float]] = {}  # submitted: (row, seconds to load it)
     task_options = {"method": method, "options": options, "grid": grid,
@@ -238,7 +271,7 @@ def run_batch(
         nonlocal done
         t0 = time.perf_counter()
         if not isinstance(outcome, BaseException):
-            path = out_dir / f"{row.group}.h5"
+            path = model_path(out_dir, row.group)
             try:
                 outcome["model"].save(path)
             except Exception as exc:  # e.g. the disk is full: this group fails, the rest go on

@@ -19,7 +19,14 @@ from typing import Any
 import click
 
 from cfcommon.cli import FiniteFloat, check_output, output_table
-from sysid.batch import GROUP_BY, GroupBy, group_sessions, run_batch
+from sysid.batch import (
+    GROUP_BY,
+    GroupBy,
+    check_model_paths,
+    group_sessions,
+    model_path,
+    run_batch,
+)
 from sysid.cli_compare import compare_cmd, resid
 from sysid.cli_identify import identify
 from sysid.cli_options import (
@@ -262,6 +269,12 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
             if v is not None}
     groups, bad = group_sessions(list(sessions), by=group_by,
                                  read_meta=read_metadata)
+    check_model_paths(groups, out_dir=out_dir, rows=bad)  # never over an input session
+    taken = [model_path(out_dir, name) for name in groups if model_path(out_dir, name).exists()]
+    if taken and not force:
+        more = f" (and {len(taken) - 1} more model file(s))" if len(taken) > 1 else ""
+        raise ParameterError(f"--out {out_dir}: {taken[0].name} exists{more}; pass --force to "
+                             "replace the models or choose another folder")
     rows: list[Any] = []
     try:
         with scheduler_client(scheduler) as client, \

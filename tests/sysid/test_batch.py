@@ -159,3 +159,31 @@ def test_a_group_of_open_loop_data_gets_a_direct_term_as_identify_does():
                                      choose_focus=True, choose_feedthrough="open-loop")
     assert out["model"].provenance["feedthrough"] is True
     np.testing.assert_allclose(out["model"].D, system.D, atol=0.05)
+
+
+def test_models_never_replace_the_sessions_they_come_from(tmp_path):
+    """``--group-by session`` names a group after its file: ``--out`` the sessions' own folder
+    replaced every recorded flight with its model, exit 0 (CLI fuzz). Now one line, nothing
+    written; an existing model file needs --force; --out on a device is one line too."""
+    import hashlib
+
+    flight = write_flight(tmp_path / "flight.h5", system=known_system(), seed=50, n=1500).path
+    before = hashlib.sha256(flight.read_bytes()).hexdigest()
+    res = run("batch", flight, "--out", tmp_path, *FAST)
+    assert res.exit_code == 2 and res.output.strip().splitlines() == [
+        f"error: --out {tmp_path}: the model of group 'flight' (flight.h5) would replace the "
+        f"session {flight}, an input of this batch; choose another folder for the models"]
+    assert hashlib.sha256(flight.read_bytes()).hexdigest() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.h5"]
+    with pytest.raises(sysid.ParameterError, match="an input of this batch"):  # the library too
+        sysid.batch.run_batch({"flight": [flight]}, out_dir=tmp_path, load=lambda p: [],
+                              method=sysid.methods.get_method("iem"),
+                              options=sysid.methods.get_method("iem").options(), grid={})
+    out = tmp_path / "models"
+    assert run("batch", flight, "--out", out, *FAST).exit_code == 0
+    (out / "summary.json").unlink()  # a model file left without its summary
+    res = run("batch", flight, "--out", out, *FAST)
+    assert res.exit_code == 2 and "flight.h5 exists; pass --force" in res.output
+    assert run("batch", flight, "--out", out, *FAST, "--force").exit_code == 0
+    res = run("batch", flight, "--out", "/dev/null", *FAST)
+    assert res.exit_code == 2 and "exists and is not a folder" in res.output
