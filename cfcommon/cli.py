@@ -238,6 +238,10 @@ class OneLineErrorGroup(click.Group):
             return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, FileNotFoundError | PermissionError | IsADirectoryError):
             return f"{exc.strerror}: {exc.filename}"
+        if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:
+            name = str(exc.filename or "")
+            shown = name if len(name) <= 80 else f"{name[:60]}...{name[-12:]}"
+            return f"{exc.strerror} ({len(name)} characters): {shown}"
         return None
 
     def main(self, *args: Any, **kwargs: Any) -> Any:

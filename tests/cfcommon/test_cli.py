@@ -127,3 +127,20 @@ def test_an_output_file_without_room_is_not_called_standard_output(tmp_path) -> 
                           timeout=120, preexec_fn=limit)
     assert (done.returncode, done.stderr) == (
         2, "error: cannot write an output file (it may be cut short): File too large\n")
+
+
+@pytest.mark.parametrize("argv", [["gs", "info", "LONG"], ["gs", "plan", "check", "LONG"],
+                                  ["gs", "fly", "hover-check", "--out", "LONG"],
+                                  ["sysid", "identify", "LONG"], ["sysid", "order", "LONG"]])
+def test_a_file_name_too_long_is_one_line(argv) -> None:
+    """A name past the file system's 255 characters: ``Path.exists()`` raises
+    ENAMETOOLONG, which escaped as a traceback from every command taking a path."""
+    from groundstation.cli import main as gs
+    from sysid.cli import main as sysid_main
+
+    long = "x" * 300
+    res = CliRunner().invoke(gs if argv[0] == "gs" else sysid_main,
+                             [long if a == "LONG" else a for a in argv[1:]])
+    assert res.exit_code == 2, res.output
+    assert res.output.strip().splitlines()[-1].startswith(
+        "error: File name too long (300 characters): xxxx"), res.output
