@@ -91,6 +91,9 @@ def plan_imports(paths: list[Path]) -> tuple[list[ImportJob], list[Path]]:
                 raise SessionError(f"{p}: holds no uSD-card deck logs (0xBC first byte) or "
                                    "cfclient CSVs ('Timestamp,...'), nor do its subfolders")
             continue
+        if not p.is_file():  # opening a FIFO waits for a writer; a device reads forever
+            raise SessionError(f"{p}: not a regular file (a device, FIFO or socket); pass "
+                               "uSD-card deck logs, cfclient CSVs or folders of them")
         kind = _kind(p)
         if kind is None:
             raise SessionError(

@@ -175,13 +175,22 @@ def find_plan(name_or_path: str | Path) -> Path:
 def load_plan(path: str | Path) -> Plan:
     """Read, validate and return the plan in ``path`` (or the shipped plan of that name)."""
     path = find_plan(path)
+    if path.is_dir():
+        raise PlanError(f"{path}: is a folder; give a plan file (.toml) or a shipped plan's "
+                        "name, e.g. prbs-3axis")
+    if not path.is_file():  # opening a FIFO waits for a writer; /dev/zero reads forever
+        raise PlanError(f"{path}: not a regular file (a device, FIFO or socket); give a plan "
+                        "file (.toml)")
     try:
         with path.open("rb") as fh:
             head = fh.read(len(_HDF5_SIGNATURE))
-            raw = b"" if head == _HDF5_SIGNATURE else head + fh.read()
+            raw = b"" if head == _HDF5_SIGNATURE else head + fh.read(MAX_PLAN_BYTES)
     except OSError as exc:
         raise PlanError(f"{path}: cannot read the plan ({exc.strerror or exc}); check the "
                         "file") from None
+    if len(raw) > MAX_PLAN_BYTES:
+        raise PlanError(f"{path}: larger than {MAX_PLAN_BYTES // 1024} KiB, so not a flight "
+                        "plan (a plan is a few KiB of TOML)")
     try:
         text = raw.decode("utf-8") if raw else None
     except UnicodeDecodeError:
@@ -194,6 +203,8 @@ def load_plan(path: str | Path) -> Plan:
     return parse_plan(text=text or "", source=str(path), name=path.stem)
 
 
+#: Largest plan file read, bytes (the shipped plans are 2-5 KiB).
+MAX_PLAN_BYTES = 1024 * 1024
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 """The first bytes of an HDF5 file (session and model files)."""
 

@@ -77,3 +77,16 @@ def test_a_folder_without_write_permission(tmp_path):
         _one_line(_import(_logs(tmp_path), ro / "imp"))
     finally:
         ro.chmod(0o700)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX FIFO")
+def test_a_fifo_or_a_device_given_as_a_log_is_one_line_at_once(tmp_path):
+    """Opening a FIFO waited for a writer until Ctrl-C; a device read without end."""
+    fifo = tmp_path / "log00"
+    os.mkfifo(fifo)
+    for path in (fifo, "/dev/zero"):
+        res = CliRunner().invoke(gs, ["import", str(path), "--out", str(tmp_path / "o")])
+        assert res.exit_code == 2, res.output
+        assert res.output.strip() == (f"error: {path}: not a regular file (a device, FIFO or "
+                                      "socket); pass uSD-card deck logs, cfclient CSVs or "
+                                      "folders of them")

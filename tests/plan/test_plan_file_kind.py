@@ -42,3 +42,26 @@ def test_other_binary_is_not_utf8_text(tmp_path):
 
 def test_a_text_plan_still_loads(tmp_path):
     assert load_plan("hover-check").name == "hover-check"
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="POSIX FIFO")
+def test_a_fifo_or_a_device_is_no_plan_and_never_waits(tmp_path):
+    """Opening a FIFO as the plan waited for a writer (until Ctrl-C); ``/dev/zero`` read until
+    the kernel refused 64 GB (CLI fuzz)."""
+    import os
+
+    fifo = tmp_path / "plan.toml"
+    os.mkfifo(fifo)
+    for path in (fifo, "/dev/zero"):
+        with pytest.raises(PlanError, match=r": not a regular file \(a device, FIFO or socket\)"):
+            load_plan(path)
+    res = CliRunner().invoke(main, ["fly", str(fifo), "--uri", "sim://0?speed=inf", "--out",
+                                    str(tmp_path / "s")])
+    assert res.exit_code == 2 and "not a regular file" in res.output
+
+
+def test_a_file_of_megabytes_is_no_plan(tmp_path):
+    big = tmp_path / "big.toml"
+    big.write_text("# " + "x" * (2 * 1024 * 1024) + "\n")
+    with pytest.raises(PlanError, match=r"big\.toml: larger than 1024 KiB, so not a flight plan"):
+        load_plan(big)
