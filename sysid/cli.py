@@ -42,6 +42,7 @@ from sysid.cli_order import order_command
 from sysid.cli_progress import progress
 from sysid.cli_support import (
     JSON_OPTION,
+    MAX_WINDOW_S,
     Group,
     console,
     load_groups,
@@ -178,7 +179,7 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
               help="Score on this session (repeatable; default: the last 30 % of each "
                    "experiment, identified on the rest).")
 @click.option("--horizon", type=click.IntRange(min=1), help="Score by k-step prediction.")
-@click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
+@click.option("--window-s", type=FiniteFloat(min=0, min_open=True, max=MAX_WINDOW_S),
               help="Score by simulation over windows of this many seconds (default: 12 "
                    "times the data's memory, at least 20 samples; see docs/sysid.md).")
 @click.option("--top", default=10, show_default=True, type=click.IntRange(min=1),

@@ -19,6 +19,7 @@ from cfcommon.cli import FiniteFloat, output_console
 from sysid.cli_support import (
     DETREND_OPTION,
     JSON_OPTION,
+    MAX_WINDOW_S,
     RRD_OPTION,
     WINDOW_HELP,
     check_rrd,
@@ -44,7 +45,7 @@ __all__ = ["check_fit_samples", "compare_cmd", "resid"]
 @click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--horizon", type=click.IntRange(min=1), help="k-step-ahead prediction.")
-@click.option("--window-s", type=FiniteFloat(min=0, min_open=True),
+@click.option("--window-s", type=FiniteFloat(min=0, min_open=True, max=MAX_WINDOW_S),
               help="Simulate over windows of this many seconds, each from its own x0.")
 @click.option("--window", "windows", multiple=True, default=("auto",), show_default=True,
               help=WINDOW_HELP)

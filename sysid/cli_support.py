@@ -40,6 +40,7 @@ from sysid.validate import simulation_window
 __all__ = [
     "DETREND_OPTION",
     "JSON_OPTION",
+    "MAX_WINDOW_S",
     "MODEL_SUFFIXES",
     "RRD_OPTION",
     "Group",
@@ -120,6 +121,8 @@ def split_names(text: str) -> list[str]:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
+#: Longest --window-s, seconds (a day: far beyond any flight; 1e308 overflowed the sample count).
+MAX_WINDOW_S = 86_400.0
 WINDOW_HELP = ("Window: auto (the excitation phases, else the airborne-N phases, each its "
                "own experiment), a phase name or kind, T0:T1 (session seconds), PHASE@T0:T1 "
                "(seconds from the phase start; PHASE@T0: to its end) or all. "

@@ -24,6 +24,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cfcommon.cli import FiniteFloat, output_console, output_table
 from groundstation.commands.fly import PlainProgress
+from groundstation.errors import GroundStationError
 from groundstation.flight import FlightResult, fly_plan
 from groundstation.plan import Plan, load_plan
 from groundstation.plan.variants import advance_prbs
@@ -123,6 +124,7 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
     from sysid import compare
     from sysid.cli_support import poles_rich_table
     from sysid.cli_sweep import choose
+    from sysid.errors import SysIdError, first_line
     from sysid.methods import get_method
     from sysid.session_io import load_session
 
@@ -154,6 +156,9 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
         click.echo(f"error: interrupted (Ctrl-C) while identifying; the sessions are kept: "
                    f"{paths[0]} {paths[1]}", err=True)
         sys.exit(130)
+    except SysIdError as exc:  # fixed horizons the flight cannot support: the flights stay
+        raise GroundStationError(f"identification failed: {first_line(exc)}; the sessions "
+                                 f"are kept: {paths[0]} {paths[1]}") from None
     model = chosen.model
     order, past, future = chosen.best.order, chosen.best.past, chosen.best.future
     seconds = time.perf_counter() - t0

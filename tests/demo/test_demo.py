@@ -76,3 +76,20 @@ def test_demo_speed_is_a_factor_or_flat_out(speed, ok):
         return
     res = CliRunner().invoke(main, ["demo", "--speed", speed])
     assert res.exit_code == 2 and "--speed" in res.output and "Traceback" not in res.output
+
+
+def test_fixed_horizons_the_flight_cannot_support_are_one_line_keeping_the_flights(tmp_path):
+    """``demo --order 40 --past 1 --future 2`` ended in sysid's NoStableModel traceback."""
+    try:
+        res = CliRunner().invoke(main, ["demo", "--out", str(tmp_path), "--speed", "inf",
+                                        "--order", "40", "--past", "1", "--future", "2"])
+    finally:
+        gsim.close_all()
+    assert res.exit_code == 2, res.output
+    line = res.output.strip().splitlines()[-1]
+    assert line.startswith("error: identification failed: all 1 models of the grid failed: "
+                           "order=40 exceeds the rank available")
+    flights = sorted(tmp_path.glob("*.h5"))
+    assert len(flights) == 2 and line.endswith(f"the sessions are kept: {flights[0]} "
+                                               f"{flights[1]}")
+    assert all(open_session(p).closed_cleanly for p in flights)

@@ -439,3 +439,13 @@ def test_identify_does_not_score_a_validation_record_too_short_to_mean_anything(
     assert "validation not scored on these: short.h5 has 15 samples" in caplog.text
     assert "validate on records of 0.4 s at least" in caplog.text  # identify has no --window
     assert len(json.loads(res.stdout)["validation"]) == 2  # f1's simulation and prediction
+
+
+@pytest.mark.parametrize("command", [["compare", "m.h5", "s.h5"], ["sweep", "s.h5"]])
+def test_a_window_of_1e308_seconds_is_refused_in_one_line(command):
+    """It overflowed the window's sample count (OverflowError traceback, CLI fuzz)."""
+    res = CliRunner().invoke(main, [*command, "--window-s", "1e308"], prog_name="sysid")
+    assert res.exit_code == 2
+    assert res.output.strip().splitlines() == [
+        f"error: Invalid value for '--window-s': 1e+308 is above 86400 (see 'sysid "
+        f"{command[0]} -h')"]
