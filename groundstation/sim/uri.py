@@ -65,7 +65,11 @@ def parse_uri(uri: str) -> SimOptions:
     if parts.scheme != "sim":
         raise LinkError(f"{uri!r} is not a sim:// URI; use e.g. sim://0?speed=20")
     opts, faults = SimOptions(address=(parts.netloc + parts.path).strip("/") or "0"), Faults()
-    for key, text in parse_qsl(parts.query, keep_blank_values=True):
+    pairs = parse_qsl(parts.query, keep_blank_values=True)
+    twice = sorted({k for i, (k, _) in enumerate(pairs) if k in dict(pairs[:i])})
+    if twice:  # the last would win in silence: speed=inf&speed=1 flew in real time
+        raise LinkError(f"sim:// option {twice[0]!r} given twice in {uri!r}; give each once")
+    for key, text in pairs:
         if key == "speed":
             opts.speed = _number(key, text, kind=float, low=1e-3)
             if MAX_SPEED < opts.speed < math.inf:

@@ -169,6 +169,8 @@ def test_bad_uri_options_are_one_line_errors():
         gsim.parse_uri("sim://0?speed=fast")
     with pytest.raises(LinkError, match="unknown sim:// option 'sped'"):
         gsim.parse_uri("sim://0?sped=20")
+    with pytest.raises(LinkError, match="option 'speed' given twice"):  # the last won: a
+        gsim.parse_uri("sim://0?speed=inf&seed=1&speed=1")  # flat-out flight in real time
     opts = gsim.parse_uri("sim://3?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5")
     assert (opts.address, opts.speed, opts.seed) == ("3", 20.0, 3)
     assert (opts.faults.drop, opts.faults.latency_ms, opts.faults.cut_at) == (0.05, 20.0, 12.5)
