@@ -312,11 +312,12 @@ def run_batch(
                 outcome = exc
             finish(row, time.perf_counter() - t0, outcome)
         if futures:
-            from sysid.cluster import completed, task_result
+            from sysid.cluster import WorkerWatch, completed, task_result
 
-            for fut in completed(client, list(futures)):
+            workers = WorkerWatch(client)  # one no-worker wait for the whole run
+            for fut in completed(client, list(futures), workers=workers):
                 try:
-                    result = task_result(client, fut)
+                    result = task_result(client, fut, workers=workers)
                 except ClusterError:  # the scheduler lost while fetching: no group's fault
                     raise
                 except Exception as exc:  # also a worker lost on the cluster (KilledWorker)

@@ -38,7 +38,9 @@ with that group's one task (they are needed by one worker only).
   (:class:`DataLost`);
 - :func:`task_result` turns Dask's ``KilledWorker`` (the workers running a task died more
   often than the scheduler's ``allowed-failures``) into a one-line :class:`WorkerLost`: a
-  failure of that task (a batch's failed row), not of the cluster.
+  failure of that task (a batch's failed row), not of the cluster. A finished task whose
+  worker left before its result was fetched is run again by the scheduler and waited for as a
+  running task is (the run's :class:`WorkerWatch` carries the no-worker wait).
 
 The two waits default to :data:`CONNECT_TIMEOUT_S` and :data:`WORKER_WAIT_S`; the
 environment variables :data:`CONNECT_ENV` and :data:`WORKER_WAIT_ENV` (seconds) replace them.
@@ -68,7 +70,7 @@ from sysid.errors import (
 
 __all__ = ["CONNECT_ENV", "CONNECT_TIMEOUT_S", "EXTRA_HINT", "POLL_S", "RESEND_LIMIT",
            "WORKER_WAIT_ENV", "WORKER_WAIT_S", "DataLost", "SchedulerLost", "TaskCancelled",
-           "Watch", "WorkerLost", "cancel_quietly",
+           "Watch", "WorkerLost", "WorkerWatch", "cancel_quietly",
            "completed", "connect", "connect_timeout_s", "dashboard_link", "probe",
            "quiet_dask_log", "require_distributed", "run_pasts", "scatter", "task_result",
            "wait_for_workers", "watching", "worker_count", "worker_wait_s"]
@@ -441,7 +443,7 @@ def wait_for_workers(client: Any, *, timeout_s: float, label: str | None = None)
     return n
 
 
-class _WorkerWatch:
+class WorkerWatch:
     """The scheduler's workers during a run: :meth:`check` asks for their number (a lost
     scheduler is :class:`SchedulerLost`), warns when the last has left and when one is back,
     and ends the run (:class:`ClusterError`) once there has been none for the worker wait.
@@ -494,7 +496,7 @@ def _cancelled(client: Any, future: Any, label: str) -> TaskCancelled:
 
 def completed(client: Any, futures: Iterable[Any], *,
               cancelled: Callable[[Any], None] | None = None,
-              workers: _WorkerWatch | None = None) -> Iterator[Any]:
+              workers: WorkerWatch | None = None) -> Iterator[Any]:
     """Yield ``futures`` as they finish, like ``distributed.as_completed``, watching the
     cluster meanwhile (:func:`watching`): :class:`SchedulerLost` as soon as the scheduler
     connection is lost (its tasks are cancelled with it), a warning when the scheduler has no
@@ -506,7 +508,7 @@ def completed(client: Any, futures: Iterable[Any], *,
     distributed = require_distributed()
     watch = _watch()
     label = _label(client, watch)
-    workers = workers or _WorkerWatch(client, watch)
+    workers = workers or WorkerWatch(client, watch)
     pending = distributed.as_completed(list(futures), loop=client.loop)
     next_check = time.monotonic() + watch.poll_s
     while not pending.is_empty():
@@ -530,7 +532,7 @@ def completed(client: Any, futures: Iterable[Any], *,
         next_check = time.monotonic() + watch.poll_s
 
 
-def task_result(client: Any, future: Any, *, workers: _WorkerWatch | None = None) -> Any:
+def task_result(client: Any, future: Any, *, workers: WorkerWatch | None = None) -> Any:
     """``future.result()``: the task's value, or the exception the task raised; a
     :class:`SchedulerLost` when the result could not be fetched because the scheduler went
     away meanwhile (the connection closed or reset, the future cancelled with it) or did not
@@ -542,11 +544,11 @@ def task_result(client: Any, future: Any, *, workers: _WorkerWatch | None = None
 
     A finished task whose worker left before its result was fetched is run again by the
     scheduler (its future goes back to pending): that is waited for as a running task is,
-    with the cluster checked every :data:`POLL_S` (``workers``, a :class:`_WorkerWatch`
+    with the cluster checked every :data:`POLL_S` (``workers``, a :class:`WorkerWatch`
     carrying the run's no-worker wait), so a cluster left without workers ends the run
     after the worker wait, not after the result limit."""
     watch = _watch()
-    workers = workers or _WorkerWatch(client, watch)
+    workers = workers or WorkerWatch(client, watch)
     limit = RESULT_WAITS * connect_timeout_s()
     deadline = time.monotonic() + limit
     while True:
@@ -624,7 +626,7 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
     watch = _watch()
     label = _label(client, watch)
     say = watch.notify or log.warning
-    workers = _WorkerWatch(client, watch)
+    workers = WorkerWatch(client, watch)
     todo = list(pasts)
     handles: list[Any] = []
     futures: dict[Any, int] = {}
@@ -666,7 +668,7 @@ def run_pasts(client: Any, *, task: Callable[..., Any], shared: dict[str, Any],
 
 
 def _scatter_when_workers(client: Any, shared: dict[str, Any], label: str,
-                          workers: _WorkerWatch, *, resend: bool) -> Any:
+                          workers: WorkerWatch, *, resend: bool) -> Any:
     """:func:`scatter` of a sweep's data; when sending it again (``resend``), first waited for
     a worker (bounded by the worker wait) and, should the scatter fail because the workers
     left again meanwhile, waited for again."""

@@ -79,8 +79,9 @@ def check_flags(**flags: object) -> None:
 
 @dataclass(frozen=True, eq=False)
 class Finished:
-    """Matrices in scaled units and what was done: ``x0`` one ``(n,)`` per flight (simulation
-    focus; zeros otherwise), ``moved`` the poles the stability mode changed, ``notes`` text."""
+    """Matrices in scaled units and what was done: ``x0`` one ``(n,)`` per flight (fitted with
+    B, D by either focus; zeros where the state regression's B, D are kept), ``moved`` the
+    poles the stability mode changed, ``notes`` text."""
 
     a: np.ndarray
     b: np.ndarray
@@ -131,7 +132,10 @@ def finish(*, gamma: np.ndarray, gamma_lp: np.ndarray, sig: Signals, feedthrough
     x0 = [np.zeros(n) for _ in flights]
     if focus == "prediction" and bd is None:
         fit = _one_step_bd(a=a, c=c, k=k, flights=flights, feedthrough=feedthrough)
-        if fit is not None:
+        if fit is None:
+            log.info("prediction focus: A - K C is unstable or nearly defective; B, D from the "
+                     "state regression")
+        else:
             b, d, x0 = fit.b_k + k @ fit.d, fit.d, fit.x0
             notes["bd"] = "one-step prediction error (prediction focus), x0 per flight"
     if focus == "simulation":

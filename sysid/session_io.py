@@ -178,11 +178,14 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
         phases = session.phases()
         excited = [p for p in phases if "excitation" in (p.name, p.kind)]
         if excited:  # each its own experiment: a PRBS, the hover after it, then a chirp
-            seen: dict[str, int] = {}  # joined held out little but the chirp
+            labels: set[str] = set()  # joined held out little but the chirp
             spans = []
             for p in excited:
-                seen[p.name] = seen.get(p.name, 0) + 1
-                label = p.name if seen[p.name] == 1 else f"{p.name}-{seen[p.name]}"
+                label, k = p.name, 1
+                while label in labels:  # a name used twice (prbs, prbs, prbs-2): NAME-k
+                    k += 1
+                    label = f"{p.name}-{k}"
+                labels.add(label)
                 spans.append((label, (p.start_s, p.end_s)))
             return spans
         airborne = [(p.name, (p.start_s, p.end_s)) for p in phases
@@ -208,6 +211,8 @@ _UPSAMPLE_WARN = 5.0
 #: Refuse a grid this many times finer than the slowest logged stream (a typo of dt: 1e-7 s on
 #: a 50 Hz log asked for 61 GiB).
 _UPSAMPLE_MAX = 1000.0
+#: Refuse a grid of more values (samples times channels) than this: 2 GiB of float64.
+_MAX_GRID_VALUES = 2**28
 #: A stream is low-passed before the hold when the grid is this much coarser than its period.
 _DECIMATE_FROM = 1.25
 
@@ -282,9 +287,17 @@ def load_experiments(
         dt = slowest
         log.info("%s: grid dt = %g s, the logged period", session.path, dt)
     if slowest > 0 and dt < slowest / _UPSAMPLE_MAX:
-        raise ParameterError(f"dt={dt:g} s is {slowest / dt:.0f}x finer than the logged period "
+        ratio = slowest / dt
+        times = f"{ratio:.0f}x" if math.isfinite(ratio) else "beyond 1e300 times"
+        raise ParameterError(f"dt={dt:g} s is {times} finer than the logged period "
                              f"{slowest:g} s; pass dt >= {slowest / _UPSAMPLE_MAX:g} (at most "
                              f"{_UPSAMPLE_MAX:g}x finer)")
+    span = max(s.time[-1] - s.time[0] for s in (session[c.stream] for c in chans)
+               if s.time.size) if chans else 0.0
+    if span / dt * len(chans) > _MAX_GRID_VALUES:
+        raise ParameterError(f"dt={dt:g} s puts {span / dt:.3g} samples of {len(chans)} channels "
+                             f"on the grid ({span / dt * len(chans) * 8 / 2**30:.3g} GiB); pass "
+                             f"dt >= {span * len(chans) / _MAX_GRID_VALUES:.2g}")
     offset = clock_offset(session, [c.stream for c in chans])
     streams = [_stream(session, c) for c in chans]
     common = min(s.t[-1] for s in streams) - max(s.t[0] for s in streams)

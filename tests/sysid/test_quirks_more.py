@@ -139,7 +139,7 @@ def test_channels_far_from_zero_are_named_with_the_mean_removal_as_remedy() -> N
         assert ("u0" in [o.name for o in found]) is named, (share, found)
 
 
-def test_the_offset_warning_of_the_products_is_logged_once_per_selection(caplog) -> None:
+def test_the_offset_warning_of_the_products_is_logged_once(caplog) -> None:
     """A selection builds the products of the same data several times (held-out split, the
     grid, the refit): the raw-API user saw the same warning three times."""
     rng = np.random.default_rng(11)

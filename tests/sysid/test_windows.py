@@ -91,6 +91,23 @@ def test_auto_takes_each_excitation_phase_as_its_own_experiment(tmp_path) -> Non
         (25.0, "excitation", "excitation"), (37.0, "land", "landing")]).path
     assert [e.source.rsplit("#", 1)[1] for e in load_experiments(same, dt=0.02)] == [
         "excitation", "excitation-2"]
+    taken = write_flight(tmp_path / "taken.h5", system=known_system(), seed=5, phases=[
+        (0.0, "takeoff", "takeoff"), (5.0, "prbs", "excitation"), (15.0, "prbs", "excitation"),
+        (25.0, "prbs-2", "excitation"), (37.0, "land", "landing")]).path
+    assert [e.source.rsplit("#", 1)[1] for e in load_experiments(taken, dt=0.02)] == [
+        "prbs", "prbs-2", "prbs-2-2"]  # every label its own
+
+
+def test_a_grid_of_gigabytes_is_refused_before_it_is_built(files, monkeypatch) -> None:
+    """The 1000x rule bounds the grid against the log's rate, not its length: a long log could
+    still ask for gigabytes (the cap: 2**28 values, 2 GiB; lowered here to the test log's)."""
+    import sysid.session_io
+
+    monkeypatch.setattr(sysid.session_io, "_MAX_GRID_VALUES", 100_000)
+    with pytest.raises(ParameterError, match=r"dt=0\.001 s puts 5(\.\d+)?e\+04 samples of 10 "
+                                             r"channels on the grid .*; pass dt >= 0\.005"):
+        load_experiments(files["recorded"], dt=0.001)
+    assert load_experiments(files["recorded"], dt=0.02)  # the logged rate: far below the cap
 
 
 def test_phase_relative_and_per_session_windows(files) -> None:
