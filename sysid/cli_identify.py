@@ -38,6 +38,7 @@ from sysid.cli_sweep import choose, print_selection, saved_line, selection_json
 from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel
+from sysid.model_io import check_not_a_session
 from sysid.refit import PROVENANCE_KEY
 from sysid.validate import compare, min_fit_samples, simulation_window
 
@@ -111,6 +112,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     if out is not None:
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
                      overwrite=force, force_flag="--force")
+        check_not_a_session(out)  # before the identification, not after it
     check_rrd(rrd, inputs=(*sessions, *validate))
     meth, options = method_options(method, feedthrough=feedthrough, focus=focus,
                                    stability=stability)

@@ -49,7 +49,7 @@ from sysid.mat_guard import Limits, check_mat
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
 
-__all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "load", "save"]
+__all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "check_not_a_session", "load", "save"]
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +95,7 @@ def save(model: StateSpaceModel, path: str | os.PathLike[str]) -> Path:
         if count > MAX_DIMENSION:
             raise ModelFileError(f"cannot write model file {str(path)!r}: {count} {what}, more "
                                  f"than the {MAX_DIMENSION} that load reads (MAX_DIMENSION)")
+    check_not_a_session(path)
     part = path.with_name(f".{path.name}.{os.getpid()}.part")  # whole or not at all
     try:
         writers[suffix](model, path, into=part)
@@ -106,6 +107,34 @@ def save(model: StateSpaceModel, path: str | os.PathLike[str]) -> Path:
         part.unlink(missing_ok=True)
     log.info("saved %d-state model to %s", model.n_states, path)
     return path
+
+
+def check_not_a_session(path: str | os.PathLike[str]) -> None:
+    """One-line :class:`ModelFileError` when ``path`` holds a flight session: a model never
+    replaces recorded data (``--force`` replaced a read-only session with a model)."""
+    if _holds_a_session(Path(path)):
+        raise ModelFileError(f"cannot write model file {str(path)!r}: it holds a recorded flight "
+                             "session, which a model never replaces (not even with --force); "
+                             "choose another name")
+
+
+def _holds_a_session(path: Path) -> bool:
+    """Whether ``path`` is a flight session file (an HDF5 file of the session schema), read
+    as an untrusted file: a model saved over it would lose the recorded flight."""
+    from cfsession import SCHEMA_NAME, SessionError
+    from cfsession.guard import open_untrusted
+
+    try:
+        if not path.is_file():
+            return False
+        with path.open("rb") as fh:
+            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
+                return False
+        f, _ = open_untrusted(path)
+        with f:
+            return f.attrs.get("schema") in (SCHEMA_NAME, SCHEMA_NAME.encode())
+    except (OSError, SessionError, ValueError, KeyError, RuntimeError):
+        return False  # unreadable as HDF5: not a session this check can recognise
 
 
 def _os_reason(exc: OSError) -> str:

@@ -153,3 +153,27 @@ def test_a_disk_without_room_is_one_line_and_no_file(tmp_path, suffix):
     target = str(tmp_path / ("m" + suffix))
     assert done.stdout == f"cannot write model file {target!r}: File too large\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_model_never_replaces_a_recorded_session(tmp_path):
+    """``sysid identify ... --out flight.h5 --force`` replaced a (read-only) session file that
+    was no input of the command with a model (CLI fuzz): refused before identifying, and by
+    ``save`` for every other caller (batch, live id)."""
+    from click.testing import CliRunner
+
+    from sysid.cli import main
+    from tests.sysid.flights import known_system, write_flight
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=1500).path
+    kept = write_flight(tmp_path / "kept.h5", system=known_system(), seed=4, n=1500).path
+    before = kept.read_bytes()
+    res = CliRunner().invoke(main, ["identify", str(flight), "--order", "4", "--past", "20",
+                                    "--future", "10", "--out", str(kept), "--force"])
+    assert res.exit_code == 2 and res.output.strip().splitlines() == [
+        f"error: cannot write model file {str(kept)!r}: it holds a recorded flight session, "
+        "which a model never replaces (not even with --force); choose another name"]
+    with pytest.raises(ModelFileError, match="holds a recorded flight session"):
+        save(sample_model(), kept)
+    assert kept.read_bytes() == before
+    save(sample_model(), tmp_path / "m.h5")
+    save(sample_model(), tmp_path / "m.h5")  # a model file is replaced as before
