@@ -36,7 +36,7 @@ from typing import Any, Literal
 import click
 import numpy as np
 
-from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS
+from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS, FiniteFloat
 from cfsession import Session, open_session, warn_problems
 from groundstation.errors import GroundStationError
 
@@ -231,7 +231,7 @@ class _Choice(click.Choice):
 @click.option("--window", default="excitation", show_default=True,
               help="mat: phase name or kind, T0:T1 (session seconds), or 'all' (one "
                    "experiment: iddata holds one).")
-@click.option("--dt", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--dt", type=FiniteFloat(min=0, min_open=True), default=None,
               help="mat: sample time Ts of u and y, s [default: the logged period, as sysid].")
 def command(session: Path, to: Format, out: Path | None, force: bool, inputs: str,
             outputs: str, window: str, dt: float | None) -> None:
@@ -246,6 +246,12 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
     from sysid.cli_support import parse_window
     from sysid.errors import ParameterError
 
+    ctx = click.get_current_context()
+    given = [f"--{n}" for n in ("inputs", "outputs", "window", "dt")
+             if ctx.get_parameter_source(n) is not click.core.ParameterSource.DEFAULT]
+    if to != "mat" and given:  # they shape the iddata part only: csv/parquet ignored them
+        raise click.BadParameter(f"for --to mat only (its iddata u, y); --to {to} writes "
+                                 "every stream whole", param_hint=", ".join(given))
     target = _target(session, to, out, force)
     s = open_session(session)
     if to != "mat":  # mat: u and y are read through sysid.session_io, which warns

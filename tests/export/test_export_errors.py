@@ -51,7 +51,8 @@ def read_only(tmp_path, monkeypatch):
 @pytest.mark.parametrize(("to", "out"), [("csv", "csv"), ("parquet", "pq"), ("mat", "f.mat")])
 def test_an_unwritable_folder_is_one_line_the_same_for_every_format(session, read_only, to,
                                                                       out):
-    line = _one_line(_run(session, "--to", to, "--out", read_only / out, "--window", "all"))
+    window = ["--window", "all"] if to == "mat" else []  # a mat-only option
+    line = _one_line(_run(session, "--to", to, "--out", read_only / out, *window))
     assert f"folder {str(read_only)!r} is not writable" in line and "-h" in line
     assert not any(read_only.iterdir())
 
@@ -117,3 +118,19 @@ def test_a_grid_far_finer_than_the_log_is_one_line_not_an_allocation(session, tm
     assert line == ("error: the iddata part (u, y) cannot be built: dt=1e-07 s is 100000x finer "
                     "than the logged period 0.01 s; pass dt >= 1e-05 (at most 1000x finer)")
     assert not (tmp_path / "tiny.mat").exists()
+
+
+@pytest.mark.parametrize("to", ["csv", "parquet"])
+@pytest.mark.parametrize("option", [["--dt", "0.01"], ["--window", "nosuch"],
+                                    ["--inputs", "motors"]])
+def test_mat_only_options_with_another_format_are_refused(session, tmp_path, to, option):
+    """They shape the .mat's iddata only; csv and parquet ignored them and exited 0."""
+    line = _one_line(_run(session, "--to", to, *option, "--out", tmp_path / "x"))
+    assert line.startswith(f"error: Invalid value for {option[0]}: for --to mat only (its "
+                           f"iddata u, y); --to {to} writes every stream whole")
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_nan_grid_period_is_refused(session, tmp_path):
+    line = _one_line(_run(session, "--to", "mat", "--dt", "nan", "--out", tmp_path / "x.mat"))
+    assert "'nan' is not a finite number" in line
