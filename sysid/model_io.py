@@ -121,8 +121,9 @@ def check_not_a_session(path: str | os.PathLike[str]) -> None:
 def _holds_a_session(path: Path) -> bool:
     """Whether ``path`` is a flight session file (an HDF5 file of the session schema), read
     as an untrusted file: a model saved over it would lose the recorded flight."""
-    from cfsession import SCHEMA_NAME, SessionError
+    from cfsession.errors import SessionError
     from cfsession.guard import open_untrusted
+    from cfsession.schema import SCHEMA_NAME
 
     try:
         if not path.is_file():

@@ -50,7 +50,7 @@ def _act_at_tick(monkeypatch, tick: int, action) -> None:
     fly_plan = fly_cli.fly_plan
 
     def hooked(**kw):
-        return fly_plan(**kw, tick_hook=lambda k: action() if k == tick else None)
+        return fly_plan(**{**kw, "tick_hook": lambda k: action() if k == tick else None})
 
     monkeypatch.setattr(fly_cli, "fly_plan", hooked)
 
