@@ -258,8 +258,9 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
                   ) -> PredictorFit | None:
     """``B_K, D, K`` by one linear least-squares fit of the one-step predictor over all samples,
     and (``residuals=True``) the prediction errors ``y - yhat`` ``(N, l)`` of each flight.
-    Given ``k`` ``(n, l)``, K is held at it and only ``B_K, D, x_0`` are fitted (the same
-    normal equations, partitioned).
+    Given ``k`` ``(n, l)``, K is held at it and only ``B_K, D, x_0`` are fitted: the response
+    to ``K y`` is subtracted from y and the features are the inputs' alone (``m n`` columns
+    instead of ``(m + l) n``).
 
     With ``A_K = A - K C`` and C fixed, the predictor (thesis eq. 3.23's ``A_K, B_K``)
 
@@ -279,7 +280,8 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
     """
     n, ell = a_k.shape[0], c.shape[0]
     m = flights[0][0].shape[1]
-    cc = m + ell
+    held = k is not None  # K held: the K y response is known, only [u] channels are fitted
+    cc = m if held else m + ell
     lam, vec = np.linalg.eig(a_k)
     if np.linalg.cond(vec) > 1e8:
         return None
@@ -290,11 +292,12 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
     n_feat = n_bk + n_d + n * n_fl
     gram = np.zeros((n_feat, n_feat))
     fty = np.zeros((n_feat, ell))
-    feats = []
+    feats, targets = [], []
     import scipy.signal  # where used: scipy.signal takes 0.5 s to import
 
     for f_idx, (u, y) in enumerate(flights):
-        w = np.hstack([u, y])
+        w = u if held else np.hstack([u, y])
+        target = y - _held_response(lam, vec, c, k, y) if held else y
         z = np.empty((w.shape[0], cc, n), dtype=complex)
         for i in keep:
             z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)
@@ -306,9 +309,10 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
         x0 = n_bk + n_d + n * f_idx
         feat[:, x0:x0 + n] = _feature_columns(powers, lam, keep)[:, 0, :]
         gram += feat.T @ feat
-        fty += feat.T @ y
+        fty += feat.T @ target
         if residuals:
             feats.append(feat)
+            targets.append(target)
     # J_l maps parameters to feature coefficients for output l
     lhs = np.zeros((n_par, n_par))
     rhs = np.zeros(n_par)
@@ -325,25 +329,31 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
         lhs += jac.T @ gram @ jac
         rhs += jac.T @ fty[:, out]
         jacs.append(jac)
-    if k is None:
-        theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
-    else:  # K's entries are parameters m n .. (m + l) n: column c - m of K, entry j at c n + j
-        held = np.arange(m * n, n_bk)
-        free = np.setdiff1d(np.arange(n_par), held)
-        theta = np.empty(n_par)
-        theta[held] = np.asarray(k, dtype=float).T.reshape(-1)
-        theta[free] = np.linalg.lstsq(lhs[np.ix_(free, free)],
-                                      rhs[free] - lhs[np.ix_(free, held)] @ theta[held],
-                                      rcond=None)[0]
+    theta = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
     errs = []
     if residuals:
         coef = np.stack([jac @ theta for jac in jacs], axis=1)  # (n_feat, l)
-        errs = [y - feat @ coef for feat, (_, y) in zip(feats, flights, strict=True)]
-    # parameter index c * n + j is entry j of column c of [B_K, K]
+        errs = [t - feat @ coef for feat, t in zip(feats, targets, strict=True)]
+    # parameter index c * n + j is entry j of column c of [B_K, K] (of B_K alone when held)
     bk_all = theta[:n_bk].reshape(cc, n).T
     d = theta[n_bk:n_bk + n_d].reshape(ell, m) if feedthrough else np.zeros((ell, m))
     x0 = [theta[n_bk + n_d + n * f:n_bk + n_d + n * (f + 1)] for f in range(n_fl)]
-    return PredictorFit(bk_all[:, :m], d, bk_all[:, m:], x0, errs)
+    k_out = np.array(k, dtype=float) if held else bk_all[:, m:]
+    return PredictorFit(bk_all[:, :m], d, k_out, x0, errs)
+
+
+def _held_response(lam: np.ndarray, vec: np.ndarray, c: np.ndarray, k: np.ndarray,
+                   y: np.ndarray) -> np.ndarray:
+    """``(N, l)`` response of the predictor to ``K y`` alone, from rest:
+    :math:`\\sum_{t<k} C A_K^{k-1-t} K y(t)`, by one first-order filter per mode of
+    ``A_K = V Lambda V^{-1}``."""
+    import scipy.signal
+
+    r = y @ (np.linalg.solve(vec, k)).T  # (N, n) modal inputs V^-1 K y
+    q = np.empty_like(r, dtype=complex)
+    for i, li in enumerate(lam):
+        q[:, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -li], r[:, i])
+    return (q @ (c @ vec).T).real
 
 
 def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
