@@ -77,7 +77,6 @@ def test_check_output_refuses_read_only_folder(tmp_path) -> None:
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="Linux's always-full device")
 @pytest.mark.parametrize("argv", [["groundstation", "plan", "check", "hover-check"],
-                                  ["groundstation", "--help"], ["sysid", "--version"],
                                   ["sysid", "order", "--help"]])
 def test_output_to_a_full_disk_is_one_line_and_exit_2(argv) -> None:
     """Standard output redirected to a full disk (``/dev/full``): one line on stderr and exit
