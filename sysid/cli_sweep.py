@@ -49,6 +49,7 @@ from sysid.errors import DataError, HorizonError
 from sysid.holdout import GIVE_HORIZONS, VALIDATE_WITH
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
+from sysid.model_io import check_not_a_session
 from sysid.refit import saved_as
 from sysid.sweep import SweepRow
 from sysid.variants import ALTERNATIVE
@@ -186,6 +187,7 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
     if out is not None:
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=(session, *validate),
                      overwrite=force, force_flag="--force")
+        check_not_a_session(out)  # before the sweep, not after it
     check_rrd(rrd, inputs=(session, *validate))
     groups = load_groups([session], opts=opts)
     val = (load_flights(list(validate), opts=opts, verb="validate the models on") if validate

@@ -119,23 +119,35 @@ def check_not_a_session(path: str | os.PathLike[str]) -> None:
 
 
 def _holds_a_session(path: Path) -> bool:
-    """Whether ``path`` is a flight session file (an HDF5 file of the session schema), read
-    as an untrusted file: a model saved over it would lose the recorded flight."""
-    from cfsession.errors import SessionError
-    from cfsession.guard import open_untrusted
+    """Whether ``path`` is a flight session file, read as an untrusted file: an HDF5 file whose
+    root ``schema`` attribute (read through the session guard's size checks) names the session
+    schema, or an HDF5 file the guard will not open (damaged, cut short, too large, unreadable)
+    whose first 64 KiB hold that name: a model saved over it would lose a recorded flight."""
+    from cfsession.guard import open_untrusted, read_attrs
     from cfsession.schema import SCHEMA_NAME
 
     try:
         if not path.is_file():
             return False
         with path.open("rb") as fh:
-            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
-                return False
+            head = fh.read(_SESSION_SNIFF_BYTES)
+    except OSError:
+        return False  # nothing this process can read: nothing it could lose by writing
+    if not head.startswith(b"\x89HDF\r\n\x1a\n"):
+        return False
+    try:
         f, _ = open_untrusted(path)
         with f:
-            return f.attrs.get("schema") in (SCHEMA_NAME, SCHEMA_NAME.encode())
-    except (OSError, SessionError, ValueError, KeyError, RuntimeError):
-        return False  # unreadable as HDF5: not a session this check can recognise
+            value = read_attrs(f, where=str(path), problems=[], kind="file").get("schema")
+    except Exception:  # best effort: a file the guard refuses (or h5py fails on) is sniffed
+        return SCHEMA_NAME.encode() in head
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    return isinstance(value, str) and value == SCHEMA_NAME
+
+
+#: Bytes of an unopenable HDF5 file searched for the session schema's name.
+_SESSION_SNIFF_BYTES = 64 * 1024
 
 
 def _os_reason(exc: OSError) -> str:

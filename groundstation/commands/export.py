@@ -251,7 +251,8 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
              if ctx.get_parameter_source(n) is not click.core.ParameterSource.DEFAULT]
     if to != "mat" and given:  # they shape the iddata part only: csv/parquet ignored them
         raise click.BadParameter(f"for --to mat only (its iddata u, y); --to {to} writes "
-                                 "every stream whole", param_hint=", ".join(given))
+                                 "every stream whole",
+                                 param_hint=", ".join(f"'{g}'" for g in given))
     target = _target(session, to, out, force)
     s = open_session(session)
     if to != "mat":  # mat: u and y are read through sysid.session_io, which warns

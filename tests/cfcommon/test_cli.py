@@ -80,8 +80,8 @@ def test_check_output_refuses_read_only_folder(tmp_path) -> None:
                                   ["sysid", "order", "--help"]])
 def test_output_to_a_full_disk_is_one_line_and_exit_2(argv) -> None:
     """Standard output redirected to a full disk (``/dev/full``): one line on stderr and exit
-    2, for a command's output and for click's own (``--help``, ``--version``); it was a
-    traceback and exit 1."""
+    2, for a command's output and for click's own (``--help``; ``--version`` goes the same
+    way, through the group's ``main``); it was a traceback and exit 1."""
     import subprocess
     import sys
 

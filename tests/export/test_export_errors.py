@@ -126,7 +126,7 @@ def test_a_grid_far_finer_than_the_log_is_one_line_not_an_allocation(session, tm
 def test_mat_only_options_with_another_format_are_refused(session, tmp_path, to, option):
     """They shape the .mat's iddata only; csv and parquet ignored them and exited 0."""
     line = _one_line(_run(session, "--to", to, *option, "--out", tmp_path / "x"))
-    assert line.startswith(f"error: Invalid value for {option[0]}: for --to mat only (its "
+    assert line.startswith(f"error: Invalid value for '{option[0]}': for --to mat only (its "
                            f"iddata u, y); --to {to} writes every stream whole")
     assert not (tmp_path / "x").exists()
 

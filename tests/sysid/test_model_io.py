@@ -178,3 +178,32 @@ def test_a_model_never_replaces_a_recorded_session(tmp_path):
     assert kept.read_bytes() == before
     save(sample_model(), tmp_path / "m.h5")
     save(sample_model(), tmp_path / "m.h5")  # a model file is replaced as before
+    cut = tmp_path / "cut.h5"  # a session cut short (a crash, a copy): still a recorded flight
+    cut.write_bytes(before[:50_000])
+    with pytest.raises(ModelFileError, match="holds a recorded flight session"):
+        save(sample_model(), cut)
+    odd = tmp_path / "odd.h5"  # a schema attribute of a compound type: no TypeError escapes
+    import h5py
+
+    with h5py.File(odd, "w") as f:
+        f.attrs["schema"] = np.zeros(1, dtype=[("a", "f8"), ("b", "i4")])
+    save(sample_model(), odd)  # not a session: replaced
+
+
+def test_sweep_refuses_a_session_as_its_model_before_sweeping(tmp_path, monkeypatch):
+    """It refused only after running its whole grid (review)."""
+    from click.testing import CliRunner
+
+    import sysid.cli_sweep
+    from sysid.cli import main
+    from tests.sysid.flights import known_system, write_flight
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=1500).path
+    kept = write_flight(tmp_path / "kept.h5", system=known_system(), seed=4, n=1500).path
+
+    def no_sweep(*_a, **_k):
+        raise AssertionError("swept before refusing")
+
+    monkeypatch.setattr(sysid.cli_sweep, "choose", no_sweep)
+    res = CliRunner().invoke(main, ["sweep", str(flight), "--out", str(kept), "--force"])
+    assert res.exit_code == 2 and "holds a recorded flight session" in res.output
