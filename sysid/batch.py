@@ -298,7 +298,7 @@ def run_batch(
             row, t0 = BatchRow(group=name, sessions=[str(p) for p in paths]), time.perf_counter()
             try:
                 data = load(paths)
-                row.flights = sum(len(g) for g in data)
+                row.flights = sum(1 for g in data if g)  # sessions read, not experiments
                 if client is None:
                     outcome: dict[str, Any] | BaseException = _group_task(
                         data, workers=workers, **task_options)

@@ -187,3 +187,14 @@ def test_models_never_replace_the_sessions_they_come_from(tmp_path):
     assert run("batch", flight, "--out", out, *FAST, "--force").exit_code == 0
     res = run("batch", flight, "--out", "/dev/null", *FAST)
     assert res.exit_code == 2 and "exists and is not a folder" in res.output
+
+
+def test_flights_counts_sessions_not_the_experiments_in_them(tmp_path):
+    """A flight with a PRBS and a chirp is two experiments of one flight (window auto)."""
+    phases = [(0.0, "takeoff", "takeoff"), (5.0, "prbs", "excitation"), (25.0, "rest", "hover"),
+              (27.0, "chirp", "excitation"), (37.0, "land", "landing")]
+    path = write_flight(tmp_path / "two.h5", system=known_system(), seed=8, phases=phases).path
+    res = run("batch", path, "--out", tmp_path / "m", *FAST, "--json")
+    assert res.exit_code == 0, res.output
+    [row] = json.loads((tmp_path / "m" / "summary.json").read_text())
+    assert row["flights"] == 1 and row["error"] in (None, "")
