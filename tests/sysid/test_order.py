@@ -186,3 +186,15 @@ def test_cli_order_lists_failed_orders_and_prints_the_rest(session, monkeypatch)
     err = res.stderr.strip()
     assert res.exit_code == 2 and err.startswith("error: parsim-k identified none of the orders "
                                                  "1..8") and "\n" not in err, res.output
+
+
+def test_a_modest_gap_gives_way_when_every_criterion_picks_more_states() -> None:
+    """0.5 decades after s_3 while AIC, AICc and BIC all pick 6 (a demo flight: gap 3, every
+    criterion 11, held-out validation 8; order 3 fitted acc.z 0 %): BIC's order."""
+    sv = np.array([10.0, 9.0, 8.0, 2.5, 2.0, 1.6, 0.5, 0.45])  # 0.5 decades after s_3
+    hint = suggest_order(sv, _ic(6))
+    assert (hint.order, hint.rule, hint.by_rule["gap"]) == (6, "bic", 3)
+    assert "under 1), but AIC, AICc and BIC all pick more states (8, 8, 6)" in hint.reason
+    strong = np.array([10.0, 9.0, 8.0, 0.5, 0.4, 0.3, 0.2, 0.1])  # 1.2 decades: the gap holds
+    assert suggest_order(strong, _ic(6)).rule == "gap"
+    assert suggest_order(sv, _ic(2)).rule == "gap"  # BIC picks fewer: no consensus for more
