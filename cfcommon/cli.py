@@ -64,10 +64,17 @@ def drop_failing_stdout() -> None:
     try:
         sys.stdout.flush()
     except OSError:
-        with contextlib.suppress(OSError):
-            null = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(null, 1)
-            os.close(null)
+        _to_null(1)
+
+
+def _to_null(*fds: int) -> None:
+    """Point the file descriptors ``fds`` at the null device (errors ignored)."""
+    with contextlib.suppress(OSError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        for fd in fds:
+            with contextlib.suppress(OSError):
+                os.dup2(null, fd)
+        os.close(null)
 
 
 def writing_stdout(exc: BaseException) -> bool:
@@ -90,12 +97,7 @@ def output_gone(exc: BaseException) -> bool:
     the interpreter's flush at exit) neither fail nor print a traceback."""
     if not isinstance(exc, OSError) or exc.errno not in (errno.EIO, errno.EPIPE):
         return False
-    with contextlib.suppress(OSError):
-        null = os.open(os.devnull, os.O_WRONLY)
-        for fd in (1, 2):
-            with contextlib.suppress(OSError):
-                os.dup2(null, fd)
-        os.close(null)
+    _to_null(1, 2)
     return True
 
 

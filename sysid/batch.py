@@ -40,7 +40,7 @@ from sysid.auto import select
 from sysid.data import IOData
 from sysid.errors import ClusterError, ParameterError, SysIdError, first_line
 from sysid.methods import Method, Options
-from sysid.session_io import SessionFileError
+from sysid.session_io import SessionFileError, unique_name
 
 __all__ = ["GROUP_BY", "BatchRow", "GroupBy", "check_model_paths", "group_sessions", "model_path",
            "run_batch", "write_summary"]
@@ -112,9 +112,7 @@ def group_sessions(paths: Sequence[Path], *, by: GroupBy,
             continue
         key = _key(path, meta, by)
         if by == "session":
-            base, k = key, 2
-            while key in groups:
-                key, k = f"{base}-{k}", k + 1
+            key = unique_name(key, groups)
         groups.setdefault(key, []).append(path)
     return groups, bad
 

@@ -47,7 +47,7 @@ import logging
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Container, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -64,7 +64,7 @@ from sysid.preprocess import Stream, detrend_data, iodata_from_streams
 
 __all__ = ["AUTO", "Channel", "PhaseRelative", "SessionFileError", "Window", "clock_offset",
            "load_experiments", "load_session", "load_sessions", "parse_window",
-           "read_metadata", "resolve_channels"]
+           "read_metadata", "resolve_channels", "unique_name"]
 
 log = logging.getLogger(__name__)
 
@@ -160,6 +160,15 @@ def _phase(session: Session, name: str, *, hint: str = "") -> tuple[float, float
                            ) from None
 
 
+def unique_name(base: str, taken: Container[str]) -> str:
+    """``base``, or ``base-2``, ``base-3`` ... the first not in ``taken`` (an experiment's
+    label, a batch group named after a file stem)."""
+    name, k = base, 2
+    while name in taken:
+        name, k = f"{base}-{k}", k + 1
+    return name
+
+
 def host_windows(session: Session, window: Window, *, verb: str = "identify from"
                  ) -> list[tuple[str, tuple[float, float] | None]]:
     """The experiments a window selects: ``(label, host-time (t0, t1) or None)`` each.
@@ -181,10 +190,7 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
             labels: set[str] = set()  # joined held out little but the chirp
             spans = []
             for p in excited:
-                label, k = p.name, 1
-                while label in labels:  # a name used twice (prbs, prbs, prbs-2): NAME-k
-                    k += 1
-                    label = f"{p.name}-{k}"
+                label = unique_name(p.name, labels)  # prbs, prbs, prbs-2: NAME-k
                 labels.add(label)
                 spans.append((label, (p.start_s, p.end_s)))
             return spans
