@@ -43,11 +43,11 @@ import numpy as np
 from cfsession.errors import SessionError
 from cfsession.vlen_text import FileBytes, Texts, declared_text_bytes, is_vlen_text, text_problem
 
-__all__ = ["MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
+__all__ = ["HDF5_SIGNATURE", "MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
            "check_dataset", "check_storage", "file_size", "hard_links", "open_untrusted",
            "read_attrs", "short_error"]
 
-_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 MAX_UNCLEAN_BYTES = 1 << 30
 """Largest file not closed cleanly that is read (into memory, see the module docstring)."""
 MAX_EXPANSION = 1000
@@ -111,7 +111,7 @@ def lookup3(data: bytes, initval: int = 0) -> int:
 def _superblock(head: bytes) -> tuple[int, int, int] | None:
     """``(status flags, stored end of file, checksum offset)`` of a version 2/3 superblock with
     8-byte addresses at offset 0, or ``None`` for any other layout."""
-    if len(head) < 48 or head[:8] != _SIGNATURE or head[8] not in (2, 3) or head[9] != 8:
+    if len(head) < 48 or head[:8] != HDF5_SIGNATURE or head[8] not in (2, 3) or head[9] != 8:
         return None
     return head[11], int.from_bytes(head[28:36], "little"), 44
 
@@ -178,7 +178,7 @@ def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, boo
             head = fh.read(48)
     except OSError as exc:
         raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if head[:8] != _SIGNATURE:
+    if head[:8] != HDF5_SIGNATURE:
         raise SessionError(f"{path}: not an HDF5 file, so not a {kind} file")
     sb = _superblock(head)
     if sb is not None and sb[1] > st.st_size:

@@ -123,7 +123,7 @@ def _holds_a_session(path: Path) -> bool:
     root ``schema`` attribute (read through the session guard's size checks) names the session
     schema, or an HDF5 file the guard will not open (damaged, cut short, too large, unreadable)
     whose first 64 KiB hold that name: a model saved over it would lose a recorded flight."""
-    from cfsession.guard import open_untrusted, read_attrs
+    from cfsession.guard import HDF5_SIGNATURE, open_untrusted, read_attrs
     from cfsession.schema import SCHEMA_NAME
 
     try:
@@ -133,7 +133,7 @@ def _holds_a_session(path: Path) -> bool:
             head = fh.read(_SESSION_SNIFF_BYTES)
     except OSError:
         return False  # nothing this process can read: nothing it could lose by writing
-    if not head.startswith(b"\x89HDF\r\n\x1a\n"):
+    if not head.startswith(HDF5_SIGNATURE):
         return False
     try:
         f, _ = open_untrusted(path)
