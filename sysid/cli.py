@@ -252,9 +252,10 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
 
     Groups come from the sessions' metadata (--group-by; docs/sysid.md names them). Each
     group's horizons and order are chosen by validation on held-out data, as `identify` does,
-    unless fixed. A group that fails is a row with its reason; the batch goes on. The summary
-    is rewritten as each group finishes: Ctrl-C keeps the finished groups, and so does a
-    --scheduler cluster that fails mid-run (one line names the groups not run).
+    unless fixed. A group that fails is a row with its reason; the batch goes on, and exits
+    with 1 when some groups failed (2 when all did). The summary is rewritten as each group
+    finishes: Ctrl-C keeps the finished groups, and so does a --scheduler cluster that fails
+    mid-run (one line names the groups not run).
 
     \b
     Examples:
@@ -312,6 +313,10 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     if rows and len(failed) == len(rows):
         raise DataError(f"every one of the {len(rows)} group(s) failed; first: "
                         f"{failed[0].group}: {failed[0].error}")
+    if failed:  # a script must see it: exit 1, the finished groups' models kept
+        click.echo(f"error: {len(failed)} of the {len(rows)} group(s) failed; first: "
+                   f"{failed[0].group}: {failed[0].error}", err=True)
+        sys.exit(1)
 
 
 @main.command()

@@ -159,11 +159,19 @@ def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
     """``--window`` values: ``(window for every session, {session: its own window})``."""
     common: Window = AUTO
     own: dict[str, Window] = {}
+    given: dict[str, str] = {}  # whose window -> the text that set it (two: the user meant one)
     for text in texts:
         session, eq, spec = text.partition("=")
+        whose = session.strip() if eq else ""
+        if whose in given:
+            who = f"session {whose!r}" if whose else "every session"
+            raise ParameterError(f"--window {given[whose]!r} and --window {text!r}: two windows "
+                                 f"for {who}; give one (a flight's phases are each their own "
+                                 "experiment with the default auto)")
+        given[whose] = text
         try:
             if eq:
-                own[session.strip()] = parse_window(spec)
+                own[whose] = parse_window(spec)
             else:
                 common = parse_window(text)
         except ParameterError as exc:

@@ -45,7 +45,7 @@ def test_batch_by_vehicle_writes_models_and_a_summary_with_failed_rows(sessions,
     paths, system = sessions
     out = tmp_path / "models"
     res = run("batch", *paths, "--out", out, "--group-by", "vehicle", *FAST)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1, res.output  # two of four groups failed; two models written
     table = {r["group"]: r for r in json.loads((out / "summary.json").read_text())}
     a, b = table["radio-0-80-2M-E7E7E7E7E7"], table["radio-0-80-2M-E7E7E7E7E8"]
     assert a["flights"] == 2 and len(a["sessions"]) == 2 and b["flights"] == 1
@@ -136,6 +136,9 @@ def test_an_unexpected_failure_is_a_row_and_the_batch_goes_on(sessions, tmp_path
         res = run("batch", *paths[:3], "--out", out, *FAST)
     rows = {r["group"]: r for r in json.loads((out / "summary.json").read_text())}
     assert set(rows) == {"a0", "a1", "b0"}, res.output
+    # some groups failed: exit 1 (a script sees it), one line naming how many and the first
+    assert res.exit_code == 1 and res.stderr.strip().splitlines()[-1] == (
+        f"error: 1 of the 3 group(s) failed; first: a0: {rows['a0']['error']}")
     assert "gyro.q" in rows["a0"]["error"] and "\n" not in rows["a0"]["error"]
     assert rows["a1"]["error"] is None and (out / "a1.h5").exists()
     assert rows["b0"]["error"] is None and (out / "b0.h5").exists()

@@ -64,6 +64,15 @@ def test_windows_for_every_session_and_for_one():
     assert parse_windows(["all"])[0] is None
 
 
+@pytest.mark.parametrize("texts", [["a.h5=prbs", " a.h5 =chirp"], ["prbs", "chirp"]])
+def test_two_windows_for_one_session_are_refused(texts):
+    """The last one won, silently: the first window was never read (walkthrough finding)."""
+    with pytest.raises(ParameterError, match="two windows for") as info:
+        parse_windows(["b.h5=hover", texts[0], texts[1]])
+    assert repr(texts[0]) in str(info.value) and repr(texts[1]) in str(info.value)
+    assert "\n" not in str(info.value)
+
+
 @pytest.mark.parametrize("text", ["3:1", "a.h5=x@1", "1:nan"])
 def test_a_bad_window_names_the_option(text):
     with pytest.raises(ParameterError) as info:
