@@ -104,6 +104,8 @@ class Commander:
         """After a cause: the plan's descent if the link is up, then the stop setpoint."""
         journal, telemetry = self.journal, self.telemetry
         n_causes = len(journal.causes)
+        # a late abort (the host held up) descends from now: never a burst of past-due setpoints
+        self.t_first += max(journal.clock.now() - self.deadline(k), 0.0)
         descent = (self.schedule.abort_schedule(k) if telemetry.flying and not self.link_down
                    else None)
         if descent is not None and len(descent):

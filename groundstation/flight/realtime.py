@@ -27,32 +27,38 @@ def prompt_thread_switches(interval_s: float = 0.0005) -> Iterator[None]:
 
 
 _HANGUP = (signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ()  # POSIX only
+#: Ctrl-\\ (SIGQUIT) killed the process mid-flight with no stop setpoint; Ctrl-Z (SIGTSTP)
+#: suspended it, and the Crazyflie's watchdog cut the motors 2 s later.
+_KEYS = tuple(getattr(signal, name) for name in ("SIGQUIT", "SIGTSTP") if hasattr(signal, name))
+_ONCE = (*_HANGUP, *(s for s in _KEYS if s.name == "SIGTSTP"))  # count once (docstring)
 
 
 @contextlib.contextmanager
 def signal_handlers(abort: Callable[[str], None]) -> Iterator[None]:
-    """SIGINT, SIGTERM and SIGHUP (the terminal closed, an SSH session dropped) request an
-    abort while flying (main thread only); restored after. SIGHUP's default killed the
-    process mid-flight with no stop setpoint and the session left open.
+    """SIGINT, SIGTERM, SIGHUP (the terminal closed, an SSH session dropped), SIGQUIT (Ctrl-\\)
+    and SIGTSTP (Ctrl-Z: the process is not suspended) request an abort while flying (main
+    thread only); restored after. SIGHUP's and SIGQUIT's defaults killed the process mid-flight
+    with no stop setpoint and the session left open; SIGTSTP's stopped the setpoints.
 
-    A second SIGINT or SIGTERM is the operator's second request (the descent ends, the stop
-    is sent at once); SIGHUP counts once: one hangup can arrive twice (the kernel's to the
-    terminal's process group, then the shell's to its jobs), and it is no one's decision to
-    skip the descent. SIGHUP ignored when the flight starts (``nohup``) stays ignored."""
+    A second SIGINT, SIGTERM or SIGQUIT is the operator's second request (the descent ends, the
+    stop is sent at once); SIGHUP and SIGTSTP count once: one hangup can arrive twice (the
+    kernel's to the terminal's process group, then the shell's to its jobs), a job-control
+    stop likewise, and it is no one's decision to skip the descent. SIGHUP ignored when the
+    flight starts (``nohup``) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    hung_up = []
+    once: set[int] = set()
 
     def request(n: int, _frame: object) -> None:
-        if n in _HANGUP:
-            if hung_up:
+        if n in _ONCE:
+            if n in once:
                 return
-            hung_up.append(n)
+            once.add(n)
         abort(f"{signal.Signals(n).name} received")
 
     previous = {}
-    for sig in (signal.SIGINT, signal.SIGTERM, *_HANGUP):
+    for sig in (signal.SIGINT, signal.SIGTERM, *_HANGUP, *_KEYS):
         if sig in _HANGUP and signal.getsignal(sig) is signal.SIG_IGN:
             continue  # nohup: the operator asked for the flight to outlive the terminal
         previous[sig] = signal.signal(sig, request)

@@ -28,7 +28,9 @@ the held phases; the setpoints stream records the thrust as sent.
 
 **Safety.** SIGINT/SIGTERM (handlers installed while flying, restored after), link loss (cflib's, or
 no log packet for :data:`~groundstation.flight.telemetry.LINK_SILENCE_S` = 0.5 s of flight time
-while flying), an exception in the runner, a measured rate beyond :class:`RateLimits`, a setpoint
+while flying), a setpoint more than :data:`SETPOINT_LATE_S` late (the host suspended or the
+runner's thread held up: the missed setpoints are never sent as a burst), an exception in the
+runner, a measured rate beyond :class:`RateLimits`, a setpoint
 that is not finite (NaN or inf is never sent) or a battery below ``vehicle.min_vbat`` at take-off
 each record an event (source ``safety``) and end with the stop setpoint; if the plan's
 ``on_abort`` is ``descend`` and the link is up, the
@@ -86,8 +88,12 @@ from groundstation.plan import Plan, Schedule, load_plan
 from groundstation.plan.altitude import AltitudeHold
 from groundstation.recorder import Recorder, session_path
 
-__all__ = ["FlightListener", "FlightResult", "RateLimits", "altitude_block_period",
-           "block_summary", "fly_plan"]
+#: A setpoint due longer ago than this (flight clock) ends the flight: the firmware's watchdog
+#: (``supervisor.c``) has levelled the vehicle out by then, so it no longer flies the plan.
+SETPOINT_LATE_S = 0.5
+
+__all__ = ["SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
+           "altitude_block_period", "block_summary", "fly_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -163,6 +169,12 @@ class _Runner:
         current = -1
         while k < len(s) and not journal.causes:
             telemetry.wait(out.deadline(k))
+            late = self.clock.now() - out.deadline(k)
+            if late > SETPOINT_LATE_S and not journal.causes:  # a backlog is never sent
+                journal.cause(f"setpoint {k} is {late:.2f} s late: the ground station was held "
+                              "up (suspended, or a write or listener blocked it); the "
+                              "Crazyflie's watchdog levels out after 0.5 s without a setpoint "
+                              "and stops the motors after 2 s")
             if journal.causes:
                 break
             if self.tick_hook is not None:

@@ -13,6 +13,7 @@ import threading
 import time
 
 import cflib.crtp
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -228,3 +229,32 @@ def test_a_close_that_never_returns_is_a_warning_after_the_stop(sim_uri, tmp_pat
     assert [e.text for e in late] == [
         "cflib did not take the link close within 0.3 s (the stop setpoint was delivered before)"]
     wait_for_stop(uri)  # and it reached the vehicle
+
+
+def test_udp_a_ground_station_held_up_past_the_watchdog_aborts_without_a_burst(udp, tmp_path):
+    """The runner's thread held up on a real-time link (Ctrl-Z then ``fg``, a blocked write, a
+    slow listener): the vehicle went without setpoints and its watchdog levelled it (0.5 s) or
+    cut its motors (2 s), and the runner then sent the missed setpoints as a burst and
+    reported a complete flight, exit 0 (safety review). Now the late setpoint is a cause: the
+    abort's descent starts from the moment the runner resumes, one setpoint per period, and
+    the stop is delivered and recorded."""
+    sim = udp.simulators[0]
+    held: list[float] = []
+
+    def hook(k: int) -> None:
+        if k == 30 and not held:  # hover-check hovers from tick 20 to 70
+            time.sleep(1.2)  # past the 0.5 s level-out, short of the 2 s motor cut
+            held.append(time.monotonic())
+
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=udp.uris[0], tick_hook=hook)
+    assert result.aborted and result.cause.startswith("setpoint 31 is "), result.cause
+    assert "s late: the ground station was held up" in result.cause
+    assert _stopped_by_the_ground_station(sim)
+    s = check_closed_with_stop(result)
+    sp = s["setpoints"].data
+    assert sp["tick"][sp["tick"] >= 0].max() == 30  # the late setpoint 31 was never sent
+    after = sp["host_time"][sp["host_time"] > sp["host_time"][sp["tick"] == 30][0]]
+    descent = after[:-1]  # then the stop
+    assert len(descent) == 20  # hover-check's 2 s descent at 10 Hz
+    # from now, 0.1 s apart: 1.9 s (past-due deadlines sent half of it at once: 0.9 s)
+    assert descent[-1] - descent[0] >= 1.5, np.diff(descent)

@@ -53,11 +53,13 @@ def signal_in_excitation(plan, sig: int, *, after: int = 20):
     return hook
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM,
-                                 *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, *(
+    getattr(signal, n) for n in ("SIGHUP", "SIGQUIT", "SIGTSTP") if hasattr(signal, n))])
 def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, request):
+    """SIGQUIT (Ctrl-\\) killed the process with no stop setpoint and the file open; SIGTSTP
+    (Ctrl-Z) suspended it and the vehicle's watchdog cut the motors (safety review)."""
     one_variant_on_sitl(request, first=sig == signal.SIGINT,
-                        why="SIGINT, SIGTERM and SIGHUP take one path, in the ground station")
+                        why="every signal takes one path, in the ground station")
     plan, uri = _pitch_only(), flight_uri()
     excitation = next(p for p in plan.compile().phases if p.kind == "excitation")
     before = signal.getsignal(sig)
