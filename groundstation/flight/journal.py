@@ -38,6 +38,7 @@ class Journal:
         self.causes: list[str] = []
         self.end_excitation = ""  # a source's request to end the excitation
         self.landed = False  # the plan flown through and the stop sent (Commander.land)
+        self.recording_lost_s: float | None = None  # flight time the recorder raised at
         self.listeners = Listeners(recorder=recorder, others=listeners,
                                    on_error=self._listener_failed)
 
@@ -77,6 +78,7 @@ class Journal:
 
     def _listener_failed(self, what: str, recorder: bool) -> None:
         if recorder:
+            self.recording_lost_s = self.now()
             self.trouble(f"recording failed: {what}")
         else:
             self.event(f"{what}; listener dropped, flight continues", level="error")

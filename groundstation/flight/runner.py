@@ -301,6 +301,10 @@ class _Runner:
             until = math.floor(rec.saved_until * 10) / 10  # rows up to then at least
             partial = (f"the file holds the flight up to {until:.1f} s only"
                        f"{f' ({rec.trouble})' if rec.trouble and not cause else ''}")
+        elif self.journal.recording_lost_s is not None:  # the recorder raised, was dropped
+            until = math.floor(self.journal.recording_lost_s * 10) / 10
+            partial = (f"the file holds the flight up to about {until:.1f} s only, not its "
+                       "stop: recording failed then")
         if rec.error:
             summary["file_error"] = rec.error
         elif partial and not cause:

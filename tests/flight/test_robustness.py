@@ -253,3 +253,29 @@ def test_demo_out_existing_file_is_one_line(tmp_path):
     out.write_text("keep me")
     line = one_line_error(CliRunner().invoke(main, ["demo", "--out", str(out)]))
     assert "--out" in line and out.read_text() == "keep me"
+
+
+def test_a_recorder_that_raises_aborts_and_says_what_the_file_lacks(sim_uri, tmp_path,
+                                                                     monkeypatch):
+    """The recorder raised once mid-flight: the flight aborted and the stop reached the vehicle,
+    but the file (closed cleanly) ended at the failure without the stop row, and the result
+    said only "session saved to" (safety review). The cause now says what the file holds."""
+    real, calls = Recorder.rows, []
+
+    def failing(self, stream, rows):
+        calls.append(stream)
+        if len(calls) == 200:
+            raise RuntimeError("injected write failure")
+        return real(self, stream, rows)
+
+    monkeypatch.setattr(Recorder, "rows", failing)
+    uri = sim_uri()
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri)
+    wait_for_stop(uri)
+    assert result.aborted and result.cause.startswith("recording failed: "), result.cause
+    assert "injected write failure" in result.cause
+    lost = float(result.cause.split("up to about ")[1].split(" s only")[0])
+    assert result.cause.endswith("s only, not its stop: recording failed then")
+    s = open_session(result.path)
+    t = s["setpoints"].data["host_time"] - s["setpoints"].data["host_time"][0]
+    assert lost > 0 and t[-1] <= lost + 0.2  # the file does end about there
