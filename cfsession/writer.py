@@ -66,6 +66,43 @@ __all__ = ["RESERVE_BYTES", "SessionWriter", "check_room", "check_writable", "ev
 
 log = logging.getLogger(__name__)
 
+#: Size of the ``summary`` attribute: made before SWMR, rewritten in place at close.
+SUMMARY_CHARS = 4096
+
+
+def summary_json(summary: Mapping, *, limit: int = SUMMARY_CHARS) -> str:
+    """``summary`` as JSON in at most ``limit`` characters, and still JSON: long strings are
+    shortened first (a disk-full cause naming a long path), then the largest entries are left
+    out and named under ``"truncated"``. Cutting the text at ``limit`` broke the JSON, and
+    ``info`` then showed no summary at all."""
+    text = json.dumps(summary, sort_keys=True, default=str)
+    for keep in (512, 160, 60):
+        if len(text) <= limit:
+            return text
+        short = _shortened(summary, keep)
+        text = json.dumps(short, sort_keys=True, default=str)
+    left_out: list[str] = []
+    while len(text) > limit and short:
+        sizes = {k: len(json.dumps(v, default=str)) for k, v in short.items() if k != "truncated"}
+        if not sizes:
+            break
+        left_out.append(max(sizes, key=sizes.__getitem__))
+        short = {k: v for k, v in short.items() if k != left_out[-1]}
+        short["truncated"] = sorted(left_out)
+        text = json.dumps(short, sort_keys=True, default=str)
+    return text if len(text) <= limit else "{}"
+
+
+def _shortened(value: Any, keep: int) -> Any:
+    if isinstance(value, str) and len(value) > keep:
+        return f"{value[:keep]}..."
+    if isinstance(value, Mapping):
+        return {str(k): _shortened(v, keep) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_shortened(v, keep) for v in value]
+    return value
+
+
 _LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "critical": 5}
 
 
@@ -215,7 +252,7 @@ class SessionWriter:
         # Attributes updated in place at close: they must exist (same size) before SWMR.
         a["closed_cleanly"] = np.int8(0)
         a["duration_s"] = np.float64(np.nan)
-        a["summary"] = " " * 4096
+        a["summary"] = " " * SUMMARY_CHARS
 
     def _create_stream(self, spec: StreamSpec) -> None:
         group = self._file.create_group(spec.name)
@@ -361,8 +398,7 @@ class SessionWriter:
                 stored = dict(summary or {})
                 if "file" in stored:  # its name only (a folder may move): docs/session-format.md
                     stored["file"] = self.path.name
-                text = json.dumps(stored, sort_keys=True, default=str)
-                a["summary"] = text[:4096].ljust(4096)
+                a["summary"] = summary_json(stored).ljust(SUMMARY_CHARS)
                 self._file.flush()
             finally:
                 self.closed = True

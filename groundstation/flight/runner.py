@@ -263,22 +263,23 @@ class _Runner:
             except Exception as exc:  # the stop follows in the finally clause
                 log.exception("abort path failed")
                 journal.cause(f"runner error while stopping: {type(exc).__name__}: {exc}")
-        finally:
+        finally:  # each step guarded: one that raises never skips the file's end
             if begun and not out.stopped:  # every path out ends with the stop
                 out.last_stop()
             if self.params:
-                restore_after_flight(link.cf, self.params, event=journal.event,
-                                     link_up=not (out.link_down or link.stuck))
+                self._guarded("restoring the parameters", lambda: restore_after_flight(
+                    link.cf, self.params, event=journal.event,
+                    link_up=not (out.link_down or link.stuck)))
             self.t_close = journal.now()
-            link.close()
-            self.telemetry.collect()
-            finished = (listeners.from_sources("finish", path=self.recorder.path)
-                        if begun else [])
-            summary = self.summary()
+            self._guarded("closing the link", link.close)
+            self._guarded("collecting the telemetry", self.telemetry.collect)
+            finished = (self._guarded("finishing the sources", lambda: listeners.from_sources(
+                "finish", path=self.recorder.path)) or [] if begun else [])
+            summary = self._guarded("the summary", self.summary) or {"error": "no summary"}
             for entries in finished:
                 summary.update(entries)
             if begun:
-                journal.dispatch()
+                self._guarded("recording the last rows", journal.dispatch)
                 listeners.end(summary=summary)
                 if not listeners.recording:  # dropped after raising: close what it has
                     self.recorder.end(summary=summary)
@@ -286,6 +287,17 @@ class _Runner:
         if begun:
             cause = self.file_outcome(summary, cause)
         return FlightResult(path=self.recorder.path, summary=summary, cause=cause)
+
+    def _guarded(self, what: str, step: Callable[[], Any]) -> Any:
+        """``step()``, or None after an event saying it failed (logged with its traceback):
+        the steps after the stop must all run, the file's end last."""
+        try:
+            return step()
+        except Exception as exc:
+            log.exception("%s failed", what)
+            self.journal.event(f"{what} failed after the stop ({type(exc).__name__}: {exc})",
+                               level="error")
+            return None
 
     def file_outcome(self, summary: dict[str, Any], cause: str) -> str:
         """The session file as it ended up, into ``summary``: ``file`` (its name now: a folder

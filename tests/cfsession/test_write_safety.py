@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
@@ -52,3 +53,26 @@ def test_the_recorder_flushes_within_the_first_second_of_flight_time(tmp_path):
     rec.rows("gyro", _rows(0.8, 20))    # .. 1.18 s: past the first second
     assert len(open_session(rec.path)["gyro"]) == 60
     rec.end(summary={"duration_s": 1.2})
+
+
+def test_a_summary_longer_than_its_attribute_is_still_json(tmp_path):
+    """The summary attribute holds 4096 characters; a longer summary (a disk-full cause naming
+    a long --out path, many file notes) was cut there, its JSON broken, and ``info`` showed no
+    summary at all (safety review). Long texts are shortened, then the largest entries left
+    out and named."""
+    from cfsession.writer import SUMMARY_CHARS, summary_json
+
+    long_path = "/data/" + "x" * 6000 + "/flight.h5"
+    rec = Recorder(tmp_path / "long.h5")
+    rec.begin(streams=[GYRO, *standard_streams()], metadata={})
+    rec.rows("gyro", _rows(0.0, 5))
+    rec.end(summary={"aborted": True, "cause": f"disk full: {long_path}", "duration_s": 1.5,
+                     "file_notes": [f"saved to {long_path}"] * 3})
+    summary = open_session(rec.path).json_meta("summary")
+    assert summary["aborted"] is True and summary["duration_s"] == 1.5
+    assert summary["cause"].startswith("disk full: /data/xxx") and summary["cause"].endswith("...")
+    # entries too big even shortened are left out, and named
+    many = {"blocks": {f"b{i}": {"note": "y" * 100} for i in range(200)}, "duration_s": 2.0}
+    text = summary_json(many)
+    assert len(text) <= SUMMARY_CHARS
+    assert json.loads(text) == {"duration_s": 2.0, "truncated": ["blocks"]}

@@ -279,3 +279,41 @@ def test_a_recorder_that_raises_aborts_and_says_what_the_file_lacks(sim_uri, tmp
     s = open_session(result.path)
     t = s["setpoints"].data["host_time"] - s["setpoints"].data["host_time"][0]
     assert lost > 0 and t[-1] <= lost + 0.2  # the file does end about there
+
+
+@pytest.mark.parametrize("target", ["setpoint_summary", "link.close"])
+def test_a_step_after_the_stop_that_raises_keeps_the_stop_and_the_files_end(target, sim_uri,
+                                                                            tmp_path,
+                                                                            monkeypatch):
+    """The steps after the stop ran unguarded: one that raised (the summary, closing the link)
+    skipped the rest, and the file lost its stop row, its last rows and its clean close
+    (safety review, injected faults). Now each is an error event and the rest runs."""
+    def broken(*args, **kwargs):
+        raise RuntimeError("injected")
+
+    if target == "setpoint_summary":
+        monkeypatch.setattr(flight_mod, "setpoint_summary", broken)
+    else:  # the link closed, then the call raised
+        original = flight_mod.open_link
+
+        def open_link(**kwargs):
+            link = original(**kwargs)
+            close = link.close
+
+            def closing():
+                close()
+                broken()
+
+            link.close = closing
+            return link
+
+        monkeypatch.setattr(flight_mod, "open_link", open_link)
+    uri = sim_uri()
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri)
+    wait_for_stop(uri)
+    assert not result.aborted, result.cause
+    s = check_closed_with_stop(result)
+    assert s["setpoints"].data["tick"].max() == len(load_plan("hover-check").compile()) - 1
+    what = "the summary" if target == "setpoint_summary" else "closing the link"
+    assert any(e.text.startswith(f"{what} failed after the stop (RuntimeError: injected)")
+               for e in s.events() if e.level == "error")
