@@ -57,6 +57,15 @@ class Journal:
         self.event(text if len(self.causes) == 1 else f"during the abort: {text}",
                    level=level, source="safety")
 
+    def stop_request(self, text: str, *, level: str = "error") -> None:
+        """A signal or a lost link: the flight's cause while it flies; after the landing (the
+        stop delivered, the file's tail recording) an event, since the flight was complete (a
+        Ctrl-C then made a landed flight "aborted", exit 2)."""
+        if self.landed and not self.causes:
+            self.event(f"after landing: {text}", level=level, source="safety")
+        else:
+            self.cause(text, level=level)
+
     def trouble(self, text: str) -> None:
         """A reason to end the flight that is no reason to hurry an abort already under way (a
         disk that refuses room, a recording that failed): the flight's cause when it is the

@@ -81,9 +81,9 @@ class Telemetry:
             elif kind == "link":
                 journal.pending["link"].append((t, item[2], item[3]))
             elif kind == "lost":
-                journal.cause(f"link lost: {item[2]}")
+                journal.stop_request(f"link lost: {item[2]}")
             elif kind == "abort":
-                journal.cause(item[2], level="warning")
+                journal.stop_request(item[2], level="warning")
             else:
                 journal.event(str(item[2]), level="warning", source="link")
 

@@ -298,3 +298,31 @@ def test_a_summary_that_finds_the_disk_full_is_one_line_after_a_whole_flight(tmp
     s = open_session(path)
     assert s.closed_cleanly and s["setpoints"].data["thrust"][-1] == 0
     assert not [e.text for e in s.events() if "abort" in e.text.lower()]
+
+
+class AfterLanding:
+    """A listener that does ``action()`` once, when the landed flight's "flight complete"
+    event is recorded (the stop delivered, the file's tail recording)."""
+
+    def __init__(self, action) -> None:
+        self.action, self.done = action, False
+
+    def begin(self, **_kw) -> None: ...
+    def end(self, **_kw) -> None: ...
+
+    def rows(self, *, stream, rows) -> None:
+        if stream == "events" and not self.done and any(b"flight complete" in bytes(r[3])
+                                                         for r in rows):
+            self.done = True
+            self.action()
+
+
+def test_a_signal_after_the_landing_leaves_the_flight_complete(sim_uri, tmp_path):
+    """Ctrl-C in the half second the file records after the stop made a flight that had landed
+    "aborted" (exit 2; safety review). It is an event now; the flight is complete."""
+    uri = sim_uri()
+    late = AfterLanding(lambda: os.kill(os.getpid(), signal.SIGINT))
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[late])
+    assert late.done and not result.aborted, result.cause
+    s = check_closed_with_stop(result)
+    assert any(e.text == "after landing: SIGINT received" for e in s.events())
