@@ -159,10 +159,12 @@ def _no_stable(p: Plan, results: Sequence[SweepResult], *, either_focus: bool) -
     for result in results:
         failed.update(dict(result.failures()))
     n_all = sum(len(result.rows) for result in results)
-    if failed and failed.total() == n_all:  # none was identified: say why
-        (why, n), = failed.most_common(1)
-        return NoStableModel(f"all {n_all} models of the grid failed" + (
-            f": {why}" if n == n_all else f" ({n} of them: {why})"), plan=p, results=results)
+    if failed and failed.total() == n_all:  # none was identified: say why (two commonest)
+        reasons = failed.most_common(2)
+        why = (f": {reasons[0][0]}" if reasons[0][1] == n_all else " (" + "; ".join(
+            f"{n} of them: {text}" for text, n in reasons) + ")")
+        return NoStableModel(f"all {n_all} models of the grid failed{why}", plan=p,
+                             results=results)
     fixed_all = {"pasts", "futures", "orders"} <= set(p.fixed)
     advice = ("other horizons or order, another method (--method), other channels or a longer "
               "window" if fixed_all else "give horizons and an order (--past/--future/--order), "

@@ -49,8 +49,8 @@ import scipy.linalg
 from sysid.data import IOData, as_flights, block_hankel, check_excited, hankel_columns
 from sysid.errors import DataError, HorizonError, ParameterError
 
-__all__ = ["DataProducts", "build_products", "given_products", "grid_values", "min_samples",
-           "solve_right", "triangular_factor"]
+__all__ = ["DataProducts", "build_products", "check_exciting", "given_products", "grid_values",
+           "min_samples", "solve_right", "triangular_factor"]
 
 log = logging.getLogger(__name__)
 
@@ -287,6 +287,21 @@ def _check_inputs_exciting(products: DataProducts) -> None:
                             "samples (the delayed copies are linearly dependent: a delayed copy "
                             "of another input, noise-free feedback without a reference, or too "
                             "few frequencies); excite more or shorten the horizons")
+
+
+def check_exciting(products: DataProducts) -> None:
+    """Refuse inputs that are not persistently exciting over ``past + future`` samples, judged
+    as :func:`triangular_factor` judges the whole data matrix (its dependent rows, then
+    :func:`_check_inputs_exciting`), on the input rows of every block alone: for a method that
+    never factors all the rows (PARSIM-K factors the past and the first future sample only, so
+    a single sinusoid, exciting over two samples, gave a confident order-2 model where IEM and
+    PO-MOESP refuse). Once per products."""
+    if "inputs-exciting" in products.cache:
+        return
+    c, m = products.n_channels, products.n_inputs
+    rows = np.concatenate([np.arange(m) + b * c for b in range(products.past + products.future)])
+    triangular_factor(products, rows)  # a DataError if those rows are dependent
+    products.cache["inputs-exciting"] = True
 
 
 def _drop_dependent(low: np.ndarray, dependent: np.ndarray) -> np.ndarray:

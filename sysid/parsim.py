@@ -32,7 +32,7 @@ import numpy as np
 
 from sysid.data import IOData
 from sysid.errors import OrderError
-from sysid.factor import DataProducts, given_products, triangular_factor
+from sysid.factor import DataProducts, check_exciting, given_products, triangular_factor
 from sysid.finish import Focus, check_flags, check_focus
 from sysid.model import StateSpaceModel
 from sysid.output_error import output_error_bd
@@ -138,6 +138,7 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     products = given_products(data, products=products, past=past, future=future, scale=scale)
     m, ell = products.n_inputs, products.n_outputs
     check_order(order=order, past=past, future=future, n_inputs=m, n_outputs=ell)
+    check_exciting(products)  # over past + future, as IEM's and PO-MOESP's factors judge it
     ob, sv = _gamma(products)
     ob = ob[:, :order]
     a_k = np.linalg.lstsq(ob[:-ell], ob[ell:], rcond=None)[0]

@@ -9,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 import sysid
+from sysid.auto import NoStableModel
 from sysid.cli import main
 from sysid.errors import OrderError
 from sysid.methods import get_method
@@ -85,3 +86,23 @@ def test_moved_poles_are_reported_as_iem_reports_them() -> None:
     assert moved["radius_to"] < 1.0 and max(abs(model.poles())) < 1.0
     free = sysid.parsim_k(data, order=2, past=10, future=10, stability="free")
     assert max(abs(free.poles())) == pytest.approx(moved["radius_from"])
+
+
+def test_a_single_sinusoid_is_refused_as_iem_and_po_moesp_refuse_it():
+    """A sinusoid identifies the response at one frequency; PARSIM-K factored only the past and
+    the first future sample (two lags, which a sinusoid excites), so it returned an order-2
+    model fitting 99 % with a gain of 6.3 where the plant's is 0.45 at another frequency, and
+    no knobs chose it, silently (degenerate-data review). Now refused as the others refuse."""
+    from scipy.signal import lfilter
+
+    n = np.arange(2000)
+    u = np.sin(0.1 * n)
+    y = lfilter([0, 1.0, 0.3], [1, -1.35, 0.486], u)
+    data = sysid.IOData(u=u, y=y + 0.05 * np.random.default_rng(1).standard_normal(2000),
+                        dt=0.01)
+    for method in (sysid.parsim_k, sysid.iem, sysid.po_moesp):
+        with pytest.raises(sysid.DataError, match="not persistently exciting over past \\+ "
+                                                  "future = 5 samples"):
+            method(data, order=2, past=1, future=4)
+    with pytest.raises(NoStableModel, match="not persistently exciting"):
+        sysid.identify(data)
