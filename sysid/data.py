@@ -290,7 +290,10 @@ def check_excited(flights: Sequence[IOData], *, rel_tol: float = CONSTANT_TOL) -
     u = np.vstack([d.u for d in flights])
     y = np.vstack([d.y for d in flights])
     u_std, y_std = u.std(axis=0), y.std(axis=0)
-    check_independent(np.hstack([u, y]), labels=labels)
+    # each flight's mean removed first: an output that is an input plus an offset (y = -3 u + 2)
+    # is as dependent once detrended, and the constant hid it (a -390 % model, silently)
+    check_independent(np.vstack([w - w.mean(axis=0) for w in (np.hstack([d.u, d.y])
+                                                             for d in flights)]), labels=labels)
     return u_std, y_std
 
 
@@ -301,11 +304,11 @@ def _channel_labels(ref: IOData) -> list[str]:
 
 def check_independent(w: np.ndarray, *, labels: Sequence[str]) -> None:
     """Raise :class:`DataError` naming a channel of ``w`` ``(N, c)`` (all flights' samples,
-    inputs then outputs) that is a linear combination of the channels before it at every
-    sample: a duplicated channel, an input copying an output, an output that is a multiple of
-    another. That is structural rank deficiency, which no identification resolves; the
-    dependence of outputs on past inputs and outputs (noise-free data) is not (see
-    :func:`sysid.factor.triangular_factor`)."""
+    inputs then outputs, each flight's mean removed by the caller) that is a linear
+    combination of the channels before it at every sample: a duplicated channel, an input
+    copying an output, an output that is a multiple of another. That is structural rank
+    deficiency, which no identification resolves; the dependence of outputs on past inputs
+    and outputs (noise-free data) is not (see :func:`sysid.factor.triangular_factor`)."""
     if w.shape[0] < w.shape[1]:
         return  # too few samples for any identification; the callers say so
     rms = np.sqrt(np.mean(w * w, axis=0))
@@ -318,6 +321,7 @@ def check_independent(w: np.ndarray, *, labels: Sequence[str]) -> None:
         used = [labels[i] for i in np.flatnonzero(np.abs(coef) > 1e-8 * np.abs(coef).max())] \
             if j else []
         of = ", ".join(used) if used else "the channels before it"
-        raise DataError(f"{labels[j]} is a linear combination of {of} at every sample (the "
+        raise DataError(f"{labels[j]} is a linear combination of {of} at every sample, "
+                        "each flight's mean aside (the "
                         "data are rank deficient: duplicated or linearly dependent channels); "
                         "drop redundant channels")

@@ -205,8 +205,14 @@ def residuals(model: StateSpaceModel, data: IOData | Sequence[IOData], *, max_la
     ee = np.zeros((2 * max_lag + 1, ell, ell))
     eu = np.zeros((2 * max_lag + 1, ell, m))
     uu = np.zeros((2 * max_lag + 1, m, m))
-    for d, e in zip(flights, errs, strict=True):
-        e0, u0 = e - e.mean(axis=0), d.u - d.u.mean(axis=0)
+    centred = [(e - e.mean(axis=0), d.u - d.u.mean(axis=0)) for d, e in zip(flights, errs,
+                                                                           strict=True)]
+    # each channel over its largest magnitude: correlations do not depend on the scale, and the
+    # sums of products overflowed (1e80) or underflowed (1e-100) into wrong verdicts
+    e_top = np.max([np.abs(e0).max(axis=0) for e0, _ in centred], axis=0)
+    u_top = np.max([np.abs(u0).max(axis=0) for _, u0 in centred], axis=0)
+    for e0, u0 in centred:
+        e0, u0 = e0 / np.where(e_top > 0, e_top, 1.0), u0 / np.where(u_top > 0, u_top, 1.0)
         ee += _lag_sums(e0, e0, max_lag)
         eu += _lag_sums(e0, u0, max_lag)
         uu += _lag_sums(u0, u0, max_lag)

@@ -143,6 +143,9 @@ def test_a_switching_input_is_not_mistaken_for_the_rounding_left_by_detrending()
       "channel 1 ('u1')", "drop redundant channels"]),
     (lambda u, y: (u, np.column_stack([y[:, 0], u[:, 1]])),
      ["output channel 1 ('y1')", "input channel 1 ('u1')", "rank deficient"]),
+    # an offset hid it (degenerate-data review: y = -3 u + 2 gave a -390 % model, silently)
+    (lambda u, y: (u, np.column_stack([y[:, 0], 2.0 - 3.0 * u[:, 0]])),
+     ["output channel 1 ('y1') is a linear combination of input channel 0 ('u0')"]),
 ])
 def test_channels_dependent_at_every_sample_are_named(make, words):
     rng = np.random.default_rng(6)

@@ -62,3 +62,23 @@ def test_information_criteria_pick_the_true_order(experiment):
     # n (2 l + m) + n per flight, no D for IEM's default
     assert list(ic.n_params[:2]) == [1 * 6 + 1, 2 * 6 + 2]
     assert np.all(ic.bic - ic.aic == pytest.approx(ic.n_params * (np.log(4000) - 2)))
+
+
+@pytest.mark.parametrize("scale", [1e80, 1e-100])
+def test_the_verdicts_do_not_depend_on_the_data_scale(scale):
+    """At 1e80 the sums of products overflowed (cross-correlation 0, "independent", p = 1) and
+    at 1e-100 underflowed ("not independent", p = 0), at magnitudes the data checks accept
+    (degenerate-data review); at scale 1 the cross-correlation test gives p = 0.29."""
+    from scipy.signal import lfilter
+
+    u = np.sign(np.random.default_rng(0).standard_normal(2000))
+    y = lfilter([0, 1, 0.3], [1, -1.35, 0.486], u)
+    y = y + 0.05 * np.random.default_rng(1).standard_normal(2000)
+    one = sysid.IOData(u=u, y=y, dt=0.01)
+    scaled = sysid.IOData(u=u * scale, y=y * scale, dt=0.01)
+    ref = sysid.residuals(sysid.iem(one, order=2, past=10, future=10), one)
+    with np.errstate(over="raise", divide="raise", invalid="raise"):  # no inf, no 0/0
+        res = sysid.residuals(sysid.iem(scaled, order=2, past=10, future=10), scaled)
+    np.testing.assert_allclose(res.cross_p, ref.cross_p, rtol=1e-6)
+    np.testing.assert_allclose(res.p_value, ref.p_value, rtol=1e-6)
+    assert list(res.independent) == list(ref.independent) == [True]
