@@ -29,8 +29,16 @@ log = logging.getLogger(__name__)
 
 
 def _as_2d(name: str, x: object) -> np.ndarray:
-    """Float copy of ``x`` as ``(N, c)``: a 1-D array becomes one column."""
-    arr = np.array(x, dtype=float, copy=True)
+    """Float copy of ``x`` as ``(N, c)``: a 1-D array becomes one column. Complex, ragged or
+    non-numeric values are a :class:`DataError` (numpy raised a bare ValueError or TypeError,
+    and dropped a complex array's imaginary part with a warning)."""
+    try:
+        if np.iscomplexobj(x) or (isinstance(x, list | tuple) and np.iscomplexobj(np.asarray(x))):
+            raise TypeError("complex values")
+        arr = np.array(x, dtype=float, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{name} is not an array of real numbers ({exc}); pass a "
+                        "(n_samples, n_channels) array of floats") from None
     if arr.ndim == 1:
         arr = arr[:, None]
     if arr.ndim != 2:
@@ -91,9 +99,13 @@ class IOData:
             raise DimensionError(
                 f"u has {u.shape[0]} samples but y has {y.shape[0]}; trim both to the same length"
             )
-        dt = float(self.dt)
-        if not np.isfinite(dt) or dt <= 0:
-            raise DataError(f"dt is {self.dt}; pass the sample period in seconds (> 0)")
+        try:
+            dt = float(self.dt)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            dt = np.nan
+        if isinstance(self.dt, bool | str | bytes) or not np.isfinite(dt) or dt <= 0:
+            shown = repr(self.dt) if isinstance(self.dt, str | bytes) else self.dt
+            raise DataError(f"dt is {shown}; pass the sample period in seconds (> 0)")
         m, ell = u.shape[1], y.shape[1]
         set_ = object.__setattr__
         set_(self, "input_names", _labels("input_names", self.input_names, m, "u"))

@@ -154,3 +154,20 @@ def test_channels_dependent_at_every_sample_are_named(make, words):
         check_excited([sysid.IOData(u=u, y=y, dt=0.01)])
     msg = str(err.value)
     assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+@pytest.mark.parametrize(("kwargs", "words"), [
+    ({"dt": "abc"}, "dt is 'abc'; pass the sample period"),
+    ({"dt": None}, "dt is None; pass the sample period"),
+    ({"dt": [0.01]}, "dt is [0.01]; pass the sample period"),
+    ({"u": ["a"] * 10}, "u is not an array of real numbers (could not convert string"),
+    ({"u": [[1.0, 2.0]] * 9 + [[3.0]]}, "u is not an array of real numbers"),
+    ({"u": np.arange(10) * (1 + 1j)}, "u is not an array of real numbers (complex values)"),
+])
+def test_values_that_are_no_real_numbers_are_one_line_data_errors(kwargs, words):
+    """A bare ValueError or TypeError from numpy before, and a complex input lost its imaginary
+    part with only numpy's warning (degenerate-data review)."""
+    args = {"u": np.arange(10.0), "y": np.arange(10.0) ** 2, "dt": 0.1, **kwargs}
+    with pytest.raises(DataError) as err:
+        sysid.IOData(**args)
+    assert str(err.value).startswith(words) and "\n" not in str(err.value)
