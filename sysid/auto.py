@@ -301,10 +301,13 @@ def select_plan(p: Plan, *, method: Method, options: Options, workers: int = 1,
                                                         "chose the model")
         chosen = pick_focus(selections) if choose_focus else selections[0]
         if tries_feedthrough(options, choose_feedthrough):
-            _, with_d = run(p, dataclasses.replace(
+            swept_d, with_d = run(p, dataclasses.replace(
                 options, focus=chosen.model.provenance.get("focus", options.focus),
                 feedthrough=True))
-            chosen = chosen if with_d is None else pick_feedthrough(chosen, with_d)
+            none = None if with_d is not None else _no_stable(p, [swept_d], either_focus=False)
+            chosen = pick_feedthrough(chosen, with_d) if with_d is not None else \
+                dataclasses.replace(chosen, feedthrough_note=f"direct term tried, none kept: "
+                                    f"{none}")  # it was silent (a static gain lost its D)
         chosen = follow_edges(p, chosen, room=p.room or max_blocks(p.ident), run=again)
         if choose_method and method.name in ALTERNATIVE:
             alt = get_method(ALTERNATIVE[method.name])

@@ -84,9 +84,9 @@ import numpy as np
 from sysid.comparison import CompareResult
 from sysid.validate import split_windows
 
-__all__ = ["DOMINANT_Z", "FIXED_TOL", "FLOOR_POINTS", "IMPRECISE_POINTS", "MAX_BLOCKS",
-           "MIN_BLOCKS", "UNRESOLVED_POINTS", "binding_edges", "block_errors", "block_shares",
-           "close_to_best", "dominant_blocks", "edge_warnings", "parsimonious",
+__all__ = ["DOMINANT_Z", "FIXED_TOL", "FLOOR_POINTS", "IMPRECISE_POINTS", "LOW_SCORE_POINTS",
+           "MAX_BLOCKS", "MIN_BLOCKS", "UNRESOLVED_POINTS", "binding_edges", "block_errors",
+           "block_shares", "close_to_best", "dominant_blocks", "edge_warnings", "parsimonious",
            "ranking_warning", "score_se", "scores", "significantly_better", "tolerance",
            "tolerance_basis"]
 
@@ -106,6 +106,9 @@ FIXED_TOL = 0.5
 UNRESOLVED_POINTS = 1.0
 #: ... and whatever the orders within it, when it is at least this many (+- 6 points at 95 %).
 IMPRECISE_POINTS = 3.0
+#: A best held-out score under this (percent) is warned of: the model explains under a fifth
+#: of the held-out outputs' variance (fit 10 % = residual norm 0.9 of the outputs').
+LOW_SCORE_POINTS = 10.0
 #: A block whose jackknife replicate lies more than this many robust standard deviations from
 #: the replicates' median dominates the spread (:func:`dominant_blocks`).
 DOMINANT_Z = 5.0
@@ -312,6 +315,13 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int,
                 f"measurement; the records may be too short for their channels or the held-out "
                 f"part unlike the rest: give horizons and an order (--past/--future/--order) "
                 f"and check the fit on other data, or {remedy}")
+    if ranked[0].score < LOW_SCORE_POINTS:  # a choice, but of models that explain ~nothing
+        return (f"the best model simulates the {n_samples} held-out samples' outputs hardly "
+                f"better than their mean (score {ranked[0].score:.1f} %, {LOW_SCORE_POINTS:g} % "
+                f"or more is a model worth checking): the inputs explain little of the outputs "
+                f"at these horizons and orders (outputs the inputs do not drive, a static gain "
+                f"with no dynamics, or too few samples); check the channels, and the fit on "
+                f"other data, or {remedy}")
     elsewhere = "validate on other flights" + ("" if validation_given else
                                                  " (sysid sweep --validate)")
     if np.isfinite(se) and se >= UNRESOLVED_POINTS:

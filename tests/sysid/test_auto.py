@@ -311,3 +311,16 @@ def test_a_refit_on_all_the_data_that_fails_keeps_the_scored_model_and_says_so()
     assert sel.model.provenance["selection"]["identified_again"] is False
     assert any(w.startswith("identified again on all the data it failed (the predictor")
                and "kept the model the sweep scored" in w for w in sel.warnings), sel.warnings
+
+
+def test_a_static_gain_is_not_lost_in_silence():
+    """y = -3 u + e (white input, open loop): every model with a direct term was unstable, the
+    run was dropped, and no knobs returned order 1 without one, fitting -0.7 % on its own data,
+    with no warning and an empty feedthrough note (degenerate-data review). Both are said now."""
+    rng = np.random.default_rng(7)
+    u = rng.standard_normal((2000, 1))
+    data = sysid.IOData(u=u, y=-3.0 * u + rng.standard_normal((2000, 1)), dt=0.01)
+    sel = sysid.identify(data)
+    if not sel.model.provenance.get("feedthrough"):
+        assert sel.feedthrough_note.startswith("direct term tried, none kept: "), sel
+    assert any("hardly better than their mean" in w for w in sel.warnings), sel.warnings
