@@ -292,6 +292,8 @@ def check_excited(flights: Sequence[IOData], *, rel_tol: float = CONSTANT_TOL) -
     constant = np.ones(len(labels), dtype=bool)
     spread = np.zeros(len(labels))
     for d in flights:
+        if not d.n_samples:  # nothing to judge (a held-out part of a record too short to split)
+            continue
         arr = np.hstack([d.u, d.y])
         constant &= _constant(arr, rel_tol=rel_tol)
         spread = np.maximum(spread, arr.std(axis=0))
@@ -305,7 +307,8 @@ def check_excited(flights: Sequence[IOData], *, rel_tol: float = CONSTANT_TOL) -
     # each flight's mean removed first: an output that is an input plus an offset (y = -3 u + 2)
     # is as dependent once detrended, and the constant hid it (a -390 % model, silently)
     check_independent(np.vstack([w - w.mean(axis=0) for w in (np.hstack([d.u, d.y])
-                                                             for d in flights)]), labels=labels)
+                                                             for d in flights) if len(w)]),
+                      labels=labels)
     return u_std, y_std
 
 

@@ -42,6 +42,7 @@ future 3, order 3 on all 38 samples of the order-3 ones, which the refusal's
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -51,12 +52,14 @@ from sysid.data import IOData, as_flights
 from sysid.errors import DataError, DimensionError
 from sysid.memory import MAX_LAG as MEMORY_MAX_LAG
 from sysid.memory import predictor_memory
-from sysid.validate import simulation_window
+from sysid.validate import min_fit_samples, simulation_window
 
 __all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "GIVE_HORIZONS", "HOLDOUT_FRACTION",
            "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "SCORE_WINDOW_X", "VALIDATE_WITH", "Plan",
            "default_grid",
            "holdout", "max_blocks", "memory_future", "plan", "short_record_future"]
+
+log = logging.getLogger(__name__)
 
 #: Share of each experiment kept for validation when only one session is given.
 HOLDOUT_FRACTION = 0.3
@@ -95,6 +98,24 @@ def holdout(groups: Sequence[Sequence[IOData]], *, fraction: float = HOLDOUT_FRA
     return ident, val, (f"one session: the first {100 * (1 - fraction):.0f} % of each of its "
                         f"{len(ident)} experiment(s) identifies, the last "
                         f"{100 * fraction:.0f} % validates")
+
+
+def _scorable(val: list[IOData], *, n_states: int, n_outputs: int) -> list[IOData]:
+    """The held-out records long enough to score a model with its own initial state on
+    (:func:`sysid.validate.min_fit_samples` for the grid's largest order); the others are
+    left out with a warning. One short record capped every record's score window at its
+    length: a 3-sample experiment beside a 3000-sample one made no knobs refuse the data, and
+    one of 5 samples scored every model 100 % (degenerate-data review). All too short: kept,
+    for the callers' refusal."""
+    need = min_fit_samples(n_states=n_states, n_outputs=n_outputs)
+    kept = [d for d in val if d.n_samples >= need]
+    if kept and len(kept) < len(val):
+        short = [d for d in val if d.n_samples < need]
+        log.warning("%d held-out record(s) of %s sample(s) left out of the score: under the %d "
+                    "samples a model's fit with its own initial state needs (%s)", len(short),
+                    ", ".join(str(d.n_samples) for d in short[:5]), need,
+                    ", ".join(d.source or "unnamed" for d in short[:3]))
+    return kept or val
 
 
 def _part(d: IOData, start: int, stop: int) -> IOData:
@@ -311,6 +332,7 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
             "futures": sorted(futures) if futures else auto["futures"]}
     grid["orders"] = (sorted(orders) if orders else  # as many as the futures allow
                       _orders(grid["futures"][-1], ident[0].n_outputs))
+    val = _scorable(val, n_states=grid["orders"][-1], n_outputs=ident[0].n_outputs)
     shortest = min(d.n_samples for d in val)
     capped = capped and not pasts
     return Plan(everything=everything, ident=ident, val=val, rule=rule, grid=grid,
