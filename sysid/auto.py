@@ -9,7 +9,8 @@ one standard error; for open-loop data (``choose_feedthrough``) once more with a
 **Choice** (:func:`select`): every model of the grid (one factorization, :mod:`sysid.sweep`) is
 scored by simulation over windows of :data:`SCORE_WINDOW_X` times the data's memory (in
 samples, so the choice does not depend on the sample time; at least 20 samples and 10 output
-values per state of the initial state fitted on each, at most the shortest held-out record)
+values per state of the initial state fitted on each, at most the shortest held-out record
+long enough for that; shorter ones are left out of the score, :func:`sysid.holdout.plan`)
 on the held-out data, ranked by the floored mean fit (:attr:`sysid.sweep.SweepRow.score`),
 and the parsimonious best stable model is taken (:meth:`sysid.sweep.SweepResult.best`: the
 smallest order within one standard error of the best score, :mod:`sysid.parsimony`). A choice
