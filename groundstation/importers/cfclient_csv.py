@@ -150,5 +150,12 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
             f"{path}: line {linenos[j]}: Timestamp {data[j, 0]:.0f} ms goes back from "
             f"{data[j - 1, 0]:.0f} ms on line {linenos[j - 1]}; the file is not one "
             "recording in time order (fix or delete those lines)")
+    same = np.flatnonzero(np.diff(stamps_ms) == 0) + 1  # cflib stamps each packet anew
+    if len(same):
+        j = int(same[0])
+        problems.append(f"{len(same)} row(s) repeat the Timestamp of the row before (first: "
+                        f"line {linenos[j]}, {data[j, 0]:.0f} ms); kept, the later row's values "
+                        "hold at that time")
+        log.warning("%s: %s", path, problems[-1])
     return CsvLog(path=path, name=block_name_of(path), timestamps_s=stamps_ms / 1000.0,
                   values=values, ctypes=ctypes, problems=problems)

@@ -84,13 +84,14 @@ class ImportedBlock:
         """Mean sample period in seconds, over the steps that are no gap (at most 1.5 median
         steps), rounded to 0.1 µs (0.01 s for a single sample). Not the median: a logger
         ticking at 101.2 Hz on a millisecond clock steps 9 or 10 ms, and a median of 10 ms (or
-        a rounding to 0.1 ms) would make the rows expected over the log's span too few."""
-        if len(self.timestamps_s) < 2:
-            return 0.01
+        a rounding to 0.1 ms) would make the rows expected over the log's span too few.
+        Repeated time stamps (steps of 0) are no sample period: a log repeating every one
+        read as 1 ms, 8991 rows "dropped" and a 1 ms grid for the identification."""
         steps = np.diff(self.timestamps_s)
+        steps = steps[steps > 0]
+        if not len(steps):
+            return 0.01
         median = float(np.median(steps))
-        if not (np.isfinite(median) and median > 0):
-            return 0.001
         period = float(np.mean(steps[(steps > 0) & (steps <= 1.5 * median)]))
         return round(period, 7)
 

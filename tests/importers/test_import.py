@@ -216,3 +216,20 @@ def test_existing_sessions_are_each_one_line_and_the_missing_ones_are_imported(t
     forced = CliRunner().invoke(gs, ["import", str(card), "--out", str(out), "--force"])
     assert forced.exit_code == 0, forced.output
     assert sorted(p.name for p in out.iterdir()) == ["log00.h5", "log01.h5", "log02.h5"]
+
+
+def test_repeated_time_stamps_are_flagged_and_not_a_1_ms_period(tmp_path) -> None:
+    """Every Timestamp twice: the period read as 1 ms (the median step was 0), info showed 8991
+    of 9991 rows "dropped" and sysid gridded at 1 ms (degenerate-data review). Now the period
+    is the 10 ms of the positive steps, nothing dropped, and the repeats are a problem of the
+    session, named with their first line."""
+    stamps = np.repeat(1000 + 10 * np.arange(100), 2)
+    path = write_csv(tmp_path / "Data-20240101T10-00-00.csv", ["Timestamp", "ext.u1"],
+                     [[t, i % 7] for i, t in enumerate(stamps)])
+    res = CliRunner().invoke(gs, ["import", str(path), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    [session] = (tmp_path / "out").glob("*.h5")
+    s = open_session(session)
+    assert s["Data"].period_s == 0.01 and s.dropped() == {"Data": 0}
+    assert any("100 row(s) repeat the Timestamp of the row before (first: line 3, 1000 ms)" in p
+               for p in s.problems), s.problems
