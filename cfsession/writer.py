@@ -70,34 +70,62 @@ log = logging.getLogger(__name__)
 SUMMARY_CHARS = 4096
 
 
-def summary_json(summary: Mapping, *, limit: int = SUMMARY_CHARS) -> str:
-    """``summary`` as JSON in at most ``limit`` characters, and still JSON: long strings are
-    shortened first (a disk-full cause naming a long path), then the largest entries are left
-    out and named under ``"truncated"``. Cutting the text at ``limit`` broke the JSON, and
-    ``info`` then showed no summary at all."""
-    text = json.dumps(summary, sort_keys=True, default=str)
-    for keep in (512, 160, 60):
+def summary_json(summary: Mapping, *, limit: int = SUMMARY_CHARS,
+                 keep: Sequence[str] = ("aborted", "cause")) -> str:
+    """``summary`` as strict JSON (NaN and infinities as ``null``) in at most ``limit``
+    characters: long strings are shortened first (a disk-full cause naming a long path), then
+    the largest entries other than ``keep`` are left out and named under ``"truncated"``.
+    Cutting the text at ``limit`` broke the JSON, and ``info`` then showed no summary at all."""
+    text = json.dumps(_shortened(summary, None), sort_keys=True, default=str, allow_nan=False)
+    for cut in (512, 160, 60):
         if len(text) <= limit:
             return text
-        short = _shortened(summary, keep)
-        text = json.dumps(short, sort_keys=True, default=str)
-    left_out: list[str] = []
-    while len(text) > limit and short:
-        sizes = {k: len(json.dumps(v, default=str)) for k, v in short.items() if k != "truncated"}
-        if not sizes:
+        short = _shortened(summary, cut)
+        text = json.dumps(short, sort_keys=True, default=str, allow_nan=False)
+    sizes = {k: len(json.dumps({k: v}, default=str)) for k, v in short.items() if k not in keep}
+    excess, left_out = len(text) - limit + 40, []  # 40: room for the "truncated" entry
+    for k in sorted(sizes, key=sizes.__getitem__, reverse=True):  # the largest first
+        if excess <= 0:
             break
-        left_out.append(max(sizes, key=sizes.__getitem__))
-        short = {k: v for k, v in short.items() if k != left_out[-1]}
-        short["truncated"] = sorted(left_out)
-        text = json.dumps(short, sort_keys=True, default=str)
-    return text if len(text) <= limit else "{}"
+        left_out.append(k)
+        excess -= sizes[k]
+    while left_out:
+        short = {k: v for k, v in short.items() if k not in left_out}
+        short["truncated"] = f"{len(left_out)} entries left out"  # their names may be long too
+        text = json.dumps(short, sort_keys=True, default=str, allow_nan=False)
+        more = [k for k in sorted(sizes, key=sizes.__getitem__, reverse=True)
+                if k not in left_out and k in short]
+        if len(text) <= limit or not more:
+            break
+        left_out.append(more[0])
+    if len(text) > limit:  # even the kept entries: their first characters
+        text = json.dumps(_shortened({k: short[k] for k in keep if k in short}, 40),
+                          sort_keys=True, default=str, allow_nan=False)[:limit]
+        return text if _is_json(text) else "{}"
+    return text
 
 
-def _shortened(value: Any, keep: int) -> Any:
-    if isinstance(value, str) and len(value) > keep:
-        return f"{value[:keep]}..."
+def _is_json(text: str) -> bool:
+    try:
+        json.loads(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _shortened(value: Any, keep: int | None) -> Any:
+    """``value`` with strings over ``keep`` characters cut (None: kept whole), keys as
+    strings, and non-finite floats as None (strict JSON)."""
+    if isinstance(value, str):
+        return f"{value[:keep]}..." if keep is not None and len(value) > keep else value
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
     if isinstance(value, Mapping):
-        return {str(k): _shortened(v, keep) for k, v in value.items()}
+        return {_shortened(str(k), keep): _shortened(v, keep) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_shortened(v, keep) for v in value]
     return value

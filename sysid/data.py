@@ -33,9 +33,14 @@ def _as_2d(name: str, x: object) -> np.ndarray:
     non-numeric values are a :class:`DataError` (numpy raised a bare ValueError or TypeError,
     and dropped a complex array's imaginary part with a warning)."""
     try:
-        if np.iscomplexobj(x) or (isinstance(x, list | tuple) and np.iscomplexobj(np.asarray(x))):
+        raw = np.asarray(x)  # ragged: a ValueError
+        if raw.dtype.kind == "c" or (raw.dtype.kind == "O" and any(
+                isinstance(v, complex) for v in raw.ravel())):
             raise TypeError("complex values")
-        arr = np.array(x, dtype=float, copy=True)
+        if raw.dtype.kind in "US" or (raw.dtype.kind == "O" and any(
+                isinstance(v, str | bytes) for v in raw.ravel())):
+            raise TypeError("text, not numbers")  # numpy would read "1.5" as 1.5
+        arr = np.array(raw, dtype=float, copy=True)
     except (TypeError, ValueError) as exc:
         raise DataError(f"{name} is not an array of real numbers ({exc}); pass a "
                         "(n_samples, n_channels) array of floats") from None
@@ -103,7 +108,7 @@ class IOData:
             dt = float(self.dt)  # type: ignore[arg-type]
         except (TypeError, ValueError):
             dt = np.nan
-        if isinstance(self.dt, bool | str | bytes) or not np.isfinite(dt) or dt <= 0:
+        if isinstance(self.dt, bool | np.bool_ | str | bytes) or not np.isfinite(dt) or dt <= 0:
             shown = repr(self.dt) if isinstance(self.dt, str | bytes) else self.dt
             raise DataError(f"dt is {shown}; pass the sample period in seconds (> 0)")
         m, ell = u.shape[1], y.shape[1]

@@ -303,7 +303,8 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int,
     more of them rather than for validation flights as if none had been given. None when
     the score is precise enough, or ranks one order clearly above the rest. When even the best
     score is 0 % (no model simulates any held-out output better than its mean), the warning
-    says that the choice was the rule's default and not a measurement."""
+    says that the choice was the rule's default and not a measurement; under
+    :data:`LOW_SCORE_POINTS`, that the inputs explain little of the outputs."""
     se = score_se(ranked[0])
     remedy = ("the validation flights given are too short or too few: give longer ones or "
               "more of them" if validation_given else

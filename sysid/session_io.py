@@ -391,6 +391,10 @@ def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
     if unknown:
         raise ParameterError(f"window for {unknown}: no such session among "
                              f"{[str(p) for p in paths]}")
+    for p in paths:
+        if str(p) != Path(p).name and str(p) in windows and Path(p).name in windows:
+            raise ParameterError(f"two windows for session {p}: one given for its path, one "
+                                 f"for its name {Path(p).name!r}; give one")
     out = []
     for p in paths:
         own = windows.get(str(p), windows.get(Path(p).name, kwargs.get("window", AUTO)))

@@ -27,9 +27,14 @@ from groundstation.flight.journal import Journal
 from groundstation.flight.telemetry import Telemetry
 from groundstation.plan import Schedule
 
-__all__ = ["Commander", "finite"]
+__all__ = ["SETPOINT_LATE_S", "Commander", "finite"]
 
 log = logging.getLogger("groundstation.flight.runner")  # the runner's way out: logged as its
+
+#: A setpoint due longer ago than this (flight clock) ends the flight: the firmware's watchdog
+#: (``supervisor.c``) has levelled the vehicle out by then, so it no longer flies the plan. In
+#: the abort's descent the rest of it is re-timed from then instead (never a burst).
+SETPOINT_LATE_S = 0.5
 
 Setpoint = tuple[float, float, float, int]  # roll deg, pitch deg, yaw rate deg/s, thrust PWM
 
@@ -97,7 +102,7 @@ class Commander:
         """The end of a plan flown through: the stop one period after setpoint ``k - 1``."""
         self.telemetry.wait(self.deadline(k))
         self.stop("landed")
-        self.journal.landed = True
+        self.journal.landed = not (self.link_down or getattr(self.link, "stuck", False))
         self.journal.event("flight complete")
 
     def abort(self, k: int) -> None:
@@ -114,6 +119,11 @@ class Commander:
                 telemetry.wait(self.deadline(k + j))
                 if len(journal.causes) > n_causes or self.link_down:
                     break
+                late = journal.clock.now() - self.deadline(k + j)
+                if late > SETPOINT_LATE_S:  # held up mid-descent: the rest from now, no burst
+                    self.t_first += late
+                    journal.event(f"descent setpoint {j} {late:.2f} s late: the rest of the "
+                                  "descent from now", level="warning", source="safety")
                 sp = descent.setpoint(j)
                 if not finite(sp):
                     journal.cause(f"descent setpoint {j} is not finite; stopping at once")

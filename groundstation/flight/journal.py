@@ -58,9 +58,10 @@ class Journal:
                    level=level, source="safety")
 
     def stop_request(self, text: str, *, level: str = "error") -> None:
-        """A signal or a lost link: the flight's cause while it flies; after the landing (the
-        stop delivered, the file's tail recording) an event, since the flight was complete (a
-        Ctrl-C then made a landed flight "aborted", exit 2)."""
+        """An operator's signal: the flight's cause while it flies; after the landing (the stop
+        delivered over a link still up, the file's tail recording) an event, since the flight
+        was complete (a Ctrl-C then made a landed flight "aborted", exit 2). A lost link is
+        always a cause: its report can come after a stop it kept from the vehicle."""
         if self.landed and not self.causes:
             self.event(f"after landing: {text}", level=level, source="safety")
         else:

@@ -26,7 +26,8 @@ and feeds the listeners, in that order, so listener work never delays a setpoint
 block and :class:`~groundstation.plan.altitude.AltitudeHold` trims the thrust of each setpoint in
 the held phases; the setpoints stream records the thrust as sent.
 
-**Safety.** SIGINT/SIGTERM (handlers installed while flying, restored after), link loss (cflib's, or
+**Safety.** SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGTSTP (handlers installed while flying,
+restored after: :func:`~groundstation.flight.realtime.signal_handlers`), link loss (cflib's, or
 no log packet for :data:`~groundstation.flight.telemetry.LINK_SILENCE_S` = 0.5 s of flight time
 while flying), a setpoint more than :data:`SETPOINT_LATE_S` late (the host suspended or the
 runner's thread held up: the missed setpoints are never sent as a burst), an exception in the
@@ -68,7 +69,7 @@ from cfsession.writer import standard_streams
 from groundstation.errors import FlightAborted, GroundStationError, SessionError
 from groundstation.flight.blocks import BATTERY_BLOCK, altitude_block_period, flight_blocks
 from groundstation.flight.clock import clock_for_uri
-from groundstation.flight.commander import Commander, finite
+from groundstation.flight.commander import SETPOINT_LATE_S, Commander, finite
 from groundstation.flight.drivers import install_drivers
 from groundstation.flight.journal import Journal
 from groundstation.flight.link import open_link
@@ -87,10 +88,6 @@ from groundstation.flight.uri import DEFAULT_URI, check_uri
 from groundstation.plan import Plan, Schedule, load_plan
 from groundstation.plan.altitude import AltitudeHold
 from groundstation.recorder import Recorder, session_path
-
-#: A setpoint due longer ago than this (flight clock) ends the flight: the firmware's watchdog
-#: (``supervisor.c``) has levelled the vehicle out by then, so it no longer flies the plan.
-SETPOINT_LATE_S = 0.5
 
 __all__ = ["SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
            "altitude_block_period", "block_summary", "fly_plan"]
@@ -119,6 +116,7 @@ class _Runner:
         self.out: Commander | None = None  # the setpoints, once connected
         self.cut: dict[str, Any] = {}  # what a source's request to end the excitation skipped
         self.n_scheduled = 0
+        self.next_tick = 0  # the next setpoint of the plan to send (an abort descends from it)
         self.t_close = math.nan  # flight time the link was closed (log packets end there)
         self.block_periods: dict[str, float] = {}
         cfg = schedule.altitude_hold
@@ -198,7 +196,7 @@ class _Runner:
                 break
             out.send(sp, phase_id=ph.id, tick=k)
             self.n_scheduled += 1
-            k += 1
+            k = self.next_tick = k + 1  # an exception below still descends from here
             journal.dispatch()
         return k
 
@@ -254,6 +252,7 @@ class _Runner:
             except Exception as exc:
                 log.exception("flight runner error")
                 journal.cause(f"runner error: {type(exc).__name__}: {exc}")
+                k = self.next_tick  # the descent starts at the plan's thrust there, not tick 0
             try:
                 if journal.causes:
                     out.abort(k)

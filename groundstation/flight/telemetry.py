@@ -80,8 +80,8 @@ class Telemetry:
                     journal.event(line.rstrip(), source="console")
             elif kind == "link":
                 journal.pending["link"].append((t, item[2], item[3]))
-            elif kind == "lost":
-                journal.stop_request(f"link lost: {item[2]}")
+            elif kind == "lost":  # always a cause: reported late, it may predate the stop
+                journal.cause(f"link lost: {item[2]}")
             elif kind == "abort":
                 journal.stop_request(item[2], level="warning")
             else:

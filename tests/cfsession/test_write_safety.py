@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 
+import numpy as np
 import pytest
 
 from cfsession import SessionError, SessionWriter, open_session
@@ -75,4 +76,10 @@ def test_a_summary_longer_than_its_attribute_is_still_json(tmp_path):
     many = {"blocks": {f"b{i}": {"note": "y" * 100} for i in range(200)}, "duration_s": 2.0}
     text = summary_json(many)
     assert len(text) <= SUMMARY_CHARS
-    assert json.loads(text) == {"duration_s": 2.0, "truncated": ["blocks"]}
+    assert json.loads(text) == {"duration_s": 2.0, "truncated": "1 entries left out"}
+    # many entries, long names: the outcome is kept, and the JSON is strict (review)
+    crowd = {**{f"k{i}" * 20: i for i in range(1000)}, "aborted": np.True_, "cause": "x" * 9000,
+             "jitter_ms": float("nan"), "n": np.int64(3)}
+    kept = json.loads(summary_json(crowd), parse_constant=lambda c: pytest.fail(c))
+    assert kept["aborted"] is True and kept["cause"].startswith("xxx") and kept["n"] == 3
+    assert kept["jitter_ms"] is None and len(summary_json(crowd)) <= SUMMARY_CHARS

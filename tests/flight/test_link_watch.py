@@ -262,3 +262,26 @@ def test_udp_a_ground_station_held_up_past_the_watchdog_aborts_without_a_burst(u
     assert len(descent) == 10  # the 1 s descent at 10 Hz
     # from now, 0.1 s apart: 0.9 s (past-due deadlines sent most of it at once: 0.2 s)
     assert descent[-1] - descent[0] >= 0.7, np.diff(descent)
+
+
+def test_a_link_lost_just_before_the_landing_stop_is_no_complete_flight(sim_uri, tmp_path):
+    """The link cut after the plan's last setpoint, before the stop: the stop never reached the
+    vehicle, and the loss, noticed in the file's tail, was filed as "after landing" and the
+    flight reported complete, exit 0 (review). A lost link is always a cause."""
+    uri = sim_uri()
+
+    class CutAfterTheLastSetpoint:
+        done = False
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints" and not self.done and any(r[6] == 99 for r in rows):
+                self.done = True
+                gsim.instance(uri).cut_link()
+
+    cut = CutAfterTheLastSetpoint()
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[cut])
+    assert cut.done and result.aborted and result.cause.startswith("link lost"), result.cause
+    assert gsim.instance(uri).vehicle.stop_count == 0  # indeed, the stop never arrived

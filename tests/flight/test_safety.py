@@ -65,6 +65,10 @@ def test_exception_in_the_runner_aborts_safely(flight_uri, tmp_path):
     assert "injected fault" in safety_events(s)[0].text
     assert s["setpoints"].data["tick"].max() == 39
     check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
+    # from the hover (39000, capped at the plan's 34000): the runner error lost the tick, and
+    # the descent was computed for tick 0, the take-off's 20000 (review)
+    sp = s["setpoints"].data
+    assert set(sp["thrust"][(sp["tick"] == -1) & (sp["thrust"] > 0)]) == {34000}
 
 
 def test_stop_policy_stops_at_once(flight_uri, tmp_path):

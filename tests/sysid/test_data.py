@@ -3,6 +3,8 @@ the excitation check (its refusals through the methods: test_errors.py)."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -160,7 +162,7 @@ def test_channels_dependent_at_every_sample_are_named(make, words):
     ({"dt": "abc"}, "dt is 'abc'; pass the sample period"),
     ({"dt": None}, "dt is None; pass the sample period"),
     ({"dt": [0.01]}, "dt is [0.01]; pass the sample period"),
-    ({"u": ["a"] * 10}, "u is not an array of real numbers (could not convert string"),
+    ({"u": ["a"] * 10}, "u is not an array of real numbers (text, not numbers)"),
     ({"u": [[1.0, 2.0]] * 9 + [[3.0]]}, "u is not an array of real numbers"),
     ({"u": np.arange(10) * (1 + 1j)}, "u is not an array of real numbers (complex values)"),
 ])
@@ -171,3 +173,15 @@ def test_values_that_are_no_real_numbers_are_one_line_data_errors(kwargs, words)
     with pytest.raises(DataError) as err:
         sysid.IOData(**args)
     assert str(err.value).startswith(words) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(("kwargs", "words"), [
+    ({"dt": np.True_}, "dt is True"),
+    ({"u": [["1.5"]] * 10}, "u is not an array of real numbers (text, not numbers)"),
+    ({"u": np.array([1.0, "a"] * 5, dtype=object)}, "u is not an array of real numbers (text"),
+])
+def test_numpy_booleans_and_numeric_text_are_refused_too(kwargs, words):
+    """numpy read "1.5" as 1.5 and np.True_ as a 1 s period (review)."""
+    args = {"u": np.arange(10.0), "y": np.arange(10.0) ** 2, "dt": 0.1, **kwargs}
+    with pytest.raises(DataError, match=re.escape(words)):
+        sysid.IOData(**args)

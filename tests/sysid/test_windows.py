@@ -259,3 +259,13 @@ def test_a_window_to_the_end_of_the_log_keeps_its_last_sample(tmp_path) -> None:
     np.testing.assert_array_equal(np.vstack([ground.y, air.y]), both.y)
     inner = load_experiments(split, window=(float(t[10]), float(t[20])), **kw)[0]
     assert inner.n_samples == 10  # T0:T1 inside the log: [T0, T1)
+
+
+def test_two_windows_for_one_session_by_path_and_by_name_are_refused(tmp_path) -> None:
+    """``--window DIR/X.h5=prbs --window X.h5=settle``: the path's won, the name's was ignored
+    in silence (review)."""
+    path = write_flight(tmp_path / "x.h5", system=known_system(), seed=3, n=600).path
+    with pytest.raises(ParameterError, match=r"two windows for session .*x\.h5: one given for "
+                                             r"its path, one for its name 'x\.h5'"):
+        load_sessions([str(path)], inputs=["motor.m1"], outputs=["gyro.x"],
+                      windows={str(path): "excitation", "x.h5": None})
