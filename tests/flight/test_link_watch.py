@@ -250,7 +250,21 @@ def test_udp_a_ground_station_held_up_past_the_watchdog_aborts_without_a_burst(u
             time.sleep(0.8)  # past the 0.5 s level-out
             held.append(time.monotonic())
 
-    result = fly_plan(plan=plan, out=tmp_path, uri=udp.uris[0], tick_hook=hook)
+    class HeldInTheDescent:  # and once more at the descent's 4th setpoint
+        seen = 0
+
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, *, stream, rows) -> None:
+            if stream == "setpoints":
+                before = self.seen
+                self.seen += sum(1 for r in rows if r[6] == -1 and r[4] > 0)
+                if before < 4 <= self.seen:
+                    time.sleep(0.8)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=udp.uris[0], tick_hook=hook,
+                      listeners=[HeldInTheDescent()])
     assert result.aborted and result.cause.startswith("setpoint 13 is "), result.cause
     assert "s late: the ground station was held up" in result.cause
     assert _stopped_by_the_ground_station(sim)
@@ -260,8 +274,10 @@ def test_udp_a_ground_station_held_up_past_the_watchdog_aborts_without_a_burst(u
     after = sp["host_time"][sp["host_time"] > sp["host_time"][sp["tick"] == 12][0]]
     descent = after[:-1]  # then the stop
     assert len(descent) == 10  # the 1 s descent at 10 Hz
-    # from now, 0.1 s apart: 0.9 s (past-due deadlines sent most of it at once: 0.2 s)
-    assert descent[-1] - descent[0] >= 0.7, np.diff(descent)
+    # from now, 0.1 s apart: 0.9 s and the 0.8 s hold (past-due deadlines sent at once: 0.2 s)
+    assert descent[3] - descent[0] >= 0.2 and descent[-1] - descent[4] >= 0.35, np.diff(descent)
+    assert any(e.text.startswith("descent setpoint 4 ") and "late: the rest of the descent "
+               "from now" in e.text for e in s.events())
 
 
 def test_a_link_lost_just_before_the_landing_stop_is_no_complete_flight(sim_uri, tmp_path):
