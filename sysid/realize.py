@@ -42,6 +42,7 @@ import scipy.linalg
 from sysid.data import IOData
 from sysid.errors import OrderError
 from sysid.model import StateSpaceModel
+from sysid.output_error import mode_powers
 
 __all__ = [
     "PredictorFit",
@@ -301,7 +302,7 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
         z = np.empty((w.shape[0], cc, n), dtype=complex)
         for i in keep:
             z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)
-        powers = (lam[None, :] ** np.arange(w.shape[0])[:, None])[:, None, :]
+        powers = mode_powers(lam, w.shape[0], modes=keep)[:, None, :]
         feat = np.zeros((w.shape[0], n_feat))
         feat[:, :n_bk] = _feature_columns(z, lam, keep).reshape(w.shape[0], n_bk)
         if feedthrough:
