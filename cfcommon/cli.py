@@ -205,6 +205,9 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
     if path.is_dir():
         raise click.BadParameter(f"{str(path)!r} is a folder; give a file name",
                                  param_hint=option)
+    if path.exists() and not path.is_file():  # a FIFO waited for a reader, Ctrl-C ignored
+        raise click.BadParameter(f"{str(path)!r} is not a regular file (a FIFO, a device or a "
+                                 "socket); give a file name", param_hint=option)
     if path.exists() and not overwrite:
         how = f"pass {force_flag} to replace it or " if force_flag else ""
         raise click.BadParameter(f"{str(path)!r} already exists; {how}choose another name",

@@ -203,6 +203,12 @@ class RerunView:
         if len(data) == 0:
             return
         t = data["host_time"].astype(np.float64)
+        lacking = [f for f in _KIND_FIELDS.get(ch.spec.kind, ()) if f not in (data.dtype.names
+                                                                             or ())]
+        if lacking:  # a file from elsewhere: a stream of that kind without its fields
+            log.warning("stream %s (kind %s) has no field %s: not shown", stream, ch.spec.kind,
+                        lacking[0])
+            return
         with self._lock:
             if ch.spec.kind == "events":
                 self._send_events(t, data)
@@ -288,8 +294,7 @@ class RerunView:
 
     def _log_session_text(self, *, summary: Mapping[str, Any] | None) -> None:
         meta = self._metadata
-        lines = [f"**{k}**: {meta[k]}" for k in _META_KEYS
-                 if meta.get(k) not in (None, "") and meta[k] == meta[k]]  # not NaN
+        lines = [f"**{k}**: {meta[k]}" for k in _META_KEYS if _shown(meta.get(k))]
         lines += [f"**problem**: {p}" for p in meta.get("problems", [])]
         if summary is not None:
             lines.append("\n**summary**\n\n```\n" +
@@ -348,3 +353,18 @@ def plot_plan(*, schedule: Schedule, view: RerunView) -> None:
     view.send_block("phases", phases)
     view.end(summary={"setpoints": n, "rate_hz": schedule.rate_hz,
                       "duration_s": float(n / schedule.rate_hz)})
+
+
+def _shown(value: Any) -> bool:
+    """A metadata value worth a line: not missing, empty or NaN (an array from a file made
+    elsewhere is shown as it is; comparing it raised "truth value ... is ambiguous")."""
+    if value is None or (isinstance(value, str) and not value):
+        return False
+    if isinstance(value, float):
+        return value == value  # not NaN
+    return True
+
+
+#: The fields each special stream kind is drawn from (a stream lacking one is not shown).
+_KIND_FIELDS = {"events": ("level", "source", "text", "cont"),
+                "phases": ("phase_id", "name", "kind"), "live_id": ("order",)}

@@ -170,12 +170,18 @@ def send_rows(rec: rr.RecordingStream, data: np.ndarray) -> None:
     """Rows of a recorded ``live_id`` stream (replay): the poles, the convergence series and a
     status line of each update (singular values and predictions are not recorded)."""
     names = data.dtype.names or ()
+    if "order" not in names or "host_time" not in names:
+        log.warning("live_id stream without order or host_time: not shown")
+        return
+    # the pole columns the file has bound the order (a file from elsewhere: 3e9 hung the loop)
+    stored = sum(1 for k in names if k.startswith("pole_re_"))
     _log_static(rec)
     for row in data:
-        n = int(row["order"])
+        order = float(row["order"])
+        n = int(min(order, stored)) if np.isfinite(order) and order >= 0 else 0
         poles = np.array([row[f"pole_re_{i}"] + 1j * row[f"pole_im_{i}"]
                           for i in range(1, n + 1) if f"pole_re_{i}" in names])
         values = {k: float(row[k]) for k in _SERIES if k in names}
         _log_update(rec, t=float(row["host_time"]), poles=poles, values=values)
         text = ", ".join(f"{_SERIES[k]} {v:.4g}" for k, v in values.items() if np.isfinite(v))
-        rec.log(_path("status"), rr.TextLog(f"update (recorded): order {n}, {text}"))
+        rec.log(_path("status"), rr.TextLog(f"update (recorded): order {order:g}, {text}"))

@@ -49,7 +49,9 @@ def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
     view.begin(streams=specs, metadata=meta)
     for spec in specs:
         view.send_block(spec.name, session[spec.name].data)
-    summary = session.json_meta("summary", {}) | {"duration_s": session.duration}
+    stored = session.json_meta("summary", {})  # a file from elsewhere: maybe no JSON object
+    summary = (stored if isinstance(stored, dict) else {"summary": stored}) | {
+        "duration_s": session.duration}
     view.end(summary=summary)
     return dict(view.sent_rows)
 

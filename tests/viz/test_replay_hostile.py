@@ -1,0 +1,71 @@
+"""``groundstation replay`` of session files made elsewhere, each damaged in one way the
+session reader lets through (a review, 2026-11-27): a traceback or a hang before, a recording
+and a warning now."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from groundstation.cli import main as gs_main
+
+HOST = ("host_time", "<f8")
+LOG = [HOST, ("fw_time_ms", "<u4"), ("x", "<f4")]
+NOTES = [HOST, ("note", "S20")]  # an "events" or "phases" stream without their fields
+LIVE = [HOST, ("order", "<f8"), ("pole_re_1", "<f8"), ("pole_im_1", "<f8")]
+
+
+def _craft(path: Path, *, attrs: dict | None = None, extra: tuple | None = None) -> Path:
+    """A minimal session (a 50-row log block) with root ``attrs`` and one ``extra`` stream
+    ``(name, kind, dtype, rows)``, written with h5py as another tool would."""
+    log = np.zeros(50, dtype=LOG)
+    log["host_time"] = np.arange(50) * 0.02
+    log["fw_time_ms"] = 1000 + 20 * np.arange(50)
+    log["x"] = np.sin(np.arange(50) * 0.1)
+    streams = [("gyro", "log", log)]
+    if extra is not None:
+        name, kind, dtype, rows = extra
+        streams.append((name, kind, np.array(rows, dtype=dtype)))
+    with h5py.File(path, "w") as f:
+        f.attrs.update({"schema": "crazyflie-flight-session", "schema_version": 1,
+                        "closed_cleanly": 1, **(attrs or {})})
+        for name, kind, arr in streams:
+            g = f.create_group(name)
+            g.attrs["kind"] = kind
+            ds = g.create_dataset("data", data=arr, maxshape=(None,), chunks=True)
+            ds.attrs["units"] = ["s"] + [""] * (len(arr.dtype.names) - 1)
+            ds.attrs["sources"] = [""] * len(arr.dtype.names)
+    return path
+
+
+CASES = {
+    "summary a list": {"attrs": {"summary": "[1, 2]"}},
+    "uri an array": {"attrs": {"uri": np.array([1.0, 2.0])}},
+    "events without fields": {"extra": ("notes", "events", NOTES, [(0.1, b"x")])},
+    "phases without fields": {"extra": ("marks", "phases", NOTES, [(0.1, b"x")])},
+    "live id order 3e9": {"extra": ("live_id", "live_id", LIVE, [(0.5, 3e9, 0.9, 0.0)])},
+    "live id order NaN": {"extra": ("live_id", "live_id", LIVE, [(0.5, np.nan, 0.9, 0.0)])},
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_a_damaged_session_replays_with_its_good_streams(case, tmp_path):
+    session = _craft(tmp_path / "s.h5", **CASES[case])
+    res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd", str(tmp_path / "o.rrd")])
+    assert res.exit_code == 0 and res.exception is None, res.output
+    assert (tmp_path / "o.rrd").stat().st_size > 0 and "gyro" not in res.stderr
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="POSIX FIFO")
+def test_an_rrd_that_is_a_fifo_is_one_line_not_a_wait(tmp_path):
+    """Rerun opened the FIFO and waited for a reader, Ctrl-C ignored."""
+    fifo = tmp_path / "view.rrd"
+    os.mkfifo(fifo)
+    session = _craft(tmp_path / "s.h5")
+    res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd", str(fifo)])
+    assert res.exit_code == 2 and "is not a regular file (a FIFO" in res.output
