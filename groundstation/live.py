@@ -227,10 +227,16 @@ class RerunView:
 
     def _send_numeric(self, ch: _Channels, times: list[tuple[str, np.ndarray]],
                       data: np.ndarray) -> None:
+        timed = np.ones(len(data), dtype=bool)  # Rerun's times are int64 nanoseconds
+        for _, a in times:
+            timed &= np.isfinite(a) & (np.abs(a) < MAX_TIME_S)
+        if not timed.all():  # a file from elsewhere: one bad time dropped the whole stream
+            log.warning("%d row(s) of %s have no usable time (not finite, or beyond %g s): "
+                        "not shown", int((~timed).sum()), ch.spec.name, MAX_TIME_S)
         full = [rr.TimeColumn(name, duration=v) for name, v in times]
         for field, entity in ch.channels:
             v = data[field].astype(np.float64)
-            ok = np.isfinite(v)
+            ok = np.isfinite(v) & timed
             if ok.all():
                 indexes = full
             elif ok.any():
@@ -368,3 +374,6 @@ def _shown(value: Any) -> bool:
 #: The fields each special stream kind is drawn from (a stream lacking one is not shown).
 _KIND_FIELDS = {"events": ("level", "source", "text", "cont"),
                 "phases": ("phase_id", "name", "kind"), "live_id": ("order",)}
+
+#: Largest time Rerun's int64-nanosecond time columns hold, with margin (s).
+MAX_TIME_S = 9e9

@@ -69,3 +69,22 @@ def test_an_rrd_that_is_a_fifo_is_one_line_not_a_wait(tmp_path):
     session = _craft(tmp_path / "s.h5")
     res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd", str(fifo)])
     assert res.exit_code == 2 and "is not a regular file (a FIFO" in res.output
+
+
+def test_a_row_with_no_usable_time_is_left_out_not_its_stream(tmp_path, caplog):
+    """One host_time of inf (or beyond Rerun's int64 nanoseconds) made the whole stream vanish
+    from the recording, exit 0, with only Rerun's own warning (review)."""
+    from tests.viz.rrd import load
+
+    session = _craft(tmp_path / "s.h5")
+    with h5py.File(session, "r+") as f:
+        rows = f["gyro/data"][...]
+        rows["host_time"][5], rows["host_time"][7] = np.inf, 1e300
+        f["gyro/data"][...] = rows
+    with caplog.at_level("WARNING", logger="groundstation.live"):
+        res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd",
+                                           str(tmp_path / "o.rrd")])
+    assert res.exit_code == 0, res.output
+    shown = [e for p, e in load(tmp_path / "o.rrd").items() if p.startswith("/gyro/")]
+    assert shown and all(len(e.times["host_time"]) == 48 for e in shown)
+    assert any("2 row(s) of gyro have no usable time" in r.getMessage() for r in caplog.records)
