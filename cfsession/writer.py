@@ -74,7 +74,7 @@ def summary_json(summary: Mapping, *, limit: int = SUMMARY_CHARS,
                  keep: Sequence[str] = ("aborted", "cause")) -> str:
     """``summary`` as strict JSON (NaN and infinities as ``null``) in at most ``limit``
     characters: long strings are shortened first (a disk-full cause naming a long path), then
-    the largest entries other than ``keep`` are left out and named under ``"truncated"``.
+    the largest entries other than ``keep`` are left out, counted under ``"truncated"``.
     Cutting the text at ``limit`` broke the JSON, and ``info`` then showed no summary at all."""
     text = json.dumps(_shortened(summary, None), sort_keys=True, default=str, allow_nan=False)
     for cut in (512, 160, 60):
@@ -83,34 +83,16 @@ def summary_json(summary: Mapping, *, limit: int = SUMMARY_CHARS,
         short = _shortened(summary, cut)
         text = json.dumps(short, sort_keys=True, default=str, allow_nan=False)
     sizes = {k: len(json.dumps({k: v}, default=str)) for k, v in short.items() if k not in keep}
-    excess, left_out = len(text) - limit + 40, []  # 40: room for the "truncated" entry
-    for k in sorted(sizes, key=sizes.__getitem__, reverse=True):  # the largest first
-        if excess <= 0:
-            break
-        left_out.append(k)
-        excess -= sizes[k]
-    while left_out:
-        short = {k: v for k, v in short.items() if k not in left_out}
-        short["truncated"] = f"{len(left_out)} entries left out"  # their names may be long too
-        text = json.dumps(short, sort_keys=True, default=str, allow_nan=False)
-        more = [k for k in sorted(sizes, key=sizes.__getitem__, reverse=True)
-                if k not in left_out and k in short]
-        if len(text) <= limit or not more:
-            break
-        left_out.append(more[0])
-    if len(text) > limit:  # even the kept entries: their first characters
-        text = json.dumps(_shortened({k: short[k] for k in keep if k in short}, 40),
-                          sort_keys=True, default=str, allow_nan=False)[:limit]
-        return text if _is_json(text) else "{}"
-    return text
-
-
-def _is_json(text: str) -> bool:
-    try:
-        json.loads(text)
-    except ValueError:
-        return False
-    return True
+    largest = sorted(sizes, key=sizes.__getitem__, reverse=True)
+    excess, n_out = len(text) - limit + 40, 0  # 40: room for the "truncated" entry
+    while n_out < len(largest) and (excess > 0 or len(text) > limit):
+        excess -= sizes[largest[n_out]]
+        n_out += 1
+        if excess <= 0:  # by the estimate it fits: measure
+            left = {k: v for k, v in short.items() if k not in largest[:n_out]}
+            text = json.dumps({**left, "truncated": f"{n_out} entries left out"},
+                              sort_keys=True, default=str, allow_nan=False)
+    return text if len(text) <= limit else "{}"  # the kept entries alone are short
 
 
 def _shortened(value: Any, keep: int | None) -> Any:

@@ -66,6 +66,11 @@ log = logging.getLogger(__name__)
 
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 _LEVELS = {1: "DEBUG", 2: "INFO", 3: "WARN", 4: "ERROR", 5: "CRITICAL"}
+#: The fields each special stream kind is drawn from (a stream lacking one is not shown).
+_KIND_FIELDS = {"events": ("level", "source", "text", "cont"),
+                "phases": ("phase_id", "name", "kind"), "live_id": ("order",)}
+#: Largest time Rerun's int64-nanosecond time columns hold, with margin (s).
+MAX_TIME_S = 9e9
 _PALETTE = ((228, 26, 28), (77, 175, 74), (55, 126, 184), (255, 127, 0), (152, 78, 163),
             (0, 190, 190))
 _SETPOINT_COLORS = {"roll": (251, 154, 153), "pitch": (178, 223, 138),
@@ -369,11 +374,3 @@ def _shown(value: Any) -> bool:
     if isinstance(value, float):
         return value == value  # not NaN
     return True
-
-
-#: The fields each special stream kind is drawn from (a stream lacking one is not shown).
-_KIND_FIELDS = {"events": ("level", "source", "text", "cont"),
-                "phases": ("phase_id", "name", "kind"), "live_id": ("order",)}
-
-#: Largest time Rerun's int64-nanosecond time columns hold, with margin (s).
-MAX_TIME_S = 9e9

@@ -63,6 +63,10 @@ class Commander:
     def deadline(self, k: int) -> float:
         return self.t_first + k * self.schedule.period
 
+    def lateness(self, k: int) -> float:
+        """Seconds since setpoint ``k`` was due (negative: not yet)."""
+        return self.journal.clock.now() - self.deadline(k)
+
     def send(self, sp: Setpoint, *, phase_id: int, tick: int) -> None:
         roll, pitch, yaw_rate, thrust = sp
         self.link.send_setpoint(roll=roll, pitch=pitch, yaw_rate=yaw_rate, thrust=thrust)
@@ -110,7 +114,7 @@ class Commander:
         journal, telemetry = self.journal, self.telemetry
         n_causes = len(journal.causes)
         # a late abort (the host held up) descends from now: never a burst of past-due setpoints
-        self.t_first += max(journal.clock.now() - self.deadline(k), 0.0)
+        self.t_first += max(self.lateness(k), 0.0)
         descent = (self.schedule.abort_schedule(k) if telemetry.flying and not self.link_down
                    else None)
         if descent is not None and len(descent):
@@ -119,7 +123,7 @@ class Commander:
                 telemetry.wait(self.deadline(k + j))
                 if len(journal.causes) > n_causes or self.link_down:
                     break
-                late = journal.clock.now() - self.deadline(k + j)
+                late = self.lateness(k + j)
                 if late > SETPOINT_LATE_S:  # held up mid-descent: the rest from now, no burst
                     self.t_first += late
                     journal.event(f"descent setpoint {j} {late:.2f} s late: the rest of the "

@@ -167,7 +167,7 @@ class _Runner:
         current = -1
         while k < len(s) and not journal.causes:
             telemetry.wait(out.deadline(k))
-            late = self.clock.now() - out.deadline(k)
+            late = out.lateness(k)
             if late > SETPOINT_LATE_S and not journal.causes:  # a backlog is never sent
                 journal.cause(f"setpoint {k} is {late:.2f} s late: the ground station was held "
                               "up (suspended, or a write or listener blocked it); the "
