@@ -17,6 +17,8 @@ through :func:`panel_title`, which keeps them short enough not to be cut in a sm
 from __future__ import annotations
 
 import atexit
+import contextlib
+import errno
 import logging
 import os
 import re
@@ -35,8 +37,10 @@ __all__ = [
     "MODES",
     "TITLE_MAX",
     "WEB_PORT",
+    "RecordingFileError",
     "ViewModeError",
     "check_port",
+    "close_file",
     "entity_path",
     "has_display",
     "open_recording",
@@ -105,6 +109,42 @@ def panel_title(label: str, *, unit: str = "", max_len: int = TITLE_MAX) -> str:
 
 class ViewModeError(ValueError):
     """An unknown view mode, ``save`` without a file, or a port that is taken (one line)."""
+
+
+class RecordingFileError(OSError):
+    """An ``.rrd`` file that could not be written (a full disk, ``ulimit -f``): one line naming
+    the file and the reason; :func:`close_file` removed what was cut short."""
+
+    def __str__(self) -> str:
+        return f"{self.filename!r} could not be written: {self.strerror}; it was removed"
+
+
+def close_file(rec: rr.RecordingStream, path: Path) -> None:
+    """Write everything logged to ``rec`` (opened in mode ``"save"`` on ``path``) and close it.
+
+    Rerun's file writer reports a failed write only in its own log, and ``disconnect`` keeps
+    quiet about it: an ``.rrd`` cut short would be left behind with no error. A flush that
+    fails here raises :class:`RecordingFileError` (the reason found by one more write to the
+    file: no room, the file size limit, ...) after the partial file is removed."""
+    try:
+        rec.flush()
+        failed = False
+    except RuntimeError as exc:
+        log.debug("rerun flush of %s: %s", path, exc)
+        failed = True
+    finally:
+        rec.disconnect()
+    if not failed and Path(path).is_file():
+        return
+    code, reason = errno.EIO, "Rerun's file writer stopped"
+    try:  # Python ignores SIGXFSZ: past ``ulimit -f`` this write fails with EFBIG
+        with open(path, "ab") as probe:
+            probe.write(bytes(1 << 20))
+    except OSError as exc:
+        code, reason = exc.errno or code, exc.strerror or reason
+    with contextlib.suppress(OSError):
+        Path(path).unlink()
+    raise RecordingFileError(code, reason, str(path))
 
 
 def has_display() -> bool:

@@ -193,6 +193,7 @@ class SessionWriter:
         self._sync_error: OSError | None = None
         self._fsync_thread: threading.Thread | None = None
         self._newest = -math.inf  # host_time of the newest row flushed before any failure
+        self._bad_rows: dict[str, int] = {}  # rows left out per stream (:meth:`_block`)
         try:
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | OPEN_FLAGS,
                          0o666)
@@ -333,7 +334,7 @@ class SessionWriter:
             if not rows:
                 continue
             ds = self._datasets[name]
-            block = np.array(rows, dtype=ds.dtype)
+            block = self._block(name, rows, ds.dtype)
             n0 = ds.shape[0]
             ds.resize((n0 + len(block),))
             ds[n0:] = block
@@ -354,6 +355,26 @@ class SessionWriter:
             elif fsync is None and now - self._last_fsync >= self.fsync_interval:
                 self._fsync_in_background()
                 self._last_fsync = now
+
+    def _block(self, name: str, rows: list[tuple], dtype: np.dtype) -> np.ndarray:
+        """``rows`` as one structured array; a row that does not fit the stream's fields (its
+        length, a value that is no number) is left out, with a note, instead of costing the
+        rows buffered with it (and at close, the clean close)."""
+        try:
+            return np.array(rows, dtype=dtype)
+        except (ValueError, TypeError, OverflowError):
+            pass
+        good, bad = [], 0
+        for row in rows:
+            try:
+                good.append(np.array(row, dtype=dtype))
+            except (ValueError, TypeError, OverflowError):
+                bad += 1
+        if bad:
+            self._bad_rows[name] = self._bad_rows.get(name, 0) + bad
+            log.warning("%s: %d row(s) of stream %r did not fit its fields and were left out",
+                        self.path.name, bad, name)
+        return np.array(good, dtype=dtype)
 
     def _sync(self) -> None:
         """``fsync``; a failure (the disk, an I/O error) is :attr:`trouble`, never raised."""
@@ -401,6 +422,9 @@ class SessionWriter:
         try:
             try:
                 self._flush(fsync=False)
+                for name, bad in self._bad_rows.items():
+                    self.notes.append(f"{bad} row(s) of stream {name!r} did not fit its fields "
+                                      "and were left out")
                 a = self._file.attrs
                 a["closed_cleanly"] = np.int8(1)
                 if duration_s is not None:

@@ -45,7 +45,15 @@ from typing import Any, Literal
 import numpy as np
 import rerun as rr
 
-from cfcommon.rerun import MODES, WEB_PORT, ViewModeError, entity_path, open_recording
+from cfcommon.rerun import (
+    MODES,
+    WEB_PORT,
+    RecordingFileError,
+    ViewModeError,
+    close_file,
+    entity_path,
+    open_recording,
+)
 from cfsession.schema import StreamSpec, phases_spec, setpoints_spec
 from groundstation.errors import GroundStationError
 from groundstation.flight.runner import FlightListener  # the runner's listener protocol
@@ -116,15 +124,17 @@ class RerunView:
     ``rows`` queues; a daemon thread sends every ``flush_interval`` seconds (``background``;
     without it, rows are sent when :meth:`flush` or :meth:`end` is called). More than
     ``max_pending_rows`` queued rows (viewer far behind) are dropped and counted in
-    ``dropped_rows``, never blocking the caller. ``url`` is the web viewer's address (serve).
+    ``dropped_rows``, never blocking the caller. ``url`` is the web viewer's address (serve);
+    ``rrd_path`` the file of mode ``save``, closed by :meth:`end` (a failed write is a one-line
+    :class:`ViewError`, the cut-short file removed).
     """
 
     def __init__(self, *, rec: rr.RecordingStream, url: str | None = None,
-                 close_on_end: bool = False, flush_interval: float = 0.1,
+                 rrd_path: Path | None = None, flush_interval: float = 0.1,
                  max_pending_rows: int = 200_000, background: bool = True) -> None:
         self.rec = rec
         self.url = url
-        self.close_on_end = close_on_end
+        self.rrd_path = rrd_path
         self.flush_interval = flush_interval
         self.max_pending_rows = max_pending_rows
         self.background = background
@@ -177,11 +187,15 @@ class RerunView:
         self.flush()
         self._flush_event()
         self._log_session_text(summary=summary)
-        self.rec.flush()
         if self.dropped_rows:
             log.warning("view dropped %d rows", self.dropped_rows)
-        if self.close_on_end:
-            self.rec.disconnect()
+        if self.rrd_path is None:
+            self.rec.flush()
+            return
+        try:
+            close_file(self.rec, self.rrd_path)
+        except RecordingFileError as exc:
+            raise ViewError(str(exc)) from None
 
     # ------------------------------------------------------------------ sending
     def flush(self) -> None:
@@ -336,7 +350,8 @@ def open_view(*, mode: Literal["rerun", "serve", "save"], name: str,
 
     ``mode``: ``rerun`` (native viewer, or the web viewer without a display), ``serve`` (web
     viewer on 127.0.0.1:``web_port``, 0 for any free port; its URL is in ``view.url`` for the
-    caller to print) or ``save`` (``rrd_path``, complete once ``end`` returns). A busy port is a
+    caller to print) or ``save`` (``rrd_path``, complete once ``end`` returns, or a
+    :class:`ViewError` when it could not be written). A busy port is a
     one-line :class:`ViewError`, raised before anything flies.
     """
     try:
@@ -344,7 +359,7 @@ def open_view(*, mode: Literal["rerun", "serve", "save"], name: str,
                                   application_id="crazyflie-groundstation", web_port=web_port)
     except ViewModeError as exc:
         raise ViewError(str(exc)) from None
-    return RerunView(rec=rec, url=url, close_on_end=mode == "save")
+    return RerunView(rec=rec, url=url, rrd_path=rrd_path if mode == "save" else None)
 
 
 def plot_plan(*, schedule: Schedule, view: RerunView) -> None:

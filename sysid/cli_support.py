@@ -304,7 +304,7 @@ def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
                                    sweep=sweep, residuals=residuals,
                                    validation=list(validation))
         finally:
-            rec.disconnect()
+            viz.close_file(rec, path)
     except (OSError, RuntimeError) as exc:
         lines = str(exc).strip().splitlines()
         reason = getattr(exc, "strerror", None) or (lines[0] if lines else type(exc).__name__)

@@ -60,6 +60,7 @@ from sysid.sweep import SweepResult
 
 __all__ = [
     "MODES",
+    "close_file",
     "has_display",
     "identification_blueprint",
     "log_compare",
@@ -99,6 +100,15 @@ def open_recording(
         return rerun_io.open_recording(name=name, mode=mode, rrd_path=rrd_path,
                                        application_id=application_id, web_port=web_port)
     except rerun_io.ViewModeError as exc:
+        raise ParameterError(str(exc)) from None
+
+
+def close_file(rec: rr.RecordingStream, path: Path) -> None:
+    """:func:`cfcommon.rerun.close_file`: write and close a saved recording; a file that could
+    not be written (removed) is a one-line :class:`ParameterError`."""
+    try:
+        rerun_io.close_file(rec, path)
+    except rerun_io.RecordingFileError as exc:
         raise ParameterError(str(exc)) from None
 
 

@@ -251,7 +251,7 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
-    if "summary" in d and not d["imported"]:  # a flight's (an import's is not in fly's words)
+    if d.get("summary") and not d["imported"]:  # a flight's (an import's is not in fly's words)
         out.print("flight summary, stored when the flight ended (counts to its end: a stream "
                   "silent after a link loss counts as dropped there):")
         for line in _summary_text(d["summary"]):

@@ -78,3 +78,45 @@ def test_serve_binds_localhost_and_prints_one_url(monkeypatch, caplog):
     assert not rerun_io._SERVERS
     monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
     assert rerun_io.has_display()
+
+
+_LIMITED = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_FSIZE, (65536, 65536))
+sys.argv = sys.argv[1:]
+from {module} import main
+main()
+"""
+
+
+@pytest.mark.parametrize(("module", "argv"), [
+    ("groundstation.cli", ["groundstation", "plan", "show", "prbs-3axis", "--rrd"]),
+])
+def test_an_rrd_cut_short_by_the_file_size_limit_is_one_line_and_removed(tmp_path, module, argv):
+    """Rerun's file writer only logs a failed write: the command printed a traceback (replay,
+    plan show) or exited 0 (sysid --rrd) and left a cut-short .rrd."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "cut.rrd"
+    done = subprocess.run([sys.executable, "-c", _LIMITED.format(module=module), *argv,
+                           str(path)], capture_output=True, text=True, timeout=120)
+    errors = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    assert done.returncode == 2, done.stderr
+    assert errors == [f"error: {str(path)!r} could not be written: File too large; it was "
+                      "removed"]
+    assert "Traceback" not in done.stderr and not path.exists()
+
+
+def test_a_failed_flush_is_an_error_and_leaves_no_file(tmp_path, monkeypatch):
+    path = tmp_path / "x.rrd"
+    rec, _ = rerun_io.open_recording(name="x", mode="save", rrd_path=path)
+    rec.log("a/b", rr.TextDocument("hello"), static=True)
+
+    def failed_flush(self, **kwargs):
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(rr.RecordingStream, "flush", failed_flush)
+    with pytest.raises(rerun_io.RecordingFileError, match="could not be written") as info:
+        rerun_io.close_file(rec, path)
+    assert isinstance(info.value, OSError) and not path.exists()

@@ -216,3 +216,21 @@ def test_a_slow_fsync_never_blocks_the_writer(tmp_path, monkeypatch):
     closer.join(10)
     assert not closer.is_alive() and len(calls) == 2  # ... then syncs once more itself
     assert len(open_session(tmp_path / "f.h5")["gyro"]) == 50
+
+
+def test_a_row_that_does_not_fit_costs_only_itself(tmp_path):
+    """A malformed row (wrong length, text for a number) once made every flush raise: the rows
+    buffered with it, and those after it, were lost and the file never closed cleanly."""
+    path = tmp_path / "s.h5"
+    w = SessionWriter(path, streams=[*blocks(), *standard_streams()], flush_interval=0.0)
+    w.append("gyro", (0.00, 1000, 0.1, 0.2, 0.3))
+    w.append("gyro", (0.02, 1020, 0.1))  # too short
+    w.append("gyro", (0.04, 1040, "fast", 0.2, 0.3))  # no number
+    w.event(t=0.05, text="after the bad rows")
+    w.append("gyro", (0.06, 1060, 0.4, 0.5, 0.6))
+    w.close(summary={"complete": True})
+    assert any("2 row(s) of stream 'gyro'" in note for note in w.notes)
+    s = open_session(path)
+    assert s.closed_cleanly
+    np.testing.assert_allclose(s["gyro"].values()[:, 0], [0.1, 0.4], rtol=1e-6)
+    assert [e.text for e in s.events()] == ["after the bad rows"]
