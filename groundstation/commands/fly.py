@@ -29,7 +29,7 @@ import click
 
 from cfcommon.cli import NO_ROOM, FiniteFloat, drop_failing_stdout, output_gone
 from cfsession.schema import StreamSpec
-from groundstation.errors import GroundStationError
+from groundstation.errors import GroundStationError, PlanError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
 from groundstation.flight.link import DEFAULT_URI, check_uri
 from groundstation.flight.liveid import (
@@ -43,8 +43,8 @@ from groundstation.plan import MAX_RATE_RANGE_DEG_S, LiveIdConfig, Plan, load_pl
 from groundstation.plan.variants import advance_prbs, reseed_prbs
 from groundstation.recorder import check_folder, check_tag
 
-__all__ = ["PlainProgress", "ProgressListener", "command", "live_id_engine", "live_id_listener",
-           "open_view", "summary_lines"]
+__all__ = ["PlainProgress", "ProgressListener", "check_live_plan", "command", "live_id_engine",
+           "live_id_listener", "open_view", "summary_lines"]
 
 
 PLAIN_EVERY_S = 5.0
@@ -73,11 +73,37 @@ def live_id_engine() -> Engine:
                   save_model=model_io.save)
 
 
+def check_live_plan(plan: Plan) -> LiveIdConfig:
+    """``plan``'s live identification (its ``[live_id]`` or the defaults) checked before
+    anything connects: names against the flight's log blocks
+    (:func:`~groundstation.flight.liveid.check_live_id`), and an excitation long enough for
+    the first update (a flight that could make none flew without saying why). One-line
+    :class:`~groundstation.errors.PlanError` otherwise; ``plan check`` runs it too."""
+    from sysid.factor import min_samples  # the engine's own count: sysid loads only here
+
+    config = plan.live_id or LiveIdConfig()
+    ins, outs, dt = check_live_id(config, streams=planned_streams(plan))
+    spans = [(p.start, p.start + p.duration) for p in plan.compile().phases
+             if p.kind == "excitation"]
+    if not spans:
+        raise PlanError(f"live_id: plan {plan.name!r} has no excitation phase to identify "
+                        "from; fly a plan with one, or without --live-id")
+    span = spans[-1][1] - spans[0][0]
+    have = int(span / dt + 1e-9)
+    need = min_samples(past=config.past, future=config.future, n_channels=len(ins) + len(outs))
+    if have < need:
+        raise PlanError(
+            f"live_id: past {config.past} + future {config.future} with {len(ins) + len(outs)} "
+            f"channels need {need} samples ({need * dt:.1f} s) of excitation for the first "
+            f"update; the plan excites for {span:.1f} s ({have} samples at {1 / dt:g} Hz): "
+            "lower past or future in [live_id], or lengthen the excitation")
+    return config
+
+
 def live_id_listener(plan: Plan, *, convergence: Convergence | None = None) -> LiveIdListener:
     """The live identification listener for ``plan`` (its ``[live_id]`` or the defaults),
-    checked against the flight's log blocks: a one-line error before anything connects."""
-    config = plan.live_id or LiveIdConfig()
-    check_live_id(config, streams=planned_streams(plan))
+    checked by :func:`check_live_plan`: a one-line error before anything connects."""
+    config = check_live_plan(plan)
     return LiveIdListener(config=config, engine=live_id_engine(), convergence=convergence)
 
 

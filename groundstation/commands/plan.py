@@ -243,6 +243,10 @@ def check(plan: str, as_json: bool) -> None:
       groundstation plan check prbs-3axis
     """
     loaded = load_plan(plan)
+    if loaded.live_id is not None:  # as fly checks it: the names, and room for one update
+        from groundstation.commands.fly import check_live_plan
+
+        check_live_plan(loaded)
     summary = summarize(loaded, loaded.compile())
     if as_json:
         click.echo(json.dumps(summary, indent=2))

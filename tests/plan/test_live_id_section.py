@@ -72,8 +72,31 @@ def test_plan_check_refuses_a_bad_table_in_one_line(tmp_path, base_text):
     res = CliRunner().invoke(main, ["plan", "check", str(path)])
     assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
     assert "live_id.past" in res.output and "out of range" in res.output
-    path.write_text(_with(base_text, "order = 6"), encoding="utf-8")
+    path.write_text(_with(base_text, "order = 6\npast = 10\nfuture = 5"), encoding="utf-8")
     assert CliRunner().invoke(main, ["plan", "check", str(path)]).exit_code == 0
+
+
+def test_plan_check_refuses_a_live_id_the_excitation_is_too_short_for(tmp_path, base_text):
+    """past = future = 400 over a 102 s excitation passed ``plan check`` and flew with no
+    update and no reason; the names were checked against the log blocks by ``fly`` only."""
+    path = tmp_path / "p.toml"
+    # 3.1 s of excitation at 50 Hz: 155 samples; 7 channels, past + future = 20: 20 x 8 - 1
+    path.write_text(_with(base_text, "past = 12\nfuture = 8"), encoding="utf-8")
+    res = CliRunner().invoke(main, ["plan", "check", str(path)])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "need 159 samples (3.2 s) of excitation" in res.output
+    assert "excites for 3.1 s (155 samples at 50 Hz)" in res.output
+    path.write_text(_with(base_text, 'past = 10\nfuture = 5\ninputs = ["motor.m9"]'),
+                    encoding="utf-8")
+    res = CliRunner().invoke(main, ["plan", "check", str(path)])
+    assert res.exit_code == 2 and "'motor.m9': no such log stream" in res.output, res.output
+
+
+def test_fly_refuses_live_id_on_a_plan_without_excitation(tmp_path):
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--live-id", "--uri", "sim://0",
+                                    "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "no excitation phase to identify from" in res.output
+    assert list(tmp_path.iterdir()) == []  # refused before anything connected or was written
 
 
 def test_channel_names_resolve_against_the_flight_log_blocks(base_text):
