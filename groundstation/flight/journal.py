@@ -86,8 +86,10 @@ class Journal:
                                        kind.encode()[:16]))
         self.event(f"phase {name} ({kind}) starts, {planned_s:g} s planned")
 
-    def _listener_failed(self, what: str, recorder: bool) -> None:
-        if recorder:
+    def _listener_failed(self, what: str, recorder: bool, fatal: bool) -> None:
+        if fatal:  # SystemExit and the like: the program is to end, after the landing
+            self.trouble(f"{what}: the flight ends")
+        elif recorder:
             self.recording_lost_s = self.now()
             self.trouble(f"recording failed: {what}")
         else:

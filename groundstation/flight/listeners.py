@@ -34,15 +34,19 @@ class FlightListener(Protocol):
 
 
 class Listeners:
-    """The recorder first, then the other listeners; ``on_error(what, recorder)`` hears of one
-    that raised (``what``: ``"Type.method failed (Exc: message)"``) after it was dropped."""
+    """The recorder first, then the other listeners; ``on_error(what, recorder, fatal)`` hears
+    of one that raised (``what``: ``"Type.method failed (Exc: message)"``) after it was
+    dropped; ``fatal``: the exception was no ``Exception`` (:attr:`escaping`)."""
 
     def __init__(self, *, recorder: FlightListener, others: Sequence[FlightListener],
-                 on_error: Callable[[str, bool], None]) -> None:
+                 on_error: Callable[[str, bool, bool], None]) -> None:
         self.recorder = recorder
         self.active: list[FlightListener] = [recorder, *others]
         self.sources: list[Any] = [x for x in others if hasattr(x, "poll")]
         self._on_error = on_error
+        #: The first ``SystemExit``/``KeyboardInterrupt``/... a listener raised: the flight
+        #: ends with its landing (``on_error`` with ``fatal=True``), then the runner re-raises it.
+        self.escaping: BaseException | None = None
 
     @property
     def recording(self) -> bool:
@@ -50,16 +54,21 @@ class Listeners:
         return self.recorder in self.active
 
     def call(self, listener: FlightListener, method: str, **kw: Any) -> Any:
-        """``listener.method(**kw)``; on an exception the listener is dropped, None returned."""
+        """``listener.method(**kw)``; on an exception the listener is dropped, None returned.
+        A ``BaseException`` that is no ``Exception`` (``SystemExit``) is kept in
+        :attr:`escaping`, not raised through the flight: it would skip the landing."""
         try:
             return getattr(listener, method)(**kw)
-        except Exception as exc:
+        except BaseException as exc:
             self.active.remove(listener)
             if listener in self.sources:
                 self.sources.remove(listener)
             what = f"{type(listener).__name__}.{method} failed ({type(exc).__name__}: {exc})"
             log.exception("listener %s", what)
-            self._on_error(what, listener is self.recorder)
+            fatal = not isinstance(exc, Exception)
+            if fatal and self.escaping is None:
+                self.escaping = exc
+            self._on_error(what, listener is self.recorder, fatal)
         return None
 
     def from_sources(self, method: str, **kw: Any) -> list[Any]:

@@ -41,9 +41,10 @@ telemetry, no descent). The stop setpoint is delivered before the link closes on
 the abort path failing included (:meth:`~groundstation.flight.link.Link.deliver_stop`), and
 recorded as a row and an event. The summary counts the log packets missing up to the moment the link
 closed, so a link dead before the end shows as dropped packets. A listener that raises is dropped
-(with an event); the flight goes on. Without its recorder the flight aborts; a session file
-that cannot be created (folder, name, no room) is a one-line error before take-off, nothing
-flown. A disk that fills (or the file size limit) is a cause too, told by the recorder while
+(with an event); the flight goes on, unless what it raised is no ``Exception`` (``SystemExit``):
+that is the cause, the flight lands, and the exception is raised once the file is closed.
+Without its recorder the flight aborts; a session file that cannot be created (folder, name,
+no room) is a one-line error before take-off, nothing flown. A disk that fills (or the file size limit) is a cause too, told by the recorder while
 its reserve still holds the landing; where the session ended up after a moved or deleted
 folder, or that it holds part of the flight or was lost, goes into the summary (``file``,
 ``file_notes``, ``file_error``) and the result (:meth:`_Runner.file_outcome`).
@@ -274,7 +275,8 @@ class _Runner:
             self._guarded("collecting the telemetry", self.telemetry.collect)
             finished = (self._guarded("finishing the sources", lambda: listeners.from_sources(
                 "finish", path=self.recorder.path)) or [] if begun else [])
-            summary = self._guarded("the summary", self.summary) or {"error": "no summary"}
+            summary = self._guarded("the summary", self.summary) or {
+                **self.outcome(), "error": "the summary failed (its error is an event)"}
             for entries in finished:
                 summary.update(entries)
             if begun:
@@ -285,6 +287,8 @@ class _Runner:
         cause = journal.causes[0] if journal.causes else ""
         if begun:
             cause = self.file_outcome(summary, cause)
+        if listeners.escaping is not None:  # landed and recorded: now it may end the program
+            raise listeners.escaping
         return FlightResult(path=self.recorder.path, summary=summary, cause=cause)
 
     def _guarded(self, what: str, step: Callable[[], Any]) -> Any:
@@ -345,13 +349,11 @@ class _Runner:
                             "samples": self.limits.samples},
         }
 
-    def summary(self) -> dict[str, Any]:
-        """Duration, packets per block, setpoint count and period jitter, cause, file."""
-        journal, telemetry = self.journal, self.telemetry
+    def outcome(self) -> dict[str, Any]:
+        """The summary's first entries: file, plan, uri, duration, aborted and cause (what a
+        summary that failed still holds)."""
+        journal = self.journal
         end = self.t_close if math.isfinite(self.t_close) else journal.now()
-        blocks = {name: block_summary(fw_ms=telemetry.fw_ms[name], period_s=p,
-                                      silence_s=end - telemetry.last_block.get(name, end))
-                  for name, p in self.block_periods.items()}
         return {
             "file": str(self.recorder.path),
             "plan": self.plan.name,
@@ -359,6 +361,17 @@ class _Runner:
             "duration_s": round(end, 3),
             "aborted": bool(journal.causes),
             "cause": journal.causes[0] if journal.causes else "",
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """:meth:`outcome`, then packets per block, setpoint count and period jitter."""
+        journal, telemetry = self.journal, self.telemetry
+        end = self.t_close if math.isfinite(self.t_close) else journal.now()
+        blocks = {name: block_summary(fw_ms=telemetry.fw_ms[name], period_s=p,
+                                      silence_s=end - telemetry.last_block.get(name, end))
+                  for name, p in self.block_periods.items()}
+        return {
+            **self.outcome(),
             **({"excitation_cut": self.cut} if self.cut else {}),
             "blocks": blocks,
             "setpoints": setpoint_summary(sent_t=self.out.sent_t, period_s=self.schedule.period,

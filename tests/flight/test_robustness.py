@@ -317,3 +317,47 @@ def test_a_step_after_the_stop_that_raises_keeps_the_stop_and_the_files_end(targ
     what = "the summary" if target == "setpoint_summary" else "closing the link"
     assert any(e.text.startswith(f"{what} failed after the stop (RuntimeError: injected)")
                for e in s.events() if e.level == "error")
+
+
+def test_a_listener_raising_systemexit_lands_records_and_then_exits(sim_uri, tmp_path):
+    """A listener's SystemExit went through the runner's ``except Exception``: a bare stop, no
+    descent, no cause in the file. Now it is the cause, the flight descends, the file closes
+    with the stop, and then the SystemExit goes on up."""
+    class Quitting:
+        def begin(self, **_kw) -> None: ...
+        def end(self, **_kw) -> None: ...
+
+        def rows(self, stream, rows) -> None:
+            if stream == "setpoints" and any(r[6] == 20 for r in rows):
+                raise SystemExit(3)
+
+    uri = sim_uri()
+    with pytest.raises(SystemExit) as exit_info:
+        fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[Quitting()])
+    assert exit_info.value.code == 3
+    wait_for_stop(uri)
+    (path,) = tmp_path.glob("*.h5")
+    s = open_session(path)
+    summary = s.json_meta("summary")
+    assert s.closed_cleanly and summary["aborted"]
+    assert summary["cause"] == "Quitting.rows failed (SystemExit: 3): the flight ends"
+    sp = s["setpoints"].data
+    assert sp["tick"].max() < 25 and (sp["tick"] == -1).sum() > 5  # descended, then the stop
+    assert sp["thrust"][-1] == 0 and sp["roll"][-1] == 0
+
+
+def test_a_summary_that_fails_still_says_whether_the_flight_aborted(sim_uri, tmp_path,
+                                                                   monkeypatch):
+    def broken(*args, **kwargs):
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(flight_mod, "setpoint_summary", broken)
+    monkeypatch.setattr(flight_mod._Runner, "preflight", lambda self: self.journal.cause(
+        "injected cause") or True)
+    uri = sim_uri()
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri)
+    wait_for_stop(uri)
+    assert result.aborted and result.cause == "injected cause"
+    assert result.summary["aborted"] and result.summary["cause"] == "injected cause"
+    assert "summary failed" in result.summary["error"]
+    assert open_session(result.path).json_meta("summary")["aborted"]
