@@ -44,10 +44,11 @@ closed, so a link dead before the end shows as dropped packets. A listener that 
 (with an event); the flight goes on, unless what it raised is no ``Exception`` (``SystemExit``):
 that is the cause, the flight lands, and the exception is raised once the file is closed.
 Without its recorder the flight aborts; a session file that cannot be created (folder, name,
-no room) is a one-line error before take-off, nothing flown. A disk that fills (or the file size limit) is a cause too, told by the recorder while
-its reserve still holds the landing; where the session ended up after a moved or deleted
-folder, or that it holds part of the flight or was lost, goes into the summary (``file``,
-``file_notes``, ``file_error``) and the result (:meth:`_Runner.file_outcome`).
+no room) is a one-line error before take-off, nothing flown. A disk that fills (or the file
+size limit) is a cause too, told by the recorder while its reserve still holds the landing;
+where the session ended up after a moved or deleted folder, or that it holds part of the
+flight or was lost, goes into the summary (``file``, ``file_notes``, ``file_error``) and the
+result (:meth:`_Runner.file_outcome`).
 
 **Sources.** A listener with ``streams()``, ``poll()``, ``finish(path=)``
 (:mod:`groundstation.flight.listeners`; live identification, :mod:`groundstation.flight.liveid`)
