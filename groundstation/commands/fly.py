@@ -411,7 +411,8 @@ def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
     result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag,
                       limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
                       connect_timeout_s=timeout_s,
-                      tick_hook=lid.in_step() if lid is not None and _flat_out(uri) else None)
+                      tick_hook=lid.in_step(real_time_s=1.0 / plan.setpoint_rate_hz)
+                      if lid is not None and _flat_out(uri) else None)
     return result, url
 
 

@@ -171,16 +171,26 @@ class LiveIdListener:
             self._queued += 1
             self._wake.set()
 
-    def in_step(self, *, timeout_s: float = 2.5) -> Callable[[int], None]:
+    def in_step(self, *, timeout_s: float = 2.5,
+                real_time_s: float | None = None) -> Callable[[int], None]:
         """A tick hook holding each setpoint until the worker has handled the rows so far
         (:attr:`caught_up`; at most ``timeout_s`` of wall time). ``sim://`` paces its clock on
         the runner, so a simulated flight runs in step with the identification however busy
         the host: every due update is computed. ``fly`` uses it on a flat-out simulator
         (``speed=inf``), where the identification could otherwise never keep up; a real
-        flight never waits on it."""
+        flight never waits on it. With ``real_time_s`` (the setpoint period) setpoint ``k`` is
+        held no later than ``k`` periods after the first: the flight is never slower than
+        real time, and updates slower than that are skipped as in a real flight (an order of
+        200 held each setpoint 2.5 s)."""
+        first: list[float] = []
 
-        def hook(_k: int) -> None:
-            give_up = time.monotonic() + timeout_s
+        def hook(k: int) -> None:
+            now = time.monotonic()
+            give_up = now + timeout_s
+            if real_time_s is not None:
+                if not first:
+                    first.append(now - k * real_time_s)
+                give_up = min(give_up, first[0] + k * real_time_s)
             while not self.caught_up and time.monotonic() < give_up:
                 time.sleep(0.001)
 

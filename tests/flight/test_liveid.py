@@ -14,6 +14,7 @@ import json
 import re
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -446,3 +447,16 @@ def test_live_id_over_the_udp_simulator(tmp_path):
     assert not result.aborted or lost, result.cause
     assert lid.updates >= 2  # at least one update before the final one
     _check_final_model_is_offline(result, lid)
+
+
+def test_in_step_with_real_time_never_holds_the_flight_behind_real_time():
+    """``fly`` on a flat-out simulator held each setpoint up to 2.5 s while a slow update ran
+    (order 200: 10 s per update, the 112 s flight slower than real time). With ``real_time_s``
+    setpoint k waits no later than k periods after the first; without it, it waits each time
+    (an upper bound only: however busy the host, 20 holds of 10 s would take 200 s)."""
+    behind = SimpleNamespace(caught_up=False)  # an update that never finishes
+    hook = LiveIdListener.in_step(behind, timeout_s=10.0, real_time_s=0.01)
+    start = time.monotonic()
+    for k in range(20):
+        hook(k)
+    assert time.monotonic() - start < 5.0
