@@ -7,8 +7,9 @@ on both sides.
 
 The layout plots each log stream in its own panels, one per unit, titled ``gyro [deg/s]``;
 roll/pitch setpoints (deg) share a panel with ``stabilizer.roll/pitch`` when those are logged,
-and the yaw-rate setpoint shares one with ``gyro.z`` (both deg/s). Every numeric series is in
-some panel. Titles fit :data:`cfcommon.rerun.TITLE_MAX` characters: a stream whose name makes
+and the yaw-rate setpoint shares one with ``gyro.z`` (both deg/s). The setpoints and link
+streams are found by their kind, whatever their name. Every numeric series is in some panel.
+Titles fit :data:`cfcommon.rerun.TITLE_MAX` characters: a stream whose name makes
 ``stream [unit]`` too long (``stateEstimate+controller [deg/s]``) gets one panel per variable
 group and unit instead, ``controller [deg/s]``, ``stateEstimate [m]`` (the entity keeps the
 stream's name). No legend (a legend covers a small panel); hovering a line names it.
@@ -28,6 +29,12 @@ __all__ = ["EVENTS", "PHASE", "SESSION", "flight_blueprint", "series_fields"]
 
 EVENTS, PHASE, SESSION = entity_path("events"), entity_path("phase"), entity_path("session")
 _SKIP = {"host_time", "fw_time_ms", "phase_id", "tick"}
+#: Setpoint panels: title, the setpoint fields and the logged variables drawn with them.
+_SETPOINT_PANELS = (
+    ("roll, pitch [deg]", ("roll", "pitch"), ("stabilizer.roll", "stabilizer.pitch")),
+    ("yaw rate [deg/s]", ("yaw_rate",), ("gyro.z",)),
+    ("thrust [PWM]", ("thrust",), ()),
+)
 
 
 def series_fields(spec: StreamSpec) -> list[Field]:
@@ -94,22 +101,20 @@ def flight_blueprint(streams: Sequence[StreamSpec]) -> rrb.Blueprint:
             placed.update(entities)
             plots.append(_plot(origin=entity_path(s.name), name=title,
                                contents="$origin/**" if len(panels) == 1 else entities))
-    if "setpoints" in by_kind:
-        roll, pitch, yaw_rate, thrust = (entity_path("setpoints", a)
-                                         for a in ("roll", "pitch", "yaw_rate", "thrust"))
-        measured = [e for e in (_entity_of(streams, "stabilizer.roll"),
-                                _entity_of(streams, "stabilizer.pitch")) if e]
-        gyro_z = _entity_of(streams, "gyro.z")
-        for name, contents in (("roll, pitch [deg]", [roll, pitch, *measured]),
-                               ("yaw rate [deg/s]", [yaw_rate, *([gyro_z] if gyro_z else [])]),
-                               ("thrust [PWM]", [thrust])):
-            plots.append(_plot(contents=contents, name=name))
-            placed.update(contents)
-    if "link" in by_kind:
-        for name, entity in (("link quality [%]", entity_path("link", "quality")),
-                             ("latency [ms]", entity_path("link", "latency_ms"))):
-            plots.append(_plot(contents=entity, name=name))
-            placed.add(entity)
+    for s in by_kind.get("setpoints", []):  # by kind: a file made elsewhere may name it so
+        axes = {f.name for f in series_fields(s)}
+        for title, fields, measured in _SETPOINT_PANELS:
+            commanded = [entity_path(s.name, f) for f in fields if f in axes]
+            if commanded:  # no panel of measurements alone: they have their own
+                contents = commanded + [e for v in measured if (e := _entity_of(streams, v))]
+                plots.append(_plot(contents=contents, name=title))
+                placed.update(contents)
+    for s in by_kind.get("link", []):
+        axes = {f.name for f in series_fields(s)}
+        for title, field in (("link quality [%]", "quality"), ("latency [ms]", "latency_ms")):
+            if field in axes:
+                plots.append(_plot(contents=entity_path(s.name, field), name=title))
+                placed.add(entity_path(s.name, field))
     for s in streams:  # any other series (a stream kind or field added later): its own panel
         for f in series_fields(s):
             entity = entity_path(s.name, f.name)

@@ -26,6 +26,7 @@ the listener's worker thread (never the flight runner's). Entities, all under ``
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -74,8 +75,8 @@ def live_id_views(*, recorded: bool = False) -> rrb.Horizontal:
                           time_ranges=_recent(TRAIL_S)),
         *live_only,
         rrb.TimeSeriesView(origin=_path("convergence"), name="convergence",
-                           contents=[_path("convergence", "pole_move"),
-                                     _path("convergence", "innovation_nvar")]),
+                           contents=[_path("convergence", n)
+                                     for n in ("pole_move", "innovation_nvar", "max_pole")]),
         rrb.TimeSeriesView(origin=_path("convergence"), name="1-step fit [%]",
                            contents=[_path("convergence", "fit_pct")], plot_legend=quiet),
         rrb.TextLogView(origin=_path("status"), name="live id"),
@@ -168,20 +169,60 @@ def _log_update(rec: rr.RecordingStream, *, t: float, poles: np.ndarray,
 
 def send_rows(rec: rr.RecordingStream, data: np.ndarray) -> None:
     """Rows of a recorded ``live_id`` stream (replay): the poles, the convergence series and a
-    status line of each update (singular values and predictions are not recorded)."""
+    status line of each update (singular values and predictions are not recorded), each entity
+    sent as one block (``send_columns``) on ``host_time``."""
     names = data.dtype.names or ()
     if "order" not in names or "host_time" not in names:
         log.warning("live_id stream without order or host_time: not shown")
         return
-    # the pole columns the file has bound the order (a file from elsewhere: 3e9 hung the loop)
-    stored = sum(1 for k in names if k.startswith("pole_re_"))
+    from groundstation.live import MAX_TIME_S
+
     _log_static(rec)
-    for row in data:
-        order = float(row["order"])
-        n = int(min(order, stored)) if np.isfinite(order) and order >= 0 else 0
-        poles = np.array([row[f"pole_re_{i}"] + 1j * row[f"pole_im_{i}"]
-                          for i in range(1, n + 1) if f"pole_re_{i}" in names])
-        values = {k: float(row[k]) for k in _SERIES if k in names}
-        _log_update(rec, t=float(row["host_time"]), poles=poles, values=values)
-        text = ", ".join(f"{_SERIES[k]} {v:.4g}" for k, v in values.items() if np.isfinite(v))
-        rec.log(_path("status"), rr.TextLog(f"update (recorded): order {order:g}, {text}"))
+    t = data["host_time"].astype(np.float64)
+    timed = np.isfinite(t) & (np.abs(t) < MAX_TIME_S)
+    if not timed.all():  # a file from elsewhere
+        log.warning("%d live_id row(s) have no usable host_time: not shown", (~timed).sum())
+        data, t = data[timed], t[timed]
+    if not len(data):
+        return
+    ns = np.rint(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # as rr.set_time rounds
+    n, at = len(data), [rr.TimeColumn("host_time", duration=ns)]
+    order = data["order"].astype(np.float64)
+    positions, counts = _pole_columns(data, order)
+    style = rr.Points2D.columns(radii=np.full(n, 0.015, dtype=np.float32),
+                                colors=np.tile(np.array(_CHOSEN, np.uint8), (n, 1)))
+    rec.send_columns(_path("z_plane", "poles"), indexes=at,
+                     columns=[*rr.Points2D.columns(positions=positions).partition(counts), *style])
+    values = {k: data[k].astype(np.float64) for k in _SERIES if k in names}
+    for name, v in values.items():
+        ok = np.isfinite(v)
+        if ok.any():
+            rec.send_columns(_path("convergence", name),
+                             indexes=[rr.TimeColumn("host_time", duration=ns[ok])],
+                             columns=rr.Scalars.columns(scalars=v[ok]))
+    rec.send_columns(_path("status"), indexes=at,
+                     columns=rr.TextLog.columns(text=_status_lines(order, values)))
+
+
+def _pole_columns(data: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Re, Im)`` of every row's poles, one after the other, and how many each row has: the
+    first ``order`` pole columns the file stores (a file from elsewhere: order 3e9 or NaN)."""
+    names = data.dtype.names or ()
+    stored = sum(1 for k in names if k.startswith("pole_re_"))
+    idx = [i for i in range(1, stored + 1) if f"pole_re_{i}" in names and f"pole_im_{i}" in names]
+    if not idx:
+        return np.zeros((0, 2)), np.zeros(len(data), dtype=np.int64)
+    usable = np.where(np.isfinite(order) & (order >= 0), order, 0.0)
+    take = np.array(idx)[None, :] <= np.minimum(usable, stored)[:, None]
+    re = np.column_stack([data[f"pole_re_{i}"] for i in idx])
+    im = np.column_stack([data[f"pole_im_{i}"] for i in idx])
+    positions = np.column_stack([re[take], im[take]])
+    return positions, take.sum(axis=1)
+
+
+def _status_lines(order: np.ndarray, values: dict[str, np.ndarray]) -> list[str]:
+    """The status line of each recorded update."""
+    columns = {_SERIES[k]: v.tolist() for k, v in values.items()}
+    return [f"update (recorded): order {o:g}, " + ", ".join(
+        f"{label} {v[i]:.4g}" for label, v in columns.items() if math.isfinite(v[i]))
+        for i, o in enumerate(order.tolist())]

@@ -196,9 +196,10 @@ def test_the_view_shows_poles_singular_values_prediction_and_convergence(thesis_
     measured = entities["/live_id/prediction/gyro.x/measured"].scalars()
     predicted = entities["/live_id/prediction/gyro.x/predicted"].scalars()
     assert len(measured) == len(predicted) > 0
-    names = {v.name for v in rrd_views(out / "view.rrd")}
-    assert {"poles (z-plane)", "singular values", "1-step prediction", "convergence"} <= names
-    assert any("gyro" in n for n in names)  # the flight's own panels stay
+    found = {v.name: v for v in rrd_views(out / "view.rrd")}
+    assert {"poles (z-plane)", "singular values", "1-step prediction", "convergence"} <= set(found)
+    assert "/live_id/convergence/max_pole" in found["convergence"].query
+    assert any("gyro" in n for n in found)  # the flight's own panels stay
 
 
 def test_recorded_updates_replay_into_the_same_panels(thesis_flight, tmp_path):

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from cfsession.schema import StreamSpec, log_block_spec
+from cfsession.schema import StreamSpec, live_id_spec, log_block_spec
 from cfsession.writer import SessionWriter, standard_streams
 
-__all__ = ["LONG_TEXT", "N_LOG", "flight_rows", "flight_specs", "write_session"]
+__all__ = ["LONG_TEXT", "N_LOG", "flight_rows", "flight_specs", "live_id_rows", "write_session"]
 
 N_LOG = 500
 FW_START_MS = (1 << 24) - 1234  # the 24-bit firmware tick wraps 1.234 s into the flight
@@ -57,10 +58,38 @@ def flight_rows() -> dict[str, list[tuple]]:
     return rows
 
 
-def write_session(path: Path) -> Path:
-    """A closed session file holding :func:`flight_rows`."""
-    with SessionWriter(path, streams=flight_specs(), metadata={
-            "plan_name": "prbs-test", "uri": "sim://0"}) as w:
+def live_id_rows(n: int, *, order: int = 4) -> np.ndarray:
+    """``n`` rows of a ``live_id`` stream with ``order`` pole columns, one update every 0.5 s.
+
+    The orders vary: some rows have fewer poles than columns, one none, one more than the file
+    stores (capped); pole_move is NaN at the first update, fit_pct NaN at every 7th.
+    """
+    data = np.zeros(n, dtype=live_id_spec(order=order).dtype)
+    k = np.arange(n)
+    data["host_time"] = 1.0 + 0.5 * k
+    data["order"] = np.where(k % 5 == 3, order - 1, order)
+    data["order"][k == 2] = 0
+    data["order"][k == 4] = order + 3
+    data["fit_pct"] = np.where(k % 7 == 6, np.nan, 50.0 + 40.0 * (1 - np.exp(-0.01 * k)))
+    data["innovation_nvar"] = 0.5 * np.exp(-0.01 * k)
+    data["pole_move"] = np.where(k == 0, np.nan, 0.1 / (1 + k))
+    data["max_pole"] = 0.99 - 0.001 * (k % 10)
+    data["final"][-1:] = 1
+    for i in range(1, order + 1):
+        data[f"pole_re_{i}"] = 0.9 - 0.05 * i + 1e-4 * k
+        data[f"pole_im_{i}"] = (-1) ** i * 0.01 * i
+    return data
+
+
+def write_session(path: Path, *, live_id: int = 0, rename: dict[str, str] | None = None) -> Path:
+    """A closed session file holding :func:`flight_rows`, with ``live_id`` that many
+    :func:`live_id_rows`; ``rename`` names streams otherwise (a file made elsewhere)."""
+    specs = flight_specs() + ([live_id_spec(order=4)] if live_id else [])
+    new = dict(rename or {})
+    with SessionWriter(path, streams=[replace(s, name=new.get(s.name, s.name)) for s in specs],
+                       metadata={"plan_name": "prbs-test", "uri": "sim://0"}) as w:
         for name, rows in flight_rows().items():
-            w.extend(name, rows)
+            w.extend(new.get(name, name), rows)
+        if live_id:
+            w.extend(new.get("live_id", "live_id"), live_id_rows(live_id).tolist())
     return path

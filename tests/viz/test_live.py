@@ -3,16 +3,25 @@
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
+import rerun as rr
 
 from cfsession import SessionWriter, open_session
 from cfsession.schema import log_block_spec
 from groundstation.commands.replay import replay_session, specs_of
 from groundstation.live import RerunView, ViewError, open_view
 from tests.viz.rrd import blueprint_views, load
-from tests.viz.sessions import LONG_TEXT, N_LOG, flight_rows, flight_specs, write_session
+from tests.viz.sessions import (
+    LONG_TEXT,
+    N_LOG,
+    flight_rows,
+    flight_specs,
+    live_id_rows,
+    write_session,
+)
 
 
 def _live(path, *, batch: int = 3) -> RerunView:
@@ -120,6 +129,17 @@ def test_blueprint_puts_setpoints_next_to_what_they_command(tmp_path):
     views = blueprint_views(tmp_path / "bp2.rrd")
     assert views["roll, pitch [deg]"] == ["/setpoints/roll", "/setpoints/pitch"]
     assert views["mixed [m]"] == ["/mixed/asl"] and views["mixed [V]"] == ["/mixed/vbat"]
+    # setpoints and link streams named otherwise (a file made elsewhere): found by their kind
+    new = {"setpoints": "commander", "link": "radio"}
+    specs = [replace(s, name=new.get(s.name, s.name)) for s in flight_specs()]
+    view = open_view(mode="save", name="bp3", rrd_path=tmp_path / "bp3.rrd")
+    view.begin(streams=specs, metadata={})
+    view.end(summary={})
+    views = blueprint_views(tmp_path / "bp3.rrd")
+    assert views["yaw rate [deg/s]"] == ["/commander/yaw_rate", "/gyro/z"]
+    assert views["thrust [PWM]"] == ["/commander/thrust"]
+    assert views["latency [ms]"] == ["/radio/latency_ms"]
+    assert not [name for name in views if name.startswith(("commander.", "radio."))]
 
 
 def test_replay_leaves_out_empty_streams(tmp_path):
@@ -132,6 +152,54 @@ def test_replay_leaves_out_empty_streams(tmp_path):
     assert not any(e.startswith(("/link", "/setpoints", "/motors")) for e in ents)
     views = blueprint_views(tmp_path / "r.rrd")
     assert "gyro [deg/s]" in views and "link quality [%]" not in views
+
+
+def _replay_counting_calls(tmp_path, monkeypatch, *, n: int) -> int:
+    """Replay a flight with ``n`` live_id rows to ``tmp_path/live<n>.rrd``; the Rerun calls
+    made."""
+    calls = []
+    for name in ("log", "send_columns", "set_time"):
+        real = getattr(rr.RecordingStream, name)
+        monkeypatch.setattr(rr.RecordingStream, name,
+                            lambda *a, _real=real, **kw: calls.append(1) or _real(*a, **kw))
+    session = open_session(write_session(tmp_path / f"live{n}.h5", live_id=n))
+    view = open_view(mode="save", name="replay", rrd_path=tmp_path / f"live{n}.rrd")
+    assert replay_session(session=session, view=view)["live_id"] == n
+    monkeypatch.undo()
+    return len(calls)
+
+
+def test_replay_sends_every_live_id_update_in_blocks(tmp_path, monkeypatch):
+    """Each update's poles, convergence values and status line, on host_time; as many Rerun
+    calls for 300 updates as for 30 (a call per row: 100 000 rows took 25 s)."""
+    few = _replay_counting_calls(tmp_path, monkeypatch, n=30)
+    assert _replay_counting_calls(tmp_path, monkeypatch, n=300) == few
+    data, ents = live_id_rows(300), load(tmp_path / "live300.rrd")
+    t = data["host_time"]
+    poles = ents["/live_id/z_plane/poles"]
+    np.testing.assert_allclose(poles.times["host_time"], t, atol=1e-9)
+    want = [[[data[f"pole_re_{i}"][k], data[f"pole_im_{i}"][k]]
+             for i in range(1, min(int(o), 4) + 1)] for k, o in enumerate(data["order"])]
+    assert [len(p) for p in poles.rows["Points2D:positions"]] == [len(w) for w in want]
+    assert want[2] == [] and len(want[4]) == 4  # order 0; order 7 of 4 stored poles
+    np.testing.assert_allclose(np.concatenate([p for p in poles.rows["Points2D:positions"] if p]),
+                               np.concatenate([w for w in want if w]), rtol=1e-7)
+    assert poles.rows["Points2D:radii"] == [[pytest.approx(0.015)]] * len(t)
+    assert len(poles.rows["Points2D:colors"]) == len(t)
+    for name in ("pole_move", "innovation_nvar", "fit_pct", "max_pole"):  # NaN: left out
+        v = data[name].astype(float)
+        ok = np.isfinite(v)
+        series = ents[f"/live_id/convergence/{name}"]
+        np.testing.assert_array_equal(series.scalars(), v[ok])
+        np.testing.assert_allclose(series.times["host_time"], t[ok], atol=1e-9)
+    status = ents["/live_id/status"]
+    np.testing.assert_allclose(status.times["host_time"], t, atol=1e-9)
+    texts = [line[0] for line in status.rows["TextLog:text"]]
+    assert len(texts) == len(t) and texts[0] == (
+        "update (recorded): order 4, innov. var [1] 0.5, 1-step fit [%] 50, max |pole| [1] 0.99")
+    assert texts[6].startswith("update (recorded): order 4, pole move [1] 0.01429, innov.")
+    assert "1-step fit" not in texts[6]  # NaN: left out
+    assert len(ents["/live_id/convergence/fit_pct"].scalars()) == 300 - 300 // 7
 
 
 def test_rows_never_raise_and_drop_when_far_behind(tmp_path, caplog):

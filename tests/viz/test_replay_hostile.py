@@ -50,6 +50,8 @@ CASES = {
     "phases without fields": {"extra": ("marks", "phases", NOTES, [(0.1, b"x")])},
     "live id order 3e9": {"extra": ("live_id", "live_id", LIVE, [(0.5, 3e9, 0.9, 0.0)])},
     "live id order NaN": {"extra": ("live_id", "live_id", LIVE, [(0.5, np.nan, 0.9, 0.0)])},
+    "live id time inf": {"extra": ("live_id", "live_id", LIVE, [(np.inf, 1, 0.9, 0.0),
+                                                                (0.5, 1, 0.9, 0.0)])},
 }
 
 
