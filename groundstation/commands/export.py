@@ -19,17 +19,21 @@
 
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``).
 A damaged or crash-truncated session is exported as far as it reads, and each of its problems
-(those ``groundstation info`` lists) is logged as a warning naming the file.
+(those ``groundstation info`` lists) is logged as a warning naming the file. Each file is
+written beside its name and renamed onto it when complete (:func:`_whole`): a full disk or
+``ulimit -f`` leaves no file cut short, and the error names the file it stopped at.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib
 import json
 import logging
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
@@ -88,14 +92,15 @@ def export_csv(session: Session, folder: Path) -> list[Path]:
         cols = _columns(session, name)
         header = [f"{f} [{stream.units[f]}]" if stream.units.get(f) else f for f in cols]
         path = folder / f"{name}.csv"
-        with path.open("w", newline="", encoding="utf-8") as fh:
+        with _whole(path) as part, part.open("w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             lists = [c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values()]
             writer.writerows(zip(*lists, strict=True))
         files.append(path)
     meta = folder / "metadata.json"
-    meta.write_text(json.dumps(_metadata(session), indent=1))
+    with _whole(meta) as part:
+        part.write_text(json.dumps(_metadata(session), indent=1))
     return [*files, meta]
 
 
@@ -111,6 +116,20 @@ def _cell(values: Any) -> np.ndarray:
     for i, v in enumerate(values):
         cell[0, i] = str(v)
     return cell
+
+
+@contextlib.contextmanager
+def _whole(path: Path) -> Iterator[Path]:
+    """The name to write ``path``'s content to; renamed onto ``path`` once written, removed if
+    writing failed (an ``OSError`` then names ``path``, the file the export stopped at)."""
+    part = path.with_name(f".{path.name}.{os.getpid()}.part")
+    try:
+        yield part
+        os.replace(part, path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    finally:
+        part.unlink(missing_ok=True)
 
 
 def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list[str],
@@ -140,14 +159,15 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
         units[_identifier(name)] = {_identifier(f): stream.units.get(f, "") for f in cols}
     meta = {_identifier(k): json.dumps(v) if not isinstance(v, str) else v
             for k, v in _metadata(session).items()}
-    savemat(path, {
-        "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
-        "Ts": float(data.dt), "InputName": _cell(data.input_names),
-        "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
-        "OutputUnit": _cell(data.output_units),
-        "Window": "all" if window is None else str(window),
-        "streams": streams, "units": units, "metadata": meta,
-    }, long_field_names=True, do_compression=True, oned_as="column")
+    with _whole(path) as part:
+        savemat(part, {
+            "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
+            "Ts": float(data.dt), "InputName": _cell(data.input_names),
+            "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
+            "OutputUnit": _cell(data.output_units),
+            "Window": "all" if window is None else str(window),
+            "streams": streams, "units": units, "metadata": meta,
+        }, long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
     return path
 
 
@@ -169,7 +189,8 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
                                      schema=pa.schema(fields, metadata={
                                          "stream": name, "kind": stream.kind}))
         path = folder / f"{name}.parquet"
-        pq.write_table(table, path)
+        with _whole(path) as part:
+            pq.write_table(table, part)
         files.append(path)
     return files
 

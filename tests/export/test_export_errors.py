@@ -134,3 +134,38 @@ def test_mat_only_options_with_another_format_are_refused(session, tmp_path, to,
 def test_a_nan_grid_period_is_refused(session, tmp_path):
     line = _one_line(_run(session, "--to", "mat", "--dt", "nan", "--out", tmp_path / "x.mat"))
     assert "'nan' is not a finite number" in line
+
+
+@pytest.mark.parametrize("to", ["csv", "mat"])
+def test_a_full_disk_leaves_no_file_cut_short_and_names_the_file(session, tmp_path,
+                                                                monkeypatch, to):
+    """A disk that filled mid-file left a cut-short STREAM.csv (or .mat) looking whole, and
+    the error said only "an output file (it may be cut short)"."""
+    import csv
+
+    import scipy.io
+
+    def filling(fh, *args, **kwargs):
+        fh.write("x" * 1000)
+        raise OSError(28, "No space left on device")
+
+    if to == "csv":
+        real = csv.writer
+
+        def writer(fh, *args, **kwargs):
+            w = real(fh, *args, **kwargs)
+            return w if "gyro" not in fh.name else type("Full", (), {
+                "writerow": w.writerow, "writerows": lambda self, rows: filling(fh)})()
+
+        monkeypatch.setattr(csv, "writer", writer)
+        out, stopped = tmp_path / "csv", tmp_path / "csv" / "gyro.csv"
+    else:
+        monkeypatch.setattr(scipy.io, "savemat",
+                            lambda path, *a, **kw: filling(open(path, "w")))  # noqa: SIM115
+        out = stopped = tmp_path / "f.mat"
+    res = _run(session, "--to", to, "--out", out, *(["--window", "all"] if to == "mat" else []))
+    line = _one_line(res)
+    assert line == f"error: cannot write {stopped}: No space left on device"
+    assert not stopped.exists()
+    left = sorted(p.name for p in tmp_path.rglob("*") if p.is_file())
+    assert not [n for n in left if n.endswith(".part") or n == stopped.name], left
