@@ -8,7 +8,9 @@
   ``sysid identify`` identifies from, with its default channels and the logged period
   (resampled on a uniform grid, not detrended; ``--inputs``, ``--outputs``, ``--window``, one
   experiment, ``--dt``), plus every stream as ``streams.STREAM.FIELD`` (column
-  vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata``::
+  vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata`` (a log
+  without the default channels or window, imported from elsewhere: every stream and no
+  iddata part, with a warning, unless ``--inputs``/``--outputs``/``--window`` is given)::
 
       s = load('flight.mat');
       data = iddata(s.y, s.u, s.Ts, 'InputName', s.InputName, 'OutputName', s.OutputName, ...
@@ -133,21 +135,32 @@ def _whole(path: Path) -> Iterator[Path]:
 
 
 def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list[str],
-               window: Any, dt: float | None) -> Path:
-    """One ``.mat`` file: iddata's ``u``, ``y``, ``Ts``, names and units, and every stream."""
+               window: Any, dt: float | None,
+               iddata: Literal["required", "if-found"] = "required") -> str:
+    """One ``.mat`` file: iddata's ``u``, ``y``, ``Ts``, names and units, and every stream.
+
+    ``iddata``: ``"required"``, the iddata part must be built (a one-line error otherwise);
+    ``"if-found"``, it is left out, with a warning, when the channels or window are not in the
+    session (the defaults on a log imported from elsewhere: every stream is still written).
+    Returns what was left out (``""`` if nothing)."""
     from scipy.io import savemat
 
     from sysid.errors import ParameterError, SysIdError
     from sysid.session_io import load_session
 
+    data, left_out = None, ""
     try:
         data = load_session(session.path, inputs=inputs, outputs=outputs, window=window, dt=dt,
                             detrend=None)
     except ParameterError as exc:  # a value given (--dt): its own advice
         raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}") from None
     except SysIdError as exc:
-        raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}; choose "
-                                 "--inputs/--outputs/--window") from None
+        if iddata == "required":
+            raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}; choose "
+                                     "--inputs/--outputs/--window") from None
+        left_out = f"no iddata part (u, y): {exc}"
+        log.warning("%s; every stream is written, pass --inputs/--outputs/--window for u, y",
+                    left_out)
     streams: dict[str, dict[str, Any]] = {}
     units: dict[str, dict[str, str]] = {}
     for name, stream in session.streams.items():
@@ -159,16 +172,16 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
         units[_identifier(name)] = {_identifier(f): stream.units.get(f, "") for f in cols}
     meta = {_identifier(k): json.dumps(v) if not isinstance(v, str) else v
             for k, v in _metadata(session).items()}
+    content: dict[str, Any] = {} if data is None else {
+        "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
+        "Ts": float(data.dt), "InputName": _cell(data.input_names),
+        "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
+        "OutputUnit": _cell(data.output_units),
+        "Window": "all" if window is None else str(window)}
     with _whole(path) as part:
-        savemat(part, {
-            "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
-            "Ts": float(data.dt), "InputName": _cell(data.input_names),
-            "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
-            "OutputUnit": _cell(data.output_units),
-            "Window": "all" if window is None else str(window),
-            "streams": streams, "units": units, "metadata": meta,
-        }, long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
-    return path
+        savemat(part, {**content, "streams": streams, "units": units, "metadata": meta},
+                long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
+    return left_out
 
 
 def export_parquet(session: Session, folder: Path) -> list[Path]:
@@ -284,8 +297,10 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
         except ParameterError as exc:
             raise click.BadParameter(str(exc), param_hint="--window") from None
         names = [[n.strip() for n in v.split(",") if n.strip()] for v in (inputs, outputs)]
-        export_mat(s, target, inputs=names[0], outputs=names[1], window=win, dt=dt)
-        click.echo(f"wrote {target}")
+        left_out = export_mat(s, target, inputs=names[0], outputs=names[1], window=win,
+                              dt=dt, iddata="required" if given else "if-found")
+        click.echo(f"wrote {target}" + (f" (every stream; {left_out.split(':')[0]}: pass "
+                                        "--inputs/--outputs/--window)" if left_out else ""))
         return
     try:
         files = export_csv(s, target) if to == "csv" else export_parquet(s, target)

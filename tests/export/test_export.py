@@ -90,6 +90,24 @@ def test_mat_holds_what_iddata_needs(tmp_path):
     assert not (tmp_path / "g.mat").exists()
 
 
+def test_mat_of_a_log_without_the_default_channels_holds_every_stream(tmp_path):
+    """A log imported from elsewhere (no 'motors' stream, no excitation phase): ``--to mat``
+    with the defaults refused to write anything; it writes every stream and says how to get
+    u and y. Named channels that are missing are still an error (above)."""
+    path = write_session(tmp_path / "elsewhere.h5", rename={"motors": "motor"})
+    out = tmp_path / "e.mat"
+    res = _run(path, "--to", "mat", "--out", out)
+    assert res.exit_code == 0, res.output
+    assert "no iddata part (u, y): pass --inputs/--outputs/--window" in res.stdout
+    m = scipy.io.loadmat(out, simplify_cells=True)
+    assert "u" not in m and "y" not in m and "Ts" not in m
+    s = open_session(path)
+    np.testing.assert_array_equal(m["streams"]["motor"]["m1"], s["motor"].data["m1"])
+    res = _run(path, "--to", "mat", "--out", tmp_path / "f.mat", "--inputs", "motor")
+    assert res.exit_code == 0 and "no iddata" not in res.output, res.output
+    assert scipy.io.loadmat(tmp_path / "f.mat")["u"].shape[1] == 4
+
+
 def test_parquet_round_trip_and_without_pyarrow(session, tmp_path, monkeypatch):
     import pyarrow.parquet as pq
 
