@@ -208,6 +208,8 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
     jit = sp.get("jitter_ms", {})
     lines = [f"flight {summary.get('plan')} on {summary.get('uri')}: "
              f"{summary.get('duration_s', 0):.1f} s"]
+    if summary.get("aborted"):  # first: the stdout record of a flight must not read as a success
+        lines.append(f"  ABORTED: {summary.get('cause') or 'cause not recorded'}")
     for name, b in summary.get("blocks", {}).items():
         share = 100.0 * b["received"] / b["expected"] if b["expected"] else 0.0
         lines.append(f"  {name:<8} {b['received']:6d} / {b['expected']:6d} packets "

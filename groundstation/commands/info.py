@@ -203,6 +203,8 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
         return
     out = output_console(width=width)
     state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
+    if isinstance(d.get("summary"), dict) and d["summary"].get("aborted"):
+        state += ", flight ABORTED (its cause is under the flight summary)"
     out.print(f"[bold]{d['path']}[/] schema {d['schema_version']}, {state}")
     t0, t1 = d["time_s"]
     span = (f"data {t0:.2f} to {t1:.2f} s of firmware time ({d['duration_s']:.2f} s)"

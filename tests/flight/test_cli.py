@@ -36,7 +36,14 @@ def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
     last = res.output.strip().splitlines()[-1]
     assert last.startswith("error: flight aborted: link lost") and str(tmp_path) in last
     assert "gyro" in res.output and "dropped" in res.output  # the summary came first
-    assert open_session(last.rsplit(" ", 1)[-1]).closed_cleanly
+    # the summary on stdout, the record kept, says so (it read as a success: first-day review)
+    assert res.stdout.splitlines()[1].startswith("  ABORTED: link lost")
+    path = last.rsplit(" ", 1)[-1]
+    assert open_session(path).closed_cleanly
+    info = CliRunner().invoke(main, ["info", path]).output.splitlines()
+    assert info[0].endswith("closed cleanly, flight ABORTED (its cause is under the flight "
+                            "summary)")
+    assert any(line.strip().startswith("ABORTED: link lost") for line in info)
 
 
 def test_fly_bad_plan_is_one_line(tmp_path):
