@@ -131,11 +131,18 @@ def chip_doubt(axes: dict[str, tuple[str, float | None]], *, sv_weak: float) -> 
 
 def sv_weakness(facts: ModelFacts) -> tuple[float, str]:
     """How close the smallest kept singular value is to the noise floor (the median of the
-    discarded ones): ratio >= 10 -> 0, ratio 1 -> 1, log scale between."""
+    discarded ones up to the data's numerical rank: short horizons leave exact zeros beyond
+    it, which made any order look supported): ratio >= 10 -> 0, ratio 1 -> 1, log scale
+    between; 1 when the order is the rank itself (no floor to compare with)."""
     sv, n = facts.singular_values, len(facts.poles)
-    if sv is None or len(sv) <= n or n == 0 or not np.median(sv[n:]) > 0:
+    if sv is None or len(sv) <= n or n == 0 or not np.all(np.isfinite(sv)) or not sv[0] > 0:
         return 0.0, "singular values: not stored"
-    ratio = float(sv[n - 1] / np.median(sv[n:]))
+    sv = np.asarray(sv, dtype=float)
+    rank = int(np.sum(sv > sv[0] * len(sv) * np.finfo(float).eps))
+    if rank <= n:
+        return 1.0, (f"singular values: the order {n} is the rank of the data ({rank} non-zero "
+                     "values), no noise floor beyond it (weakness 1.00); longer horizons show one")
+    ratio = float(sv[n - 1] / np.median(sv[n:rank]))
     w = min(1.0, max(0.0, math.log(SV_GOOD / ratio) / math.log(SV_GOOD))) if ratio > 0 else 1.0
     return w, (f"singular values: sigma_{n} / median(discarded) = {ratio:.3g} "
                f"(weakness {w:.2f}; 0 at >= {SV_GOOD:g})")

@@ -19,6 +19,7 @@ from groundstation.plan.design import (
     design_plan,
     prbs_timing,
     saturated,
+    sv_weakness,
 )
 from groundstation.plan.excitation import prbs_shift
 from groundstation.plan.variants import advance_prbs
@@ -197,6 +198,19 @@ def test_weak_singular_values_excite_every_axis_more():
                        flown=set()).plan
     assert _amplitudes(strong) == _amplitudes(base)
     assert all(_amplitudes(weak)[k] > a for k, a in _amplitudes(base).items())
+
+
+def test_the_noise_floor_ends_at_the_data_rank():
+    """With short horizons the singular values beyond the data's rank are exact zeros; their
+    median made any order look supported (sigma_8 / median = 8e14, weakness 0: first-day
+    review). The floor is the median of the discarded values up to the rank."""
+    weak_with_zeros = [10.0, 0.2] + [0.1] * 8 + [0.0] * 20
+    w, note = sv_weakness(_facts(sv=weak_with_zeros))
+    assert w == sv_weakness(_facts(sv=weak_with_zeros[:10]))[0] > 0.5, note
+    assert "median(discarded) = 2" in note
+    w, note = sv_weakness(_facts(sv=[10.0, 9.0] + [1e-16] * 8))  # the order is the rank
+    assert w == 1.0 and "no noise floor" in note
+    assert sv_weakness(_facts(sv=[10.0, 9.0] + [0.1] * 8))[0] == 0.0
 
 
 def test_fits_stored_or_implied_by_the_model():
