@@ -195,8 +195,9 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
         doubt, flown_clock = chip_doubt(axes, sv_weak=w_sv), min(e.clock_period for e in chains)
         rule = {"poles": facts.poles, "dt": facts.dt, "rate_hz": rate, "n_ticks": phase.n_ticks,
                 "horizon_ticks": facts.horizon_samples * facts.dt * rate}
+        flown_period = max(((1 << e.register_length) - 1) * e.clock_period for e in chains)
         timing = prbs_timing(**rule, max_clock=flown_clock if doubt else None,
-                             untrusted=doubt)
+                             min_period_ticks=flown_period if doubt else 0, untrusted=doubt)
         if timing and timing.capped:
             chip_notes.append(f"phase[{i}] PRBS {timing.why_clock}")
         worst = max(weak, key=weak.__getitem__) if weak else None

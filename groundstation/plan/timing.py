@@ -43,12 +43,14 @@ class Timing(NamedTuple):
 
 def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
                 horizon_ticks: float = 0.0, max_clock: int | None = None,
-                untrusted: str = "") -> Timing | None:
+                min_period_ticks: int = 0, untrusted: str = "") -> Timing | None:
     """The chip and register from the model's modes (module docstring); None when no mode
     below the setpoints' Nyquist frequency settles within the phase. ``max_clock`` (ticks)
-    caps the chip, with ``untrusted`` saying why: the flown chip, when the model is not
-    trusted to lengthen it (:func:`groundstation.plan.design.design_plan`); the period is then
-    chosen for the capped chip."""
+    caps the chip and ``min_period_ticks`` floors the period, with ``untrusted`` saying why:
+    the flown chip and period, when the model is not trusted to lengthen the one or shorten
+    the other (:func:`groundstation.plan.design.design_plan`: a model that explains the
+    flight poorly may miss the fast modes and the slow ones alike; a 16 % fit cut a 10-bit
+    PRBS to 3 bits); the period is then chosen for the capped chip."""
     z = np.asarray(poles, dtype=complex)
     z = z[(np.abs(z) > 1e-12) & (np.abs(z) < 1.0)]
     s = np.log(z) / dt  # continuous-time equivalents, rad/s
@@ -70,7 +72,7 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
                      f"{clock * tick:g} s, but {untrusted}")
         clock = int(max_clock)
     want = 2 * math.pi * BETA_S * tau_h
-    need = max(want, horizon_ticks * tick) / (clock * tick)
+    need = max(want, horizon_ticks * tick, min_period_ticks * tick) / (clock * tick)
     fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
     if not fits:
         raise PlanError(f"an excitation phase of {phase_s:g} s cannot hold one period of a "
@@ -80,6 +82,8 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
     period_s = ((1 << n) - 1) * clock * tick
     why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period_s:g} s vs 2 pi beta_s "
                f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
+    if min_period_ticks * tick > want and (1 << n) - 1 >= min_period_ticks / clock:
+        why_reg += f"; at least the flown {min_period_ticks * tick:g} s: {untrusted}"
     if (1 << n) - 1 < need:
         why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
     return Timing(clock, n, why_clock, why_reg, capped)

@@ -122,15 +122,15 @@ def test_designed_plan_passes_check_and_show_explains_it(tmp_path):
     plan = load_plan(out)
     assert plan.name == "next"
     prbs = [e for e in plan.phases[2].excitation]
-    # yaw explained at 60 % only: the chip stays as flown (one tick); the period still follows
-    # the slowest mode: 37.7 s = 377 chips of 0.1 s -> 9 bits
-    assert {(e.clock_period, e.register_length) for e in prbs} == {(1, 9)}
+    # yaw explained at 60 % only: the chip stays as flown (one tick), and so does the period
+    # (the slowest mode asks for 37.7 s = 377 chips of 0.1 s -> 9 bits; flown: 10 bits)
+    assert {(e.clock_period, e.register_length) for e in prbs} == {(1, 10)}
     check = _run("plan", "check", out)
     assert check.exit_code == 0 and "warning" not in check.output, check.output
     show = _run("plan", "show", out, "--width", "60")
     assert show.exit_code == 0
     assert "designed from m.json" in show.output
-    for key in ("phase[2].roll.register_length", "phase[2].yaw_rate.amplitude",
+    for key in ("phase[2].roll.seed", "phase[2].yaw_rate.amplitude",
                 "phase[2].pitch.seed", "gyro.z at 60.0 %"):
         assert key in show.output
     # the shipped plan's comments and layout are kept: every line is there unchanged, or is a
@@ -198,6 +198,19 @@ def test_weak_singular_values_excite_every_axis_more():
                        flown=set()).plan
     assert _amplitudes(strong) == _amplitudes(base)
     assert all(_amplitudes(weak)[k] > a for k, a in _amplitudes(base).items())
+
+
+def test_a_model_not_trusted_never_shortens_the_period():
+    """A model fitting 16 % with fast modes only cut the flown 10-bit PRBS to 3 bits (period
+    0.7 s, PE order 7) and plan check passed it (first-day review)."""
+    base = load_plan("prbs-3axis")
+    fast = {"taus": (0.05, 0.1)}
+    poor = design_plan(base, _facts(**fast, fits=dict.fromkeys(GYROS, 16.0)), name="a",
+                       flown=set())
+    assert {e.register_length for e in poor.plan.phases[2].excitation} == {10}
+    good = design_plan(base, _facts(**fast, fits=dict.fromkeys(GYROS, 95.0)), name="b",
+                       flown=set())
+    assert max(e.register_length for e in good.plan.phases[2].excitation) < 10
 
 
 def test_the_noise_floor_ends_at_the_data_rank():
