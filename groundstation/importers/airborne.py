@@ -112,8 +112,12 @@ def airborne_segments(
         if top < min_height_m:
             continue  # motors ran, the vehicle did not leave the ground
         level = max(min_height_m, height_fraction * top)
-        up = np.where(np.isfinite(run_h), run_h, -np.inf) >= level
-        spans += [(t[i0 + j0] + guard_s, t[i0 + j1 - 1] - guard_s) for j0, j1 in _runs(up)]
+        known = np.where(np.isfinite(run_h), run_h, -np.inf)
+        up = known >= level
+        for a0, a1 in _runs(known >= min_height_m):  # clear of the ground: a dip is no landing
+            high = np.flatnonzero(up[a0:a1])
+            if len(high):
+                spans.append((t[i0 + a0 + high[0]] + guard_s, t[i0 + a0 + high[-1]] - guard_s))
     return [Segment(float(a), float(b)) for a, b in spans if b - a >= min_duration_s]
 
 

@@ -45,6 +45,19 @@ def test_two_flights_with_height_give_two_segments_inside_the_hover():
         assert np.all(thrust[inside] > 0)  # motors on throughout, ground excluded
 
 
+def test_a_dip_below_half_height_is_no_landing_but_touching_down_is():
+    """A flight that sank from 1.3 m to 0.5 m in its excitation was cut in two segments, the
+    first 3 s long (first-day review); touching down between two hops still splits."""
+    t, thrust, h = flight_log(flights=[(2.0, 25.0)], hover_m=1.3)
+    sank = (t > 8.0) & (t < 15.0)
+    h[sank] = 0.5
+    [seg] = airborne_segments(t_s=t, thrust=thrust, height_m=h)
+    assert seg.start_s < 8.0 and seg.end_s > 15.0
+    h[sank] = 0.02  # down on the ground with the motors on
+    segs = airborne_segments(t_s=t, thrust=thrust, height_m=h)
+    assert len(segs) == 2 and segs[0].end_s < 8.0 < 15.0 < segs[1].start_s
+
+
 def test_without_height_the_motor_runs_are_trimmed_by_a_second():
     t, thrust, _ = flight_log(flights=[(2.0, 10.0)])
     [seg] = airborne_segments(t_s=t, thrust=thrust)
