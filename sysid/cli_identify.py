@@ -26,6 +26,7 @@ from sysid.cli_support import (
     MODEL_SUFFIXES,
     check_rrd,
     console,
+    fit_or_none,
     fit_table,
     fits_json,
     load_flights,
@@ -166,6 +167,13 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                        compare(model, val, window=v_win, warn=False)),
                       ("validation: 1-step prediction",
                        compare(model, val, horizon=1, warn=False))]
+    if all(fit_or_none(f) is None for f in (*sim.fit, *pred.fit)):  # no use to anyone
+        raise DataError(
+            f"the model diverges on the data it was identified from (every windowed-simulation "
+            f"and 1-step fit; poles up to |z| = {np.abs(model.poles()).max():.3g}): these data "
+            f"do not support order {order} with past {past}, future {future}; try a lower "
+            "--order, --stability enforce, or no --order/--past/--future for the automatic "
+            "choice" + ("; nothing saved" if out is not None else ""))
     if out is not None:
         model.save(out)
     if rrd is not None:

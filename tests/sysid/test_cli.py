@@ -449,3 +449,31 @@ def test_a_window_of_1e308_seconds_is_refused_in_one_line(command):
     assert res.output.strip().splitlines() == [
         f"error: Invalid value for '--window-s': 1e+308 is above 86400 (see 'sysid "
         f"{command[0]} -h')"]
+
+
+def test_identify_refuses_to_save_a_model_that_diverges_on_its_own_data(flights, tmp_path,
+                                                                        monkeypatch):
+    """Fixed settings the data did not support gave poles at |z| = 10.9, "diverged" in every
+    cell of the fit table, "model saved", exit 0 (first-day review)."""
+    import sysid.cli_identify as cli_identify
+
+    real = cli_identify.method_options
+
+    def diverging(*args, **kwargs):
+        meth, options = real(*args, **kwargs)
+
+        class Unstable:
+            def identify(self, *a, **kw):
+                model = meth.identify(*a, **kw)
+                return model.replace(A=model.A * 12.0, K=model.K * 0.0)
+
+        return Unstable(), options
+
+    monkeypatch.setattr(cli_identify, "method_options", diverging)
+    out = tmp_path / "m.h5"
+    res = run("identify", flights[0].path, *FAST, "--out", out)
+    assert res.exit_code == 2, res.output
+    line = res.output.strip().splitlines()[-1]
+    assert line.startswith("error: the model diverges on the data it was identified from")
+    assert line.endswith("; nothing saved") and "try a lower --order" in line
+    assert not out.exists()
