@@ -278,6 +278,11 @@ def load_experiments(
         raise ParameterError(f"dt={dt}; pass the grid period in seconds (> 0)")
     session = open_session(path)
     warn_problems(session, log)  # the one place sysid reads sessions: damage is never silent
+    summary = session.json_meta("summary", None)
+    if isinstance(summary, dict) and summary.get("aborted") is True:
+        log.warning("%s: the flight was aborted (%s): its phases end at the abort, and the "
+                    "excitation may be shorter than planned", session.path,
+                    str(summary.get("cause") or "cause not recorded")[:200])
     ins = resolve_channels(session, inputs, role="input")
     outs = resolve_channels(session, outputs, role="output")
     chans = ins + outs

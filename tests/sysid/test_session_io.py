@@ -102,3 +102,19 @@ def test_session_without_log_streams(tmp_path) -> None:
         w.phase(t=0.0, phase_id=0, name="excitation", kind="excitation")
     with pytest.raises(DataError, match=r"empty\.h5: no log stream or variable 'motors'"):
         load_session(path)
+
+
+def test_an_aborted_flight_is_said_when_identifying_from_it(tmp_path, caplog) -> None:
+    """A flight stopped with Ctrl-C 39 s into a 102 s PRBS was identified from in silence
+    (first-day review): its excitation phase ends at the abort."""
+    import json
+
+    import h5py
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=600)
+    load_session(flight.path, inputs=["motors"], outputs=["gyro"])
+    assert "aborted" not in caplog.text
+    with h5py.File(flight.path, "r+") as f:
+        f.attrs["summary"] = json.dumps({"aborted": True, "cause": "SIGINT received"})
+    load_session(flight.path, inputs=["motors"], outputs=["gyro"])
+    assert "the flight was aborted (SIGINT received)" in caplog.text
