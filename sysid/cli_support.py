@@ -192,9 +192,17 @@ def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
             dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"],
             verb=verb)
     except DataError as exc:  # a channel the session lacks: say which option chooses them
-        role = next((r for r in ("inputs", "outputs") if f"for the {r}" in str(exc)), None)
-        if role is None or (role == "inputs" and inputs) or (role == "outputs" and outputs):
-            raise  # the model's channels (compare, resid): no option chooses them
+        channel = getattr(exc, "channel", None)
+        if channel is None or channel.problem != "unknown":
+            raise
+        role = f"{channel.role}s"
+        if (role == "inputs" and inputs) or (role == "outputs" and outputs):
+            # the model's channels (compare, resid): no option chooses them
+            raise DataError(f"{exc.path}: the model's {channel.role} {channel.name!r} is not "
+                            f"logged in this session (its log streams: "
+                            f"{', '.join(channel.logged) or 'none'}); {verb.split()[0]} the "
+                            "model on sessions that log the channels it was identified "
+                            "with") from None
         raise DataError(f"{exc}; choose the {role} with --{role}") from None
 
 

@@ -95,11 +95,16 @@ def resolve_channels(session: Session, names: Sequence[str], *,
                      role: Literal["input", "output"]) -> list[Channel]:
     """Log variables selected by ``names`` (module docstring, step 1), in order: the rule of
     :func:`cfsession.channels.resolve_channels` (live identification uses it too) on the
-    session's log streams that hold rows. One-line :class:`DataError` naming the file."""
+    session's log streams that hold rows. One-line :class:`DataError` naming the file (its
+    ``channel`` attribute: the :class:`~cfsession.errors.ChannelError`, for a caller's
+    wording)."""
     try:
         return _resolve(names, streams=session_specs(session), role=role)
     except ChannelError as exc:
-        raise DataError(f"{session.path}: {exc}") from None
+        err = DataError(f"{session.path}: {exc}")
+        err.channel = exc  # type: ignore[attr-defined]
+        err.path = session.path  # type: ignore[attr-defined]
+        raise err from None
 
 
 def clock_offset(session: Session, stream_names: Sequence[str]) -> float:

@@ -477,3 +477,20 @@ def test_identify_refuses_to_save_a_model_that_diverges_on_its_own_data(flights,
     assert line.startswith("error: the model diverges on the data it was identified from")
     assert line.endswith("; nothing saved") and "try a lower --order" in line
     assert not out.exists()
+
+
+def test_compare_on_a_session_without_the_models_channels_names_the_model(flights, tmp_path):
+    """It said "no log stream or variable 'stabilizer.roll' for the outputs ... (use STREAM or
+    STREAM.FIELD ...)", for a name the user never typed and with no option to act on it."""
+    model = sysid.StateSpaceModel(A=np.eye(1) * 0.5, B=np.ones((1, 4)), C=np.ones((1, 1)),
+                                  dt=0.02, input_names=[f"motor.m{i}" for i in range(1, 5)],
+                                  output_names=["stabilizer.roll"])
+    path = model.save(tmp_path / "m.json")
+    for command in ("compare", "resid"):
+        res = run(command, path, flights[0].path)
+        assert res.exit_code == 2, res.output
+        assert res.stderr.strip() == (
+            f"error: {flights[0].path}: the model's output 'stabilizer.roll' is not logged in "
+            "this session (its log streams: acc, gyro, motors); "
+            f"{'compare' if command == 'compare' else 'analyse'} the model on sessions that "
+            "log the channels it was identified with")
