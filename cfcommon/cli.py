@@ -45,8 +45,10 @@ __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLi
            "output_table", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
-#: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from).
-DEFAULT_INPUTS = "motors"
+#: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
+#: variable groups, not stream names: ``motor`` is ``motor.m1..m4`` in a flight's ``motors``
+#: stream, a cfclient CSV's ``Motors`` and a uSD log alike (``motors`` was a flight's only).
+DEFAULT_INPUTS = "motor"
 DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped

@@ -139,7 +139,8 @@ def session_options(func: Callable) -> Callable:
     """Options shared by every command that reads sessions."""
     opts = [
         click.option("--inputs", default=DEFAULT_INPUTS, show_default=True, help=(
-                     "Input channels: STREAM, STREAM.FIELD or group.variable, comma-separated.")),
+                     "Input channels: STREAM, STREAM.FIELD, group.variable or a variable "
+                     "group (motor: motor.m1..m4), comma-separated.")),
         click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
                      help="Output channels, as --inputs (default: what the motors drive "
                           "directly; see docs/sysid.md)."),

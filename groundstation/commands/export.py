@@ -44,7 +44,7 @@ import numpy as np
 
 from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS, FiniteFloat
 from cfsession import Session, open_session, warn_problems
-from groundstation.errors import GroundStationError
+from groundstation.errors import GroundStationError, SessionError
 
 __all__ = ["command", "export_csv", "export_mat", "export_parquet"]
 
@@ -152,12 +152,12 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
     try:
         data = load_session(session.path, inputs=inputs, outputs=outputs, window=window, dt=dt,
                             detrend=None)
-    except ParameterError as exc:  # a value given (--dt): its own advice
-        raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}") from None
-    except SysIdError as exc:
-        if iddata == "required":
-            raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}; choose "
-                                     "--inputs/--outputs/--window") from None
+    except (SysIdError, SessionError) as exc:  # SessionError: no such phase
+        if iddata == "required":  # a value given (--dt, a window): its own advice
+            advice = "" if isinstance(exc, ParameterError) else \
+                "; choose --inputs/--outputs/--window"
+            raise GroundStationError(f"the iddata part (u, y) cannot be built: {exc}{advice}"
+                                     ) from None
         left_out = f"no iddata part (u, y): {exc}"
         log.warning("%s; every stream is written, pass --inputs/--outputs/--window for u, y",
                     left_out)

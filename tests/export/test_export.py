@@ -90,20 +90,22 @@ def test_mat_holds_what_iddata_needs(tmp_path):
     assert not (tmp_path / "g.mat").exists()
 
 
-def test_mat_of_a_log_without_the_default_channels_holds_every_stream(tmp_path):
-    """A log imported from elsewhere (no 'motors' stream, no excitation phase): ``--to mat``
+def test_mat_of_a_log_without_the_default_window_holds_every_stream(tmp_path):
+    """A log imported from elsewhere (airborne segments, no excitation phase): ``--to mat``
     with the defaults refused to write anything; it writes every stream and says how to get
-    u and y. Named channels that are missing are still an error (above)."""
-    path = write_session(tmp_path / "elsewhere.h5", rename={"motors": "motor"})
+    u and y. Named channels or windows that are missing are still an error (above)."""
+    flight = write_flight(tmp_path / "elsewhere.h5", system=known_system(), seed=4, n=800,
+                          phases=[(0.0, "ground-0", "ground"), (1.0, "airborne-1", "airborne")])
     out = tmp_path / "e.mat"
-    res = _run(path, "--to", "mat", "--out", out)
+    res = _run(flight.path, "--to", "mat", "--out", out)
     assert res.exit_code == 0, res.output
     assert "no iddata part (u, y): pass --inputs/--outputs/--window" in res.stdout
     m = scipy.io.loadmat(out, simplify_cells=True)
     assert "u" not in m and "y" not in m and "Ts" not in m
-    s = open_session(path)
-    np.testing.assert_array_equal(m["streams"]["motor"]["m1"], s["motor"].data["m1"])
-    res = _run(path, "--to", "mat", "--out", tmp_path / "f.mat", "--inputs", "motor")
+    s = open_session(flight.path)
+    np.testing.assert_array_equal(m["streams"]["motors"]["m1"], s["motors"].data["m1"])
+    res = _run(flight.path, "--to", "mat", "--out", tmp_path / "f.mat", "--window",
+               "airborne-1")
     assert res.exit_code == 0 and "no iddata" not in res.output, res.output
     assert scipy.io.loadmat(tmp_path / "f.mat")["u"].shape[1] == 4
 
