@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 @click.version_option(package_name="cf-sysid", prog_name="sysid")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
-    """Closed-loop subspace identification (IEM, PO-MOESP) of flight sessions.
+    """Closed-loop subspace identification (IEM, PARSIM-K; PO-MOESP for open loop) of flight sessions.
 
     \b
     Examples:
@@ -150,9 +150,12 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     order is scored or suggested beyond what it identifies at these horizons; an order it
     fails to identify there is listed with its reason and neither scored nor suggested. The
     gap rule picks the n maximising log10(s_n / s_n+1) among the first --show values. It is
-    the suggestion when clear: n >= 2 and a drop of at least a factor of 2 (0.3 decades). A
-    largest gap right after s_1 is degenerate (one dominant direction), a smaller one no cut:
-    BIC's order is suggested then. Validation on held-out data (sysid identify without
+    the suggestion when clear: n >= 2 and a drop of at least a factor of 2 (0.3 decades),
+    and, if under a factor of 10 (1 decade), AIC, AICc or BIC picking no more than n states.
+    A largest gap right after s_1 is degenerate (one dominant direction), a smaller one no
+    cut: BIC's order is suggested then, as it is when the horizons cap the rank or order n
+    cannot be identified. The information criteria score orders up to 12: a BIC at 12 may
+    lie beyond (a larger --show does not raise it). Validation on held-out data (sysid identify without
     --order) judges better than either. Without --past/--future the horizons are the largest
     of the default grid (three and one and a half times the data's memory, the lag of the
     best ARX model by AICc, or what the data allow).
