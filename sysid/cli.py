@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 @click.version_option(package_name="cf-sysid", prog_name="sysid")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
-    """Closed-loop subspace identification (IEM, PARSIM-K; PO-MOESP for open loop) of flight sessions.
+    """Closed-loop subspace identification of flight sessions (IEM, PARSIM-K; PO-MOESP).
 
     \b
     Examples:
@@ -155,8 +155,8 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     A largest gap right after s_1 is degenerate (one dominant direction), a smaller one no
     cut: BIC's order is suggested then, as it is when the horizons cap the rank or order n
     cannot be identified. The information criteria score orders up to 12: a BIC at 12 may
-    lie beyond (a larger --show does not raise it). Validation on held-out data (sysid identify without
-    --order) judges better than either. Without --past/--future the horizons are the largest
+    lie beyond (a larger --show does not raise it). Validation on held-out data (sysid
+    identify without --order) judges better than either. Without --past/--future the horizons are the largest
     of the default grid (three and one and a half times the data's memory, the lag of the
     best ARX model by AICc, or what the data allow).
 
