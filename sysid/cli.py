@@ -156,9 +156,9 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
     cut: BIC's order is suggested then, as it is when the horizons cap the rank or order n
     cannot be identified. The information criteria score orders up to 12: a BIC at 12 may
     lie beyond (a larger --show does not raise it). Validation on held-out data (sysid
-    identify without --order) judges better than either. Without --past/--future the horizons are the largest
-    of the default grid (three and one and a half times the data's memory, the lag of the
-    best ARX model by AICc, or what the data allow).
+    identify without --order) judges better than either. Without --past/--future the
+    horizons are the largest of the default grid (three and one and a half times the data's
+    memory, the lag of the best ARX model by AICc, or what the data allow).
 
     \b
     Example:
