@@ -88,6 +88,10 @@ def plan_imports(paths: list[Path]) -> tuple[list[ImportJob], list[Path]]:
             before = len(jobs) + sum(len(v) for v in csv_groups.values())
             _scan(p, depth=1, jobs=jobs, csv_groups=csv_groups, skipped=skipped)
             if len(jobs) + sum(len(v) for v in csv_groups.values()) == before:
+                if (p / "metadata.json").is_file() and any(p.glob("*.csv")):
+                    raise SessionError(f"{p}: a 'groundstation export --to csv' folder, not a "
+                                       "log to import: use the session file it was exported "
+                                       "from as it is")
                 raise SessionError(f"{p}: holds no uSD-card deck logs (0xBC first byte) or "
                                    "cfclient CSVs ('Timestamp,...'), nor do its subfolders")
             continue

@@ -180,3 +180,17 @@ def test_a_symlink_at_the_output_is_never_followed(tmp_path):
     assert "already exists" in _one_line_error(_import(str(src), "--out", str(out)))
     assert _import(str(src), "--out", str(out), "--force").exit_code == 0
     assert victim.read_text() == "keep me" and not (out / "log05.h5").is_symlink()
+
+
+def test_an_export_folder_is_named_as_one(tmp_path):
+    """Importing this tool's own CSV export said only "holds no uSD-card deck logs or cfclient
+    CSVs" (first-day review)."""
+    from tests.viz.sessions import write_session
+
+    session = write_session(tmp_path / "f.h5")
+    assert CliRunner().invoke(gs, ["export", str(session), "--to", "csv", "--out",
+                                   str(tmp_path / "csv")]).exit_code == 0
+    res = CliRunner().invoke(gs, ["import", str(tmp_path / "csv"), "--out",
+                                  str(tmp_path / "out")])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "a 'groundstation export --to csv' folder, not a log to import" in res.output
