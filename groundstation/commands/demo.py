@@ -112,7 +112,9 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
       1. fly prbs-3axis (roll/pitch ±25 deg, yaw rate ±50 deg/s) on sim://0
       2. fly it again with the PRBS advanced by --advance chips on sim://1
       3. identify with IEM from flight 1's excitation phase; past, future and order are
-         chosen by validation on its last 30 % (--order 8 --past 60 --future 17: the thesis)
+         chosen by validation on its last 30 % (--order 8 --past 60 --future 17: the thesis),
+         motors -> acc.x, acc.y, acc.z and gyro as in the thesis (sysid identify's defaults
+         are acc.z and gyro, and it tries PARSIM-K too: its model can differ)
       4. print the poles and the fits on flight 2: 2 s windowed simulation and k-step prediction
 
     \b
