@@ -255,7 +255,9 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
 
     Groups come from the sessions' metadata (--group-by; docs/sysid.md names them). Each
     group's horizons and order are chosen by validation on held-out data, as `identify` does,
-    unless fixed. A group that fails is a row with its reason; the batch goes on, and exits
+    unless fixed; the method and focus too (unless --method/--focus), even with all three
+    fixed, so that every row has a held-out score: `identify` with all three fixed makes
+    IEM's prediction-focus model from all the data instead. A group that fails is a row with its reason; the batch goes on, and exits
     with 1 when some groups failed (2 when all did). The summary is rewritten as each group
     finishes: Ctrl-C keeps the finished groups, and so does a --scheduler cluster that fails
     mid-run (one line names the groups not run).
