@@ -257,10 +257,10 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     group's horizons and order are chosen by validation on held-out data, as `identify` does,
     unless fixed; the method and focus too (unless --method/--focus), even with all three
     fixed, so that every row has a held-out score: `identify` with all three fixed makes
-    IEM's prediction-focus model from all the data instead. A group that fails is a row with its reason; the batch goes on, and exits
-    with 1 when some groups failed (2 when all did). The summary is rewritten as each group
-    finishes: Ctrl-C keeps the finished groups, and so does a --scheduler cluster that fails
-    mid-run (one line names the groups not run).
+    IEM's prediction-focus model from all the data instead. A group that fails is a row with
+    its reason; the batch goes on, and exits with 1 when some groups failed (2 when all did).
+    The summary is rewritten as each group finishes: Ctrl-C keeps the finished groups, and so
+    does a --scheduler cluster that fails mid-run (one line names the groups not run).
 
     \b
     Examples:
