@@ -26,12 +26,11 @@ selected twice is a one-line :class:`~cfsession.errors.ChannelError`.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from cfsession.errors import ChannelError
+from cfsession.errors import ChannelError, did_you_mean
 from cfsession.reader import Session, StreamData
 from cfsession.schema import Field, StreamSpec
 
@@ -64,14 +63,6 @@ def session_specs(session: Session) -> list[StreamSpec]:
     """The specs of a read session's log streams that hold rows (an empty stream has nothing
     to select)."""
     return [spec_of(s) for s in session.streams.values() if s.kind == "log" and len(s)]
-
-
-def _did_you_mean(name: str, known: Sequence[str]) -> str:
-    """`` (did you mean 'x'?)`` for the names of ``known`` closest to ``name`` (case aside)."""
-    lower = {k.lower(): k for k in known}
-    close = [name.lower()] if name.lower() in lower else difflib.get_close_matches(
-        name.lower(), list(lower), n=3, cutoff=0.75)
-    return f" (did you mean {' or '.join(repr(lower[c]) for c in close)}?)" if close else ""
 
 
 def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
@@ -114,7 +105,7 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
             known = [*fields, *(f"{sn}.{fn}" for sn, fs in fields.items() for fn in fs),
                      *by_source]
             raise ChannelError(f"no log stream or variable {name!r} for the {role}s"
-                               f"{_did_you_mean(name, known)}; log streams are "
+                               f"{did_you_mean(name, known)}; log streams are "
                                f"{sorted(fields)} (use STREAM or STREAM.FIELD or "
                                "group.variable)", problem="unknown", role=role, name=name,
                                logged=tuple(sorted(fields)))

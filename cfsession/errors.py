@@ -9,9 +9,11 @@ twice), is one of them; its message names no file, so a caller prefixes its own 
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Sequence
 from typing import Literal
 
-__all__ = ["ChannelError", "ChannelProblem", "SessionError"]
+__all__ = ["ChannelError", "ChannelProblem", "SessionError", "did_you_mean"]
 
 ChannelProblem = Literal["unknown", "ambiguous", "duplicate", "empty"]
 
@@ -35,3 +37,12 @@ class ChannelError(SessionError):
                  logged: tuple[str, ...] = ()) -> None:
         super().__init__(message)
         self.problem, self.role, self.name, self.logged = problem, role, name, logged
+
+
+def did_you_mean(name: str, known: Sequence[str]) -> str:
+    """`` (did you mean 'x'?)`` for the names of ``known`` closest to ``name`` (case aside);
+    ``""`` when none is close."""
+    lower = {k.lower(): k for k in known}
+    close = [name.lower()] if name.lower() in lower else difflib.get_close_matches(
+        name.lower(), list(lower), n=3, cutoff=0.75)
+    return f" (did you mean {' or '.join(repr(lower[c]) for c in close)}?)" if close else ""

@@ -24,7 +24,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from cfsession.errors import SessionError
+from cfsession.errors import SessionError, did_you_mean
 from cfsession.guard import check_dataset, file_size, hard_links, open_untrusted, read_attrs
 from cfsession.schema import (
     SCHEMA_NAME,
@@ -234,8 +234,9 @@ class Session:
         if not hits:
             names = sorted({p.name for p in self.phases()})
             kinds = sorted({p.kind for p in self.phases()})
-            raise SessionError(f"{self.path}: no phase {name_or_kind!r}; phases are {names} "
-                               f"(kinds {kinds})")
+            hint = did_you_mean(name_or_kind, [*names, *kinds])
+            raise SessionError(f"{self.path}: no phase {name_or_kind!r}{hint}; phases are "
+                               f"{names} (kinds {kinds})")
         return hits[0].start_s, hits[-1].end_s
 
     def events(self) -> list[Event]:
@@ -279,7 +280,10 @@ def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
     """Check the root attributes a reader relies on: schema, schema_version (one-line
     :class:`SessionError`); wrongly typed optional ones are dropped and listed in problems."""
     if meta.get("schema") != SCHEMA_NAME:
-        raise SessionError(f"{p}: HDF5 file but not a flight session (no '{SCHEMA_NAME}' schema)")
+        model = str(meta.get("format", "")).endswith("StateSpaceModel")
+        what = ": a model file (sysid compare, sysid export read it)" if model else ""
+        raise SessionError(f"{p}: HDF5 file but not a flight session (no '{SCHEMA_NAME}' "
+                           f"schema){what}")
     version = meta.get("schema_version")
     if isinstance(version, float) and version.is_integer():
         version = int(version)

@@ -59,7 +59,8 @@ def check_dongle(uri: str) -> None:
     radios = crazyradios()
     if not radios:
         raise LinkError(f"cannot connect to {uri}: no Crazyradio found on USB; plug in a "
-                        f"Crazyradio PA (1915:7777), or if it is plugged in, {UDEV_HINT}")
+                        f"Crazyradio PA (1915:7777), or if it is plugged in, {UDEV_HINT}; "
+                        "without one, fly the simulator: --uri sim://0")
     if int(dev_id) >= len(radios):
         raise LinkError(f"cannot connect to {uri}: there is no Crazyradio {dev_id} (found "
                         f"{len(radios)}; they count from 0); groundstation scan lists them")

@@ -56,3 +56,15 @@ def test_the_events_stream_shows_no_internal_field(session):
     [row] = [line for line in res.output.splitlines() if line.startswith("events ")]
     assert "cont" not in row
     assert "level, source, text (1 event)" in row
+
+
+def test_a_model_file_is_named_as_one(tmp_path):
+    import numpy as np
+
+    import sysid
+
+    path = sysid.StateSpaceModel(A=np.eye(1) * 0.5, B=np.ones((1, 1)), C=np.ones((1, 1)),
+                                 dt=0.02).save(tmp_path / "m.h5")
+    res = CliRunner().invoke(gs, ["info", str(path)])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert res.output.rstrip().endswith("a model file (sysid compare, sysid export read it)")

@@ -149,7 +149,7 @@ class PlainProgress:
     def _emit(self, t: float) -> None:
         self._next = (t // self.every_s + 1) * self.every_s
         packets = " ".join(f"{k} {v}" for k, v in self._packets.items()) or "-"
-        line = (f"[fly] t {t:6.1f}/{self.duration_s:.1f} s  phase {self._phase:<12} "
+        line = (f"[fly] t {max(t, 0.0):6.1f}/{self.duration_s:.1f} s  phase {self._phase:<12} "
                 f"packets {packets}{f'  | {self.status()}' if self.status else ''}")
         self.lines.append(line)
         click.echo(line, err=True)

@@ -86,14 +86,22 @@ def plan_imports(paths: list[Path]) -> tuple[list[ImportJob], list[Path]]:
             raise SessionError(f"{p}: no such file or folder")
         if p.is_dir():
             before = len(jobs) + sum(len(v) for v in csv_groups.values())
+            seen = len(skipped)
             _scan(p, depth=1, jobs=jobs, csv_groups=csv_groups, skipped=skipped)
             if len(jobs) + sum(len(v) for v in csv_groups.values()) == before:
                 if (p / "metadata.json").is_file() and any(p.glob("*.csv")):
                     raise SessionError(f"{p}: a 'groundstation export --to csv' folder, not a "
                                        "log to import: use the session file it was exported "
                                        "from as it is")
+                found = skipped[seen:]
+                sessions = sum(f.suffix.lower() == ".h5" for f in found)
+                what = (f"; its {sessions} .h5 file(s) are sessions already (groundstation "
+                        "info reads them)" if sessions else
+                        f"; found {len(found)} other file(s): "
+                        f"{', '.join(f.name for f in found[:3])}" if found else "")
                 raise SessionError(f"{p}: holds no uSD-card deck logs (0xBC first byte) or "
-                                   "cfclient CSVs ('Timestamp,...'), nor do its subfolders")
+                                   "cfclient CSVs ('Timestamp,...'), nor do its subfolders"
+                                   f"{what}")
             continue
         if not p.is_file():  # opening a FIFO waits for a writer; a device reads forever
             raise SessionError(f"{p}: not a regular file (a device, FIFO or socket); pass "

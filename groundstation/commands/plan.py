@@ -225,7 +225,7 @@ def command() -> None:
     \b
     Examples:
       groundstation plan check prbs-3axis
-      groundstation plan show flightplans/hover-check.toml
+      groundstation plan show hover-check          # a shipped plan, or a path to a .toml
       groundstation plan show prbs-3axis --json > schedule.json
     """
 

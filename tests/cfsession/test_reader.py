@@ -75,7 +75,9 @@ def test_phase_windows_run_to_the_next_phase_and_kinds_span_first_to_last(sessio
         session.phase_window("excitation")
     msg = str(info.value)
     assert "no phase 'excitation'" in msg and "'airborne-2'" in msg and "'landing'" in msg
-    assert "\n" not in msg
+    assert "\n" not in msg and "did you mean" not in msg
+    with pytest.raises(SessionError, match=r"no phase 'hovr' \(did you mean 'hover'\?\)"):
+        session.phase_window("hovr")  # --window with a typo (first-day review)
 
 
 def test_a_missing_stream_is_a_one_line_error_naming_the_streams(session):

@@ -194,3 +194,13 @@ def test_an_export_folder_is_named_as_one(tmp_path):
                                   str(tmp_path / "out")])
     assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
     assert "a 'groundstation export --to csv' folder, not a log to import" in res.output
+
+
+def test_a_folder_of_sessions_is_named_as_one(tmp_path):
+    from tests.viz.sessions import write_session
+
+    write_session(tmp_path / "flights" / "f.h5")
+    res = CliRunner().invoke(gs, ["import", str(tmp_path / "flights"), "--out",
+                                  str(tmp_path / "out")])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "its 1 .h5 file(s) are sessions already" in res.output
