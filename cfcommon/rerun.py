@@ -113,38 +113,41 @@ class ViewModeError(ValueError):
 
 class RecordingFileError(OSError):
     """An ``.rrd`` file that could not be written (a full disk, ``ulimit -f``): one line naming
-    the file and the reason; :func:`close_file` removed what was cut short."""
+    the file and the reason; nothing of it is left (:func:`close_file`)."""
 
     def __str__(self) -> str:
-        return f"{self.filename!r} could not be written: {self.strerror}; it was removed"
+        return f"{self.filename!r} could not be written: {self.strerror}; nothing was left"
+
+
+#: The byte streams of the recordings opened in mode "save", by ``id`` of the recording.
+_SAVING: dict[int, rr.BinaryStream] = {}
 
 
 def close_file(rec: rr.RecordingStream, path: Path) -> None:
-    """Write everything logged to ``rec`` (opened in mode ``"save"`` on ``path``) and close it.
+    """Write everything logged to ``rec`` (opened in mode ``"save"`` on ``path``) to ``path``.
 
-    Rerun's file writer reports a failed write only in its own log, and ``disconnect`` keeps
-    quiet about it: an ``.rrd`` cut short would be left behind with no error. A flush that
-    fails here raises :class:`RecordingFileError` (the reason found by one more write to the
-    file: no room, the file size limit, ...) after the partial file is removed."""
+    Rerun's own file writer (``RecordingStream.save``) reports a failed write only in its log:
+    ``disconnect`` then keeps quiet about it (an ``.rrd`` cut short left behind, exit 0), or
+    ``flush`` and ``disconnect`` wait forever (rerun 0.41, a full disk or ``ulimit -f``). So
+    the recording goes to memory (``binary_stream``) and this writes it, beside ``path`` then
+    renamed onto it: a file that cannot be written is a :class:`RecordingFileError` with the
+    system's reason, and nothing of it is left. The whole recording is held in memory until
+    then (an ``.rrd`` is about as large as the session it shows)."""
+    stream = _SAVING.pop(id(rec), None)
+    data = stream.read(flush=True) if stream is not None else None
+    rec.disconnect()
+    path = Path(path)
+    part = path.with_name(f".{path.name}.{os.getpid()}.part")
     try:
-        rec.flush()
-        failed = False
-    except RuntimeError as exc:
-        log.debug("rerun flush of %s: %s", path, exc)
-        failed = True
-    finally:
-        rec.disconnect()
-    if not failed and Path(path).is_file():
-        return
-    code, reason = errno.EIO, "Rerun's file writer stopped"
-    try:  # Python ignores SIGXFSZ: past ``ulimit -f`` this write fails with EFBIG
-        with open(path, "ab") as probe:
-            probe.write(bytes(1 << 20))
+        with open(part, "wb") as fh:
+            fh.write(data or b"")
+        os.replace(part, path)
     except OSError as exc:
-        code, reason = exc.errno or code, exc.strerror or reason
-    with contextlib.suppress(OSError):
-        Path(path).unlink()
-    raise RecordingFileError(code, reason, str(path))
+        raise RecordingFileError(exc.errno or errno.EIO, exc.strerror or "write failed",
+                                 str(path)) from None
+    finally:
+        with contextlib.suppress(OSError):
+            part.unlink()
 
 
 def has_display() -> bool:
@@ -168,7 +171,7 @@ def open_recording(
     display and otherwise serves the web viewer (logged warning). ``"serve"`` runs the web
     viewer on ``127.0.0.1:web_port`` (0: any free port, see :func:`serve_web`); ``url`` is its
     address, else None (the caller prints it). ``"save"`` needs ``rrd_path`` (its folder is
-    created; an existing file is replaced).
+    created; an existing file is replaced when :func:`close_file` writes it).
     """
     if mode not in MODES:
         raise ViewModeError(f"view mode {mode!r} is unknown; use one of {', '.join(MODES)}")
@@ -181,11 +184,11 @@ def open_recording(
         check_port(web_port)  # before anything starts: a busy port is a one-line error
     rec = rr.RecordingStream(application_id, recording_id=None)
     rec.send_recording_name(name)
-    if mode == "save":
+    if mode == "save":  # written by close_file: rerun's file writer can hang on a full disk
         path = Path(rrd_path)  # type: ignore[arg-type]
         path.parent.mkdir(parents=True, exist_ok=True)
-        rec.save(path)
-        log.info("writing Rerun recording to %s", path)
+        _SAVING[id(rec)] = rec.binary_stream()
+        log.info("recording for %s (written by close_file)", path)
         return rec, None
     if mode == "rerun":
         rec.spawn()

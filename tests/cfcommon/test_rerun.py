@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 
 import psutil
@@ -17,7 +18,7 @@ def test_save_mode_writes_a_readable_rrd_and_creates_its_folder(tmp_path):
     rec, url = rerun_io.open_recording(name="x", mode="save", rrd_path=path)
     assert url is None
     rec.log("a/b", rr.TextDocument("hello"), static=True)
-    rec.disconnect()
+    rerun_io.close_file(rec, path)
     assert load(path)["/a/b"].static["TextDocument:text"][0] == "hello"
 
 
@@ -103,20 +104,24 @@ def test_an_rrd_cut_short_by_the_file_size_limit_is_one_line_and_removed(tmp_pat
                            str(path)], capture_output=True, text=True, timeout=120)
     errors = [line for line in done.stderr.splitlines() if line.startswith("error:")]
     assert done.returncode == 2, done.stderr
-    assert errors == [f"error: {str(path)!r} could not be written: File too large; it was "
-                      "removed"]
+    assert errors == [f"error: {str(path)!r} could not be written: File too large; nothing "
+                      "was left"]
     assert "Traceback" not in done.stderr and not path.exists()
 
 
-def test_a_failed_flush_is_an_error_and_leaves_no_file(tmp_path, monkeypatch):
+def test_a_failed_write_is_an_error_and_leaves_no_file(tmp_path, monkeypatch):
     path = tmp_path / "x.rrd"
+    path.write_bytes(b"an older recording")
     rec, _ = rerun_io.open_recording(name="x", mode="save", rrd_path=path)
     rec.log("a/b", rr.TextDocument("hello"), static=True)
+    real_replace = os.replace
 
-    def failed_flush(self, **kwargs):
-        raise RuntimeError("File-writer thread shut down prematurely")
+    def full(src, dst):  # the disk filled as the file was completed
+        raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(rr.RecordingStream, "flush", failed_flush)
-    with pytest.raises(rerun_io.RecordingFileError, match="could not be written") as info:
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(rerun_io.RecordingFileError, match="No space left on device") as info:
         rerun_io.close_file(rec, path)
-    assert isinstance(info.value, OSError) and not path.exists()
+    monkeypatch.setattr(os, "replace", real_replace)
+    assert isinstance(info.value, OSError) and path.read_bytes() == b"an older recording"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.rrd"]  # no part file left

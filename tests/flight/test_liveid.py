@@ -21,7 +21,7 @@ import pytest
 from click.testing import CliRunner
 
 import groundstation.sim as gsim
-from cfcommon.rerun import open_recording
+from cfcommon.rerun import close_file, open_recording
 from cfsession import open_session
 from groundstation.cli import main
 from groundstation.commands.fly import live_id_engine, live_id_listener
@@ -206,8 +206,7 @@ def test_recorded_updates_replay_into_the_same_panels(thesis_flight, tmp_path):
     result, lid, _out = thesis_flight
     rec, _ = open_recording(name="replay", mode="save", rrd_path=tmp_path / "r.rrd")
     send_rows(rec, open_session(result.path)["live_id"].data)
-    rec.flush()
-    rec.disconnect()
+    close_file(rec, tmp_path / "r.rrd")
     entities = load_rrd(tmp_path / "r.rrd")
     poles = entities["/live_id/z_plane/poles"]
     assert len(poles.rows["Points2D:positions"]) == lid.updates

@@ -39,7 +39,7 @@ def test_singular_values_and_poles_equal_the_models(tmp_path, identified):
     rec, url = viz.open_recording(name="id", mode="save", rrd_path=path)
     assert url is None
     viz.log_identification(rec=rec, model=model)
-    rec.disconnect()
+    viz.close_file(rec, path)
     ents = load(path)
     sv = ents["/sysid/order/singular_values"].static["BarChart:values"][0]["buffer"]
     np.testing.assert_allclose(sv, model.provenance["singular_values"], rtol=1e-12)
@@ -77,7 +77,7 @@ def test_compare_series_and_fits(tmp_path, identified):
     path = tmp_path / "cmp.rrd"
     rec, _ = viz.open_recording(name="cmp", mode="save", rrd_path=path)
     viz.log_identification(rec=rec, model=model, comparisons=[sim, pred])
-    rec.disconnect()
+    viz.close_file(rec, path)
     ents = load(path, sort_by="t")
     for res, slug in ((sim, "simulation"), (pred, "prediction_5_step")):
         assert viz.mode_slug(res) == slug
@@ -107,7 +107,7 @@ def test_validation_comparisons_have_entities_of_their_own(tmp_path, identified)
     path = tmp_path / "val.rrd"
     rec, _ = viz.open_recording(name="val", mode="save", rrd_path=path)
     viz.log_identification(rec=rec, model=model, comparisons=[on_ident], validation=[on_val])
-    rec.disconnect()
+    viz.close_file(rec, path)
     ents = load(path, sort_by="t")
     for base, res, d in (("/sysid", on_ident, ident), ("/sysid/validation", on_val, val)):
         mod = ents[f"{base}/simulation/exp0/q/model"]
@@ -124,7 +124,7 @@ def test_validation_comparisons_have_entities_of_their_own(tmp_path, identified)
         with pytest.raises(sysid.ParameterError, match="simulation given more than once"):
             viz.log_identification(rec=rec, model=model, comparisons=[on_ident, on_val])
     finally:
-        rec.disconnect()
+        viz.close_file(rec, tmp_path / "twice.rrd")
 
 
 def test_compare_two_experiments(tmp_path, identified):
@@ -135,7 +135,7 @@ def test_compare_two_experiments(tmp_path, identified):
     path = tmp_path / "two.rrd"
     rec, _ = viz.open_recording(name="two", mode="save", rrd_path=path)
     viz.log_compare(rec=rec, result=res, dt=data.dt)
-    rec.disconnect()
+    viz.close_file(rec, path)
     ents = load(path, sort_by="t")
     for e, half in enumerate(halves):
         mod = ents[f"/sysid/simulation/exp{e}/q/model"]
@@ -150,7 +150,7 @@ def test_sweep_pole_clouds(tmp_path, identified):
     path = tmp_path / "sweep.rrd"
     rec, _ = viz.open_recording(name="sweep", mode="save", rrd_path=path)
     counts = viz.log_sweep_poles(rec=rec, result=result)
-    rec.disconnect()
+    viz.close_file(rec, path)
     ents = load(path)
     assert counts == {3: 4, 4: 4}
     for n in (3, 4):

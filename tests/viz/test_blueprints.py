@@ -111,7 +111,7 @@ def recordings(tmp_path_factory) -> dict[str, Path]:
                         dt=model.dt)
     rec, _ = viz.open_recording(name="all", mode="save", rrd_path=d / "all.rrd")
     viz.log_identification(rec=rec, model=model, residuals=sysid.residuals(model, data))
-    rec.disconnect()
+    viz.close_file(rec, d / "all.rrd")
     out["identify with residuals"] = d / "all.rrd"
     return out
 
@@ -247,5 +247,5 @@ def test_the_blueprint_sent_last_is_the_one_read(tmp_path) -> None:
         rec.log("/a", rr.TextDocument("a"), static=True)
         for name in ("first", "second"):
             rec.send_blueprint(rrb.Blueprint(rrb.TextDocumentView(origin="/a", name=name)))
-        rec.disconnect()
+        viz.close_file(rec, tmp_path / f"{i}.rrd")
         assert [v.name for v in views(tmp_path / f"{i}.rrd")] == ["second"]
