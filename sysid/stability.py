@@ -104,7 +104,8 @@ def stabilize(a: np.ndarray, *, mode: Stability
             log.warning("pole at |z| = %.3f kept: too far outside the unit circle to be noise "
                         "around an integrator; either the plant is unstable or the model has "
                         "more states than the data support (a lower order may avoid it; "
-                        "stability='enforce' moves it inside)", radius)
+                        "--stability enforce, stability='enforce' in Python, moves it "
+                        "inside)", radius)
         i += size
     if not moved:
         return a, []
