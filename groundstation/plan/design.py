@@ -195,7 +195,8 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
         doubt, flown_clock = chip_doubt(axes, sv_weak=w_sv), min(e.clock_period for e in chains)
         rule = {"poles": facts.poles, "dt": facts.dt, "rate_hz": rate, "n_ticks": phase.n_ticks,
                 "horizon_ticks": facts.horizon_samples * facts.dt * rate}
-        flown_period = max(((1 << e.register_length) - 1) * e.clock_period for e in chains)
+        flown_period = min(phase.n_ticks, max(((1 << e.register_length) - 1) * e.clock_period
+                                              for e in chains))  # ticks, as much as flew
         timing = prbs_timing(**rule, max_clock=flown_clock if doubt else None,
                              min_period_ticks=flown_period if doubt else 0, untrusted=doubt)
         if timing and timing.capped:

@@ -72,18 +72,30 @@ def prbs_timing(*, poles: np.ndarray, dt: float, rate_hz: float, n_ticks: int,
                      f"{clock * tick:g} s, but {untrusted}")
         clock = int(max_clock)
     want = 2 * math.pi * BETA_S * tau_h
-    need = max(want, horizon_ticks * tick, min_period_ticks * tick) / (clock * tick)
-    fits = [n for n in LFSR_TAPS if ((1 << n) - 1) * clock <= n_ticks]
+    asked = max(want / tick, horizon_ticks)  # ticks of period the model and horizons ask for
+
+    def registers(chip: int) -> list[int]:
+        return [n for n in LFSR_TAPS if ((1 << n) - 1) * chip <= n_ticks]
+
+    if min_period_ticks and max_clock is not None and clock < max_clock and not any(
+            ((1 << n) - 1) * clock >= min_period_ticks for n in registers(clock)):
+        why_clock = (f"chip {max_clock * tick:g} s as flown: the model's "
+                     f"{clock * tick:g} s chips hold no period as long as the flown "
+                     f"{min_period_ticks * tick:g} s within the phase, and {untrusted}")
+        clock = int(max_clock)  # the flown chip and period: they fitted the phase
+    fits = registers(clock)
     if not fits:
         raise PlanError(f"an excitation phase of {phase_s:g} s cannot hold one period of a "
                         f"PRBS with {clock * tick:g} s chips; lengthen it to at least "
                         f"{3 * clock * tick:g} s")
-    n = next((n for n in fits if (1 << n) - 1 >= need), fits[-1])
-    period_s = ((1 << n) - 1) * clock * tick
-    why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period_s:g} s vs 2 pi beta_s "
-               f"tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
-    if min_period_ticks * tick > want and (1 << n) - 1 >= min_period_ticks / clock:
+    n = next((n for n in fits if ((1 << n) - 1) * clock >= min_period_ticks
+              and ((1 << n) - 1) * clock >= asked * (1 - 1e-9)), fits[-1])
+    period = ((1 << n) - 1) * clock  # ticks
+    why_reg = (f"period {(1 << n) - 1} x {clock * tick:g} s = {period * tick:g} s vs 2 pi "
+               f"beta_s tau_H = 2 pi x {BETA_S:g} x {tau_h:.3g} s = {want:.3g} s (slowest mode)")
+    if min_period_ticks > asked * (1 + 1e-9) and period >= min_period_ticks:
         why_reg += f"; at least the flown {min_period_ticks * tick:g} s: {untrusted}"
-    if (1 << n) - 1 < need:
-        why_reg += f"; capped by the {phase_s:g} s phase (lengthen it to {want:.0f} s for all)"
+    if period < asked * (1 - 1e-9):
+        why_reg += (f"; capped by the {phase_s:g} s phase (lengthen it to "
+                    f"{max(want, horizon_ticks * tick):.0f} s for all)")
     return Timing(clock, n, why_clock, why_reg, capped)

@@ -213,6 +213,29 @@ def test_a_model_not_trusted_never_shortens_the_period():
     assert max(e.register_length for e in good.plan.phases[2].excitation) < 10
 
 
+@pytest.mark.parametrize(("flown", "phase_s", "kept"), [
+    # 3-tick chips, 8 bits (76.5 s) in an 80 s phase: 1-tick chips hold no period that long
+    # within the phase; they made a 51.1 s period (review of the first fix)
+    ((3, 8), 80.0, (3, 8)),
+    # 6 bits (6.3 s) of 1-tick chips in 25.2 s: 63 x 0.1 / 0.1 = 63.000000000000014 asked
+    # for a 7-bit period (12.7 s) "at least the flown 6.3 s"
+    ((1, 6), 25.2, (1, 6)),
+])
+def test_an_untrusted_model_keeps_the_flown_period_in_whole_ticks(flown, phase_s, kept):
+    text = load_plan("prbs-3axis").text.replace("duration = 102.3", f"duration = {phase_s}")
+    text = text.replace("register_length = 10", f"register_length = {flown[1]}")
+    text = text.replace("clock_period = 1 ", f"clock_period = {flown[0]} ")
+    text = text.replace("clock_period = 1\n", f"clock_period = {flown[0]}\n")
+    text = text.replace("seed = 441", "seed = 41").replace("seed = 440", "seed = 40")
+    plan = parse_plan(text=text, source="flown.toml")
+    assert {(e.clock_period, e.register_length) for e in plan.phases[2].excitation} == {flown}
+    poor = dict.fromkeys(GYROS, 16.0)
+    design = design_plan(plan, _facts(taus=(0.05, 0.1), fits=poor), name="a", flown=set())
+    assert {(e.clock_period, e.register_length)
+            for e in design.plan.phases[2].excitation} == {kept}
+    assert not any("capped by the" in str(c) for c in design.changes)
+
+
 def test_the_noise_floor_ends_at_the_data_rank():
     """With short horizons the singular values beyond the data's rank are exact zeros; their
     median made any order look supported (sigma_8 / median = 8e14, weakness 0: first-day
