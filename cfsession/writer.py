@@ -360,14 +360,18 @@ class SessionWriter:
         """``rows`` as one structured array; a row that does not fit the stream's fields (its
         length, a value that is no number) is left out, with a note, instead of costing the
         rows buffered with it (and at close, the clean close)."""
-        try:
-            return np.array(rows, dtype=dtype)
-        except (ValueError, TypeError, OverflowError):
-            pass
+        if all(isinstance(row, tuple) for row in rows):  # a list or scalar spreads into fields
+            try:
+                return np.array(rows, dtype=dtype)
+            except (ValueError, TypeError, OverflowError):
+                pass
         good, bad = [], 0
         for row in rows:
             try:
-                good.append(np.array(row, dtype=dtype))
+                item = np.array(tuple(row), dtype=dtype)  # a scalar or a list is no row
+                if item.ndim:
+                    raise ValueError("not one row")
+                good.append(item)
             except (ValueError, TypeError, OverflowError):
                 bad += 1
         if bad:
@@ -422,9 +426,14 @@ class SessionWriter:
         try:
             try:
                 self._flush(fsync=False)
-                for name, bad in self._bad_rows.items():
-                    self.notes.append(f"{bad} row(s) of stream {name!r} did not fit its fields "
-                                      "and were left out")
+                for name, bad in self._bad_rows.items():  # in the notes, and the file's events
+                    note = f"{bad} row(s) of stream {name!r} did not fit its fields and were " \
+                        "left out"
+                    self.notes.append(note)
+                    if "events" in self._specs and self._specs["events"].kind == "events":
+                        self.event(t=self._newest if math.isfinite(self._newest) else 0.0,
+                                   text=note, level="error", source="recorder")
+                self._flush(fsync=False)
                 a = self._file.attrs
                 a["closed_cleanly"] = np.int8(1)
                 if duration_s is not None:

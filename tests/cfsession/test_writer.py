@@ -228,9 +228,17 @@ def test_a_row_that_does_not_fit_costs_only_itself(tmp_path):
     w.append("gyro", (0.04, 1040, "fast", 0.2, 0.3))  # no number
     w.event(t=0.05, text="after the bad rows")
     w.append("gyro", (0.06, 1060, 0.4, 0.5, 0.6))
+    w.append("gyro", [0.07, 1070])  # a list: numpy spread it into every field, then raised
+    w.append("gyro", 5.0)  # a scalar: spread into every field, silently
+    w.flush()
+    w.append("gyro", [0.08, 1080, 0.7, 0.8, 0.9])  # a whole row as a list is a row
     w.close(summary={"complete": True})
-    assert any("2 row(s) of stream 'gyro'" in note for note in w.notes)
+    assert any("4 row(s) of stream 'gyro'" in note for note in w.notes), w.notes
     s = open_session(path)
     assert s.closed_cleanly
-    np.testing.assert_allclose(s["gyro"].values()[:, 0], [0.1, 0.4], rtol=1e-6)
-    assert [e.text for e in s.events()] == ["after the bad rows"]
+    np.testing.assert_allclose(s["gyro"].values()[:, 0], [0.1, 0.4, 0.7], rtol=1e-6)
+    events = s.events()
+    assert [e.text for e in events] == [
+        "after the bad rows", "4 row(s) of stream 'gyro' did not fit its fields and were left "
+        "out"]
+    assert events[1].level == "error" and events[1].source == "recorder"
