@@ -87,7 +87,7 @@ class Journal:
         self.event(f"phase {name} ({kind}) starts, {planned_s:g} s planned")
 
     def _listener_failed(self, what: str, recorder: bool, fatal: bool) -> None:
-        if fatal:  # SystemExit and the like: the program is to end, after the landing
+        if fatal and not recorder:  # SystemExit and the like: the program ends, after landing
             self.trouble(f"{what}: the flight ends")
         elif recorder:
             self.recording_lost_s = self.now()

@@ -361,3 +361,27 @@ def test_a_summary_that_fails_still_says_whether_the_flight_aborted(sim_uri, tmp
     assert result.summary["aborted"] and result.summary["cause"] == "injected cause"
     assert "summary failed" in result.summary["error"]
     assert open_session(result.path).json_meta("summary")["aborted"]
+
+
+def test_a_recorder_raising_no_exception_still_says_what_the_file_lacks(sim_uri, tmp_path,
+                                                                       monkeypatch):
+    """A KeyboardInterrupt from the recorder itself took the listeners' SystemExit path: not
+    a recording failure, so the runner never learnt where the file ends (review of the first
+    fix). It is a recording failure, then the interrupt goes on up."""
+    real, calls = Recorder.rows, []
+
+    def failing(self, stream, rows):
+        calls.append(stream)
+        if len(calls) == 200:
+            raise KeyboardInterrupt
+        return real(self, stream, rows)
+
+    monkeypatch.setattr(Recorder, "rows", failing)
+    uri = sim_uri()
+    with pytest.raises(KeyboardInterrupt):
+        fly_plan(plan="hover-check", out=tmp_path, uri=uri)
+    wait_for_stop(uri)
+    (path,) = tmp_path.glob("*.h5")
+    summary = open_session(path).json_meta("summary")
+    assert summary["aborted"]
+    assert summary["cause"] == "recording failed: Recorder.rows failed (KeyboardInterrupt: )"
