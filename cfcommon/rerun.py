@@ -41,6 +41,7 @@ __all__ = [
     "ViewModeError",
     "check_port",
     "close_file",
+    "discard_file",
     "entity_path",
     "has_display",
     "open_recording",
@@ -134,7 +135,10 @@ def close_file(rec: rr.RecordingStream, path: Path) -> None:
     system's reason, and nothing of it is left. The whole recording is held in memory until
     then (an ``.rrd`` is about as large as the session it shows)."""
     stream = _SAVING.pop(id(rec), None)
-    data = stream.read(flush=True) if stream is not None else None
+    if stream is None:  # closed already, or never opened to be saved: nothing to write
+        log.debug("close_file(%s): no recording to write", path)
+        return
+    data = stream.read(flush=True)
     rec.disconnect()
     path = Path(path)
     part = path.with_name(f".{path.name}.{os.getpid()}.part")
@@ -148,6 +152,13 @@ def close_file(rec: rr.RecordingStream, path: Path) -> None:
     finally:
         with contextlib.suppress(OSError):
             part.unlink()
+
+
+def discard_file(rec: rr.RecordingStream) -> None:
+    """Drop a recording opened in mode ``"save"`` without writing it (the work that was to
+    fill it failed: no file rather than part of one)."""
+    _SAVING.pop(id(rec), None)
+    rec.disconnect()
 
 
 def has_display() -> bool:

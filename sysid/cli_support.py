@@ -312,8 +312,10 @@ def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
             viz.log_identification(rec=rec, model=model, comparisons=list(comparisons),
                                    sweep=sweep, residuals=residuals,
                                    validation=list(validation))
-        finally:
-            viz.close_file(rec, path)
+        except BaseException:
+            viz.discard_file(rec)  # no file rather than part of one
+            raise
+        viz.close_file(rec, path)
     except (OSError, RuntimeError) as exc:
         lines = str(exc).strip().splitlines()
         reason = getattr(exc, "strerror", None) or (lines[0] if lines else type(exc).__name__)

@@ -61,6 +61,7 @@ from sysid.sweep import SweepResult
 __all__ = [
     "MODES",
     "close_file",
+    "discard_file",
     "has_display",
     "identification_blueprint",
     "log_compare",
@@ -110,6 +111,11 @@ def close_file(rec: rr.RecordingStream, path: Path) -> None:
         rerun_io.close_file(rec, path)
     except rerun_io.RecordingFileError as exc:
         raise ParameterError(str(exc)) from None
+
+
+def discard_file(rec: rr.RecordingStream) -> None:
+    """:func:`cfcommon.rerun.discard_file`: a saved recording dropped, no file written."""
+    rerun_io.discard_file(rec)
 
 
 def mode_slug(result: CompareResult) -> str:

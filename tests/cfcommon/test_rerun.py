@@ -125,3 +125,18 @@ def test_a_failed_write_is_an_error_and_leaves_no_file(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "replace", real_replace)
     assert isinstance(info.value, OSError) and path.read_bytes() == b"an older recording"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.rrd"]  # no part file left
+
+
+def test_closing_twice_or_discarding_never_writes_an_empty_file(tmp_path):
+    path = tmp_path / "x.rrd"
+    rec, _ = rerun_io.open_recording(name="x", mode="save", rrd_path=path)
+    rec.log("a/b", rr.TextDocument("hello"), static=True)
+    rerun_io.close_file(rec, path)
+    size = path.stat().st_size
+    rerun_io.close_file(rec, path)  # a second close (a finally clause) wrote 0 bytes over it
+    assert path.stat().st_size == size > 0
+    other = tmp_path / "y.rrd"
+    rec, _ = rerun_io.open_recording(name="y", mode="save", rrd_path=other)
+    rerun_io.discard_file(rec)
+    rerun_io.close_file(rec, other)
+    assert not other.exists()
