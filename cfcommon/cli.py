@@ -46,9 +46,10 @@ __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLi
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
-#: variable groups, not stream names: ``motor`` is ``motor.m1..m4`` in a flight's ``motors``
-#: stream, a cfclient CSV's ``Motors`` and a uSD log alike (``motors`` was a flight's only).
-DEFAULT_INPUTS = "motor"
+#: variables, not stream names: ``motor.m1..m4`` in a flight's ``motors`` stream, a cfclient
+#: CSV's ``Motors`` and a uSD log alike (``motors`` named a flight's stream only; the group
+#: ``motor`` also holds ``m1req..m4req`` where those are logged).
+DEFAULT_INPUTS = "motor.m1,motor.m2,motor.m3,motor.m4"
 DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped

@@ -140,7 +140,7 @@ def session_options(func: Callable) -> Callable:
     opts = [
         click.option("--inputs", default=DEFAULT_INPUTS, show_default=True, help=(
                      "Input channels: STREAM, STREAM.FIELD, group.variable or a variable "
-                     "group (motor: motor.m1..m4), comma-separated.")),
+                     "group (gyro: gyro.x, gyro.y, gyro.z), comma-separated.")),
         click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
                      help="Output channels, as --inputs (default: what the motors drive "
                           "directly; see docs/sysid.md)."),
