@@ -1,0 +1,71 @@
+"""Frozen channels: a stretch where one value repeats exactly is named (a sensor or log that
+stopped); a PRBS, a limit and noisy data are not; DaISy flutter's dead tail is."""
+
+from __future__ import annotations
+
+import numpy as np
+from click.testing import CliRunner
+
+import sysid
+from sysid.quirks import data_warnings, find_frozen, frozen_warnings
+from tests.sysid import daisy
+from tests.sysid.systems import open_loop, random_stable_system
+
+
+def _experiment(n: int = 2000, *, seed: int = 0) -> sysid.IOData:
+    rng = np.random.default_rng(seed)
+    system = random_stable_system(n_states=3, n_inputs=1, n_outputs=2, rng=rng,
+                                  radius=(0.6, 0.9))
+    return open_loop(system, n_samples=n, rng=rng, noise_std=0.02).data
+
+
+def test_an_output_frozen_for_its_second_half_is_named_with_where_and_how_long() -> None:
+    d = _experiment()
+    y = d.y.copy()
+    y[1200:, 1] = y[1200, 1]
+    frozen = sysid.IOData(u=d.u, y=y, dt=d.dt)
+    [f] = find_frozen([frozen])
+    assert (f.kind, f.start, f.length) == ("output", 1200, 800)
+    [line] = frozen_warnings([frozen])
+    assert "holds" in line and "exactly for 800 samples" in line and "40 % of" in line
+    assert line in data_warnings([frozen])
+    assert find_frozen([d]) == []  # the same data before the freeze
+
+
+def test_a_prbs_input_a_limit_and_a_short_hold_are_no_freeze() -> None:
+    d = _experiment()
+    u = np.sign(np.sin(np.arange(d.n_samples) / 150.0))[:, None]  # two levels, long holds
+    y = d.y.copy()
+    y[500:900, 0] = y[:, 0].max()  # held at its largest value: a limit
+    y[1000:1040, 1] = y[1000, 1]  # 40 samples: under FROZEN_MIN
+    assert find_frozen([sysid.IOData(u=u, y=y, dt=d.dt)]) == []
+
+
+def test_daisy_flutters_dead_tail_is_named() -> None:
+    """The last 225 of flutter's 1024 samples hold one value (6.66e-8, 4.35e-8): two thirds of
+    the benchmark protocol's validation third."""
+    ident, val = daisy.load("flutter")
+    names = {(f.kind, f.length) for f in find_frozen([ident, val])}
+    assert names == {("input", 225), ("output", 225)}
+    assert find_frozen(list(daisy.load("dryer"))) == []
+
+
+def test_identify_with_its_settings_given_says_so(tmp_path, caplog) -> None:
+    """Only the no-knobs selection reported the data's quirks; with --order, --past and
+    --future given a gyro frozen for half the flight went unsaid."""
+    import h5py
+
+    from sysid.cli import main
+    from tests.sysid.flights import known_system, write_flight
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=1500)
+    args = ["identify", str(flight.path), "--order", "4", "--past", "20", "--future", "10",
+            "--outputs", "gyro.x"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert "holds" not in caplog.text
+    with h5py.File(flight.path, "r+") as f:
+        gyro = f["gyro/data"][...]
+        gyro["x"][len(gyro) // 2:] = gyro["x"][len(gyro) // 2]
+        f["gyro/data"][...] = gyro
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert "output gyro.x holds" in caplog.text and "exactly for" in caplog.text
