@@ -83,6 +83,8 @@ MAX_ROWS = 40_000
 #: Least share of an input's variance the disturbance's past must explain for feedback
 #: (0.1 % of its rms): below, a feedback cannot bias a fit measurably.
 MIN_SHARE = 1e-6
+#: Rows of the ARX regressors formed at a time for the disturbance's residuals (memory).
+ARX_BLOCK = 65_536
 
 
 @dataclass(frozen=True)
@@ -156,11 +158,11 @@ def feedback_test(flights: Sequence[IOData], *, lags: int | None = None,
     if eps is None:  # the inputs explain the outputs exactly: nothing to feed back
         return FeedbackTest(p_values=np.ones(m), input_names=names, lags=lags,
                             n_rows=n_rows, feedback=False, shares=np.zeros(m))
-    u_past = np.vstack([_lagged(u[lags:], range(1, lags + 1), lags) for u in us])
-    e_past = np.vstack([_lagged(e, range(1, lead + 1), lags) for e in eps])
     target = np.vstack([u[2 * lags:] for u in us])
     rows = _subset(len(target))
-    p, share = _added_regressors(u_past[rows], e_past[rows], target[rows])
+    u_past = _lagged_rows([u[lags:] for u in us], range(1, lags + 1), lags, rows)
+    e_past = _lagged_rows(eps, range(1, lead + 1), lags, rows)
+    p, share = _added_regressors(u_past, e_past, target[rows])
     found = (p < alpha / m) & (share >= MIN_SHARE)
     return FeedbackTest(p_values=p, input_names=names, lags=lags, n_rows=n_rows,
                         feedback=bool(found.any()), shares=share)
@@ -173,10 +175,27 @@ def _subset(n: int) -> slice | np.ndarray:
     return np.sort(np.random.default_rng(0).choice(n, MAX_ROWS, replace=False))
 
 
-def _lagged(x: np.ndarray, lags: range, start: int) -> np.ndarray:
-    """Columns ``x(k - i)`` for ``i`` in ``lags``, rows ``k = start .. len(x) - 1``."""
-    n = len(x)
-    return np.hstack([x[start - i:n - i] for i in lags])
+def _lagged(x: np.ndarray, lags: range, start: int, stop: int | None = None) -> np.ndarray:
+    """Columns ``x(k - i)`` for ``i`` in ``lags``, rows ``k = start .. stop - 1`` (``stop``:
+    ``len(x)``)."""
+    stop = len(x) if stop is None else stop
+    return np.hstack([x[start - i:stop - i] for i in lags])
+
+
+def _lagged_rows(xs: Sequence[np.ndarray], lags: range, start: int,
+                 rows: slice | np.ndarray) -> np.ndarray:
+    """``np.vstack([_lagged(x, lags, start) for x in xs])[rows]`` without the pooled matrix
+    (``rows``: :func:`_subset`, sorted), which on long records is the largest array of an
+    identification (101 columns of 1.4e6 rows: 1.1 GB)."""
+    if isinstance(rows, slice):
+        return np.vstack([_lagged(x, lags, start) for x in xs])[rows]
+    offsets = np.cumsum([0, *(len(x) - start for x in xs)])
+    out = np.empty((len(rows), len(lags) * xs[0].shape[1]))
+    for f, x in enumerate(xs):
+        lo, hi = np.searchsorted(rows, offsets[f:f + 2])
+        k = rows[lo:hi] - offsets[f] + start  # rows of this flight, as samples of x
+        out[lo:hi] = np.hstack([x[k - i] for i in lags])
+    return out
 
 
 def _disturbance(us: list[np.ndarray], ys: list[np.ndarray], lags: int
@@ -185,16 +204,24 @@ def _disturbance(us: list[np.ndarray], ys: list[np.ndarray], lags: int
     ``lags`` past outputs and inputs ``0..lags``, each channel scaled to unit variance;
     channels the inputs explain exactly (relative std below 1e-6) are left out, None when
     all are."""
-    x = np.vstack([np.hstack([_lagged(y, range(1, lags + 1), lags),
-                              _lagged(u, range(0, lags + 1), lags)])
-                   for u, y in zip(us, ys, strict=True)])
     t = np.vstack([y[lags:] for y in ys])
     rows = _subset(len(t))
-    r = np.linalg.qr(np.hstack([x[rows], t[rows]]), mode="r")
+    x = np.hstack([_lagged_rows(ys, range(1, lags + 1), lags, rows),
+                   _lagged_rows(us, range(0, lags + 1), lags, rows)])
+    r = np.linalg.qr(np.hstack([x, t[rows]]), mode="r")
     k = x.shape[1]
     theta = np.linalg.lstsq(r[:k, :k], r[:k, k:], rcond=None)[0]
-    resid = t - x @ theta
     del x
+    # every row's residual, the regressors built a block of rows at a time (memory)
+    resid = np.empty_like(t)
+    row = 0
+    for u, y in zip(us, ys, strict=True):
+        for a in range(lags, len(y), ARX_BLOCK):
+            b = min(a + ARX_BLOCK, len(y))
+            x = np.hstack([_lagged(y, range(1, lags + 1), a, b),
+                           _lagged(u, range(0, lags + 1), a, b)])
+            resid[row:row + b - a] = t[row:row + b - a] - x @ theta
+            row += b - a
     scale = resid.std(axis=0)
     keep = scale > 1e-6 * t.std(axis=0)
     if not keep.any():

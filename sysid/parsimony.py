@@ -75,6 +75,7 @@ it) is not flagged: the data rank the orders.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Protocol
@@ -138,21 +139,30 @@ def _pieces(length: int, count: int) -> list[tuple[int, int]]:
     return list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
 
 
-def _blocks(res: CompareResult) -> list[list[tuple[int, int, int]]]:
-    """The blocks of ``res``, each a list of ``(record, start, stop)`` pieces: the score's
+def _blocks(res: CompareResult) -> tuple[tuple[tuple[int, int, int], ...], ...]:
+    """The blocks of ``res``, each a tuple of ``(record, start, stop)`` pieces: the score's
     windows (``res.window`` samples, split by :func:`sysid.validate.split_windows` as
     :func:`sysid.compare` splits them) or whole records, cut into pieces of at least
     :data:`MIN_PIECE_SAMPLES` samples when there are fewer than :data:`MIN_BLOCKS`; beyond
-    :data:`MAX_BLOCKS`, consecutive pieces share a block."""
+    :data:`MAX_BLOCKS`, consecutive pieces share a block. They depend on the records' lengths
+    and the window only, the same for every model of a sweep: worked out once
+    (:func:`_block_layout`)."""
+    return _block_layout(tuple(y.shape[0] for y in res.y_measured), res.window)
+
+
+@functools.lru_cache(maxsize=32)
+def _block_layout(lengths: tuple[int, ...], window: int | None
+                  ) -> tuple[tuple[tuple[int, int, int], ...], ...]:
+    """:func:`_blocks` of records of ``lengths`` samples scored over ``window``."""
     windows = []
-    for e, y in enumerate(res.y_measured):
-        n = y.shape[0]
-        windows += [(e, sl.start, sl.stop) for sl in split_windows(n, res.window or n)]
+    for e, n in enumerate(lengths):
+        windows += [(e, sl.start, sl.stop) for sl in split_windows(n, window or n)]
     per = math.ceil(MIN_BLOCKS / len(windows))
     pieces = [(e, a + a2, a + b2) for e, a, b in windows for a2, b2 in _pieces(b - a, per)]
     if len(pieces) <= MAX_BLOCKS:
-        return [[piece] for piece in pieces]
-    return [[pieces[i] for i in g] for g in np.array_split(np.arange(len(pieces)), MAX_BLOCKS)]
+        return tuple((piece,) for piece in pieces)
+    return tuple(tuple(pieces[i] for i in g)
+                 for g in np.array_split(np.arange(len(pieces)), MAX_BLOCKS))
 
 
 def block_errors(res: CompareResult) -> np.ndarray:

@@ -42,7 +42,7 @@ import scipy.linalg
 from sysid.data import IOData
 from sysid.errors import OrderError
 from sysid.model import StateSpaceModel
-from sysid.output_error import mode_powers
+from sysid.output_error import mode_power
 
 __all__ = [
     "PredictorFit",
@@ -222,16 +222,6 @@ def _modal_features(lam: np.ndarray, vec: np.ndarray, c: np.ndarray
     return keep, np.array(rows)
 
 
-def _feature_columns(z: np.ndarray, lam: np.ndarray, keep: list[int]) -> np.ndarray:
-    """Real features ``(N, cc, n)`` from complex modal filters ``z (N, cc, n_modes)``."""
-    cols = []
-    for i in keep:
-        cols.append(z[:, :, i].real)
-        if lam[i].imag > 0:
-            cols.append(z[:, :, i].imag)
-    return np.stack(cols, axis=2)
-
-
 def refine_predictor(*, a_k: np.ndarray, c: np.ndarray,
                      flights: list[tuple[np.ndarray, np.ndarray]], feedthrough: bool
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -299,16 +289,18 @@ def predictor_fit(*, a_k: np.ndarray, c: np.ndarray,
     for f_idx, (u, y) in enumerate(flights):
         w = u if held else np.hstack([u, y])
         target = y - _held_response(lam, vec, c, k, y) if held else y
-        z = np.empty((w.shape[0], cc, n), dtype=complex)
-        for i in keep:
-            z[:, :, i] = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)
-        powers = mode_powers(lam, w.shape[0], modes=keep)[:, None, :]
         feat = np.zeros((w.shape[0], n_feat))
-        feat[:, :n_bk] = _feature_columns(z, lam, keep).reshape(w.shape[0], n_bk)
+        x0 = n_bk + n_d + n * f_idx
+        col = 0  # feature j of channel ch is column ch * n + j; x0's feature j is x0 + j
+        for i in keep:  # each mode's filter written straight into its columns (no copies)
+            z = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam[i]], w, axis=0)  # (N, cc)
+            power = mode_power(lam[i], w.shape[0])  # 0 after its leading power.size rows
+            for part in (np.real, np.imag) if lam[i].imag > 0 else (np.real,):
+                feat[:, col:n_bk:n] = part(z)
+                feat[:power.size, x0 + col] = part(power)
+                col += 1
         if feedthrough:
             feat[:, n_bk:n_bk + m] = u
-        x0 = n_bk + n_d + n * f_idx
-        feat[:, x0:x0 + n] = _feature_columns(powers, lam, keep)[:, 0, :]
         gram += feat.T @ feat
         fty += feat.T @ target
         if residuals:

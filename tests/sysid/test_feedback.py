@@ -182,3 +182,25 @@ def test_open_loop_data_try_a_direct_term_with_no_knobs():
     assert sel.feedback.feedback is False and sel.model.provenance["feedthrough"] is True
     assert "direct term kept" in sel.feedthrough_note
     assert _truth(sel.model, val) > 99.0
+
+
+def test_the_subset_of_lagged_rows_is_built_without_the_pooled_matrix(monkeypatch):
+    """Long records: the regressions' rows are taken from the flights directly (the pooled
+    lag matrix was the largest array of a no-knobs run, 1.1 GB on 2e6 samples), the same
+    values; the disturbance's residuals are formed a block of rows at a time."""
+    from sysid import feedback
+
+    rng = np.random.default_rng(5)
+    xs = [rng.standard_normal((n, 2)) for n in (700, 12, 1300)]
+    pooled = np.vstack([feedback._lagged(x, range(1, 6), 5) for x in xs])
+    rows = np.sort(rng.choice(len(pooled), 300, replace=False))
+    np.testing.assert_array_equal(feedback._lagged_rows(xs, range(1, 6), 5, rows), pooled[rows])
+    np.testing.assert_array_equal(feedback._lagged_rows(xs, range(1, 6), 5, slice(None)), pooled)
+    us, ys = [x[:, :1] for x in xs], [x[:, 1:] + 0.5 * x[:, :1] for x in xs]
+    for max_rows in (feedback.MAX_ROWS, 500):  # every row, and a subset (seed 0)
+        monkeypatch.setattr(feedback, "MAX_ROWS", max_rows)
+        monkeypatch.setattr(feedback, "ARX_BLOCK", 65_536)
+        whole = feedback._disturbance(us, ys, 5)
+        monkeypatch.setattr(feedback, "ARX_BLOCK", 37)
+        for a, b in zip(whole, feedback._disturbance(us, ys, 5), strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)

@@ -157,3 +157,26 @@ def test_mode_powers_are_numpys_complex_powers(start):
     only = mode_powers(lam, 50, start=start, modes=[1, 3])
     assert not only[:, [0, 2, 4, 5]].any()
     np.testing.assert_allclose(only[:, [1, 3]], direct[:50, [1, 3]], rtol=1e-12)
+
+
+def test_mode_powers_stop_at_the_floor_before_the_subnormal_numbers():
+    """A stable mode's powers are 0 once below ``POWER_FLOOR`` (the impulse filter went on
+    into a limit cycle of subnormal numbers, a hundred times slower per sample); the powers
+    before are the filter's own, to the bit, also for a block starting at ``start``."""
+    import scipy.signal
+
+    from sysid.output_error import POWER_FLOOR, mode_powers
+
+    lam = np.array([0.9, 0.95 * np.exp(0.3j), 0.5 - 0.5j, 0.999, 1.01])
+    impulse = np.zeros(20_000)
+    impulse[0] = 1.0
+    for start in (0, 37, 5000):
+        got = mode_powers(lam, impulse.size, start=start)
+        for i, li in enumerate(lam):
+            full = scipy.signal.lfilter([1.0], [1.0, -li], impulse) * (li ** start if start else 1)
+            kept = got[:, i] != 0  # a leading run; the floor, to the recursion's rounding
+            assert kept.all() or not kept[np.argmin(kept):].any()
+            np.testing.assert_array_equal(got[kept, i], full[kept])
+            assert (np.abs(full[~kept]) < 1.0001 * POWER_FLOOR).all()
+            assert (np.abs(full[kept]) > 0.9999 * POWER_FLOOR).all()
+        assert np.count_nonzero(got[:, 0]) < 7000  # 0.9 ** 6600 = 1e-302
