@@ -40,7 +40,7 @@ from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel
 from sysid.model_io import check_not_a_session
-from sysid.quirks import data_warnings
+from sysid.quirks import frozen_warnings
 from sysid.refit import PROVENANCE_KEY
 from sysid.validate import compare, min_fit_samples, simulation_window
 
@@ -122,8 +122,8 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     flights = [e for g in groups for e in g]
     selection = None
     if order is not None and past is not None and future is not None:
-        for warning in data_warnings(flights):  # what the selection reports, also said here
-            log.warning("%s", warning)
+        for warning in frozen_warnings(flights):  # the selection's cheapest check, said here
+            log.warning("%s", warning)  # (its outlier and drift checks cost more than this fit)
         with Console(stderr=True).status(f"identifying ({method}, n={order})"):
             model = meth.identify(flights, order=order, past=past, future=future,
                                   options=options)

@@ -7,9 +7,12 @@ degenerate-data review).
 
 A channel is named when, in some record, one value repeats exactly over a run of at least
 :data:`FROZEN_SHARE` of the record and :data:`FROZEN_MIN` samples, while the channel is
-continuous there (distinct values more than :data:`CONTINUOUS` of the samples: a PRBS, a step
-or a quantised sensor repeat values by design) and the run is not at the record's smallest or
-largest value (a limit: saturation, not a freeze).
+continuous elsewhere in the record (distinct values more than :data:`CONTINUOUS` of the other
+samples: a PRBS, a step or a quantised sensor repeat values by design) and the run is not at
+the record's smallest or largest value (a limit: saturation, not a freeze). Exact equality
+survives the removal of a mean but not of a trend: with ``--detrend linear`` a frozen stretch
+is a straight line, and is not named. Noise-free data at rest (simulated) is named too, and
+the warning says so.
 """
 
 from __future__ import annotations
@@ -49,13 +52,10 @@ class Frozen:
     dt: float
 
 
-def _longest_run(x: np.ndarray) -> tuple[int, int]:
-    """Start and length of the longest run of exactly equal consecutive values of ``x``."""
-    change = np.flatnonzero(np.diff(x) != 0) + 1
-    starts = np.concatenate([[0], change])
-    lengths = np.diff(np.concatenate([starts, [len(x)]]))
-    i = int(np.argmax(lengths))
-    return int(starts[i]), int(lengths[i])
+def _runs(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and lengths of the runs of exactly equal consecutive values of ``x``."""
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(x) != 0) + 1])
+    return starts, np.diff(np.concatenate([starts, [len(x)]]))
 
 
 def find_frozen(flights: Sequence[IOData]) -> list[Frozen]:
@@ -73,14 +73,21 @@ def find_frozen(flights: Sequence[IOData]) -> list[Frozen]:
         w = d.w
         for j in range(w.shape[1]):
             x = w[:, j]
-            start, length = _longest_run(x)
-            held = x[start]
-            if (length < need or held in (x.min(), x.max())
-                    or len(np.unique(x)) <= CONTINUOUS * n):
-                continue
-            found.append(Frozen(name=names[j], kind=kinds[j], unit=units[j],
-                                record=d.source or f"record {r + 1}", value=float(held),
-                                start=start, length=length, n_samples=n, dt=d.dt))
+            starts, lengths = _runs(x)
+            low, high = x.min(), x.max()
+            for i in np.argsort(lengths)[::-1]:  # the longest run that is no limit
+                start, length = int(starts[i]), int(lengths[i])
+                if length < need:
+                    break
+                if x[start] in (low, high):
+                    continue
+                rest = np.concatenate([x[:start], x[start + length:]])
+                if len(np.unique(rest)) > CONTINUOUS * len(rest):  # continuous elsewhere
+                    found.append(Frozen(name=names[j], kind=kinds[j], unit=units[j],
+                                        record=d.source or f"record {r + 1}",
+                                        value=float(x[start]), start=start, length=length,
+                                        n_samples=n, dt=d.dt))
+                break
     return found
 
 
@@ -97,9 +104,9 @@ def frozen_warnings(flights: Sequence[IOData]) -> list[str]:
     """
     out = []
     for f in find_frozen(flights):
-        unit = f" {f.unit}" if f.unit else ""
-        out.append(f"{f.kind} {f.name} holds {f.value:.6g}{unit} exactly for {f.length} samples "
-                   f"({f.length * f.dt:.3g} s, {100 * f.length / f.n_samples:.0f} % of "
-                   f"{f.record}) from {f.start * f.dt:.3g} s into it: a sensor or a log that "
-                   "stopped, its last value held; leave that stretch out (--window)")
+        out.append(f"{f.kind} {f.name} holds one value exactly for {f.length} samples "
+                   f"({f.length * f.dt:.1f} s, {100 * f.length / f.n_samples:.0f} % of "
+                   f"{f.record}) from sample {f.start} ({f.start * f.dt:.1f} s after that "
+                   "record's start): a sensor or a log that stopped and was held, or data at "
+                   "rest; if it stopped, leave that stretch out")
     return out

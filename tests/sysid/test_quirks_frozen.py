@@ -27,9 +27,24 @@ def test_an_output_frozen_for_its_second_half_is_named_with_where_and_how_long()
     [f] = find_frozen([frozen])
     assert (f.kind, f.start, f.length) == ("output", 1200, 800)
     [line] = frozen_warnings([frozen])
-    assert "holds" in line and "exactly for 800 samples" in line and "40 % of" in line
+    assert "holds one value exactly for 800 samples" in line and "40 % of" in line
+    assert "from sample 1200" in line
     assert line in data_warnings([frozen])
     assert find_frozen([d]) == []  # the same data before the freeze
+
+
+def test_a_freeze_over_most_of_a_record_or_beside_a_longer_limit_is_named() -> None:
+    """Only the longest run was looked at, and distinct values were counted over the whole
+    record: an 85 % freeze, or a 15 % freeze beside 30 % at the channel's maximum, went
+    unnamed (review)."""
+    d = _experiment()
+    y = d.y.copy()
+    y[300:, 0] = y[300, 0]  # 85 %
+    y[:600, 1] = y[:, 1].max()  # 30 % at its largest value: a limit
+    y[1000:1300, 1] = y[1000, 1]  # 15 % mid-range: a freeze
+    found = {(f.name, f.start, f.length) for f in find_frozen([sysid.IOData(u=d.u, y=y,
+                                                                            dt=d.dt)])}
+    assert found == {(d.output_names[0], 300, 1700), (d.output_names[1], 1000, 300)}
 
 
 def test_a_prbs_input_a_limit_and_a_short_hold_are_no_freeze() -> None:
@@ -68,4 +83,4 @@ def test_identify_with_its_settings_given_says_so(tmp_path, caplog) -> None:
         gyro["x"][len(gyro) // 2:] = gyro["x"][len(gyro) // 2]
         f["gyro/data"][...] = gyro
     assert CliRunner().invoke(main, args).exit_code == 0
-    assert "output gyro.x holds" in caplog.text and "exactly for" in caplog.text
+    assert "output gyro.x holds one value exactly for" in caplog.text
