@@ -41,6 +41,9 @@ FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
 """The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
 BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
 """A slow block (name, variables, period s) for the take-off check and the battery's sag."""
+SUPERVISOR_INFO = "supervisor.info"
+"""The supervisor's state bits (``supervisor.c``: bit 5 tumbled, bit 6 locked), logged in the
+battery block where the TOC has it, for the take-off check."""
 ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
 """The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
 the radio's budget stays with the thesis' three 50 Hz blocks)."""
@@ -108,13 +111,16 @@ def flight_blocks(*, toc_type: TocType, altitude_variable: str | None,
                   setpoint_period_s: float, warn: Callable[[str], None] = lambda _: None,
                   ) -> list[BlockPlan]:
     """Every block a flight logs, checked by :func:`plan_blocks`: :data:`FLIGHT_BLOCKS`, the
-    battery (left out, with ``warn``, when the TOC has no ``pm.vbat``: e.g. CrazySim's
-    unpatched SITL) and the attitude, and ``altitude_variable`` (a plan's altitude hold) at
-    :func:`altitude_block_period`."""
+    battery with :data:`SUPERVISOR_INFO` where the TOC has it (left out, with ``warn``, when
+    the TOC has no ``pm.vbat``: e.g. CrazySim's unpatched SITL) and the attitude, and
+    ``altitude_variable`` (a plan's altitude hold) at :func:`altitude_block_period`."""
     blocks = plan_blocks(toc_type=toc_type, blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S)
-    slow = [BATTERY_BLOCK, ATTITUDE_BLOCK]
+    name, variables, period = BATTERY_BLOCK
+    if toc_type(SUPERVISOR_INFO) is not None:
+        variables = (*variables, SUPERVISOR_INFO)
+    slow = [(name, variables, period), ATTITUDE_BLOCK]
     if toc_type(BATTERY_BLOCK[1][0]) is None:
-        slow.remove(BATTERY_BLOCK)
+        slow.pop(0)
         warn(f"no {BATTERY_BLOCK[1][0]} in the log TOC (no power management, e.g. an "
              "unpatched SITL build): battery check skipped")
     for name, variables, period in slow:

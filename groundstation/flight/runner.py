@@ -32,7 +32,8 @@ no log packet for :data:`~groundstation.flight.telemetry.LINK_SILENCE_S` = 0.5 s
 while flying), a setpoint more than :data:`SETPOINT_LATE_S` late (the host suspended or the
 runner's thread held up: the missed setpoints are never sent as a burst), an exception in the
 runner, a measured rate beyond :class:`RateLimits`, a setpoint
-that is not finite (NaN or inf is never sent) or a battery below ``vehicle.min_vbat`` at take-off
+that is not finite (NaN or inf is never sent), a battery below ``vehicle.min_vbat`` or a vehicle
+its supervisor locked or that is upside down (``supervisor.info``) at take-off
 each record an event (source ``safety``) and end with the stop setpoint; if the plan's
 ``on_abort`` is ``descend`` and the link is up, the
 :meth:`~groundstation.plan.schedule.Schedule.abort_schedule` descent streams first at the same rate,
@@ -96,6 +97,9 @@ __all__ = ["SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
 
 log = logging.getLogger(__name__)
 
+TUMBLED_BIT, LOCKED_BIT = 1 << 5, 1 << 6
+"""Bits of ``supervisor.info`` (``supervisor.c``) that refuse a take-off."""
+
 
 class _Runner:
     """One flight; see the module docstring. Use :func:`fly_plan`."""
@@ -133,7 +137,8 @@ class _Runner:
 
     # ------------------------------------------------------------------ the flight
     def preflight(self) -> bool:
-        """Wait for every log block and a battery reading; refuse a low battery."""
+        """Wait for every log block and a battery reading; refuse a low battery, and a
+        vehicle its supervisor has locked or that is upside down (``supervisor.info``)."""
         journal, telemetry = self.journal, self.telemetry
         names = list(self.block_periods)
         give_up = time.monotonic() + max(3.0, self.connect_timeout_s / 2)
@@ -150,10 +155,21 @@ class _Runner:
             journal.dispatch()
         if journal.causes:
             return False
-        v, vbat = self.schedule.vehicle, telemetry.vbat
+        v, vbat, bits = self.schedule.vehicle, telemetry.vbat, telemetry.supervisor
         if vbat is not None and vbat < v.min_vbat:
             journal.cause(f"battery {vbat:.2f} V below vehicle.min_vbat = {v.min_vbat:g} V: "
                           "refusing to take off; charge or swap the battery")
+            return False
+        if bits is not None and bits & LOCKED_BIT:  # it would "fly" with its motors at 0
+            journal.cause(f"the Crazyflie is locked (supervisor.info 0x{bits:04x}): its "
+                          "supervisor stopped it (a commander watchdog timeout in flight, an "
+                          "emergency stop or a crash) and keeps it so until restarted; "
+                          "refusing to take off; power-cycle it (the SITL firmware: restart "
+                          "groundstation sim --firmware)")
+            return False
+        if bits is not None and bits & TUMBLED_BIT:
+            journal.cause(f"the Crazyflie is upside down (supervisor.info 0x{bits:04x}): "
+                          "refusing to take off; set it level")
             return False
         battery = "no battery reading" if vbat is None else f"battery {vbat:.2f} V"
         journal.event(f"preflight ok: {battery}, log blocks {names} running")

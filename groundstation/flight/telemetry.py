@@ -45,6 +45,7 @@ class Telemetry:
         self.last_log = -math.inf  # flight time of the newest log packet (any block)
         self.last_block: dict[str, float] = {}  # ... of each block
         self.vbat: float | None = None
+        self.supervisor: int | None = None  # supervisor.info where the battery block has it
         self.altitude_m: float | None = None  # last logged altitude for the altitude hold
         self.over_limit_runs = [0, 0, 0]  # consecutive packets beyond the rate limit, per axis
         self.console = ""
@@ -69,6 +70,8 @@ class Telemetry:
                 self.delivered[block] += 1
                 if block == BATTERY_BLOCK[0]:
                     self.vbat = float(values[0])
+                    if len(values) > 1:
+                        self.supervisor = int(values[1])
                 elif block == ALTITUDE_BLOCK:
                     self.altitude_m = float(values[0])
                 elif block == "gyro" and self.flying:

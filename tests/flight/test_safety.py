@@ -120,6 +120,27 @@ def test_low_battery_refuses_to_take_off(flight_uri, tmp_path):
     assert s["battery"].values()[0, 0] < 4.2
 
 
+def test_a_locked_vehicle_refuses_to_take_off(sim_uri, tmp_path):
+    """A vehicle its supervisor locked (here: the commander watchdog after a link cut in the
+    hover) runs no motors until restarted. A second flight "flew" it with its motors at 0,
+    every setpoint sent, exit 0 (SITL: after any flight; first-day review)."""
+    uri = sim_uri()
+
+    def cut(k: int) -> None:
+        if k == 40:
+            gsim.instance(uri).cut_link()
+
+    fly_plan(plan="hover-check", out=tmp_path / "first", uri=uri, tick_hook=cut)
+    sim = wait_for_stop(uri)
+    assert sim.vehicle.is_locked
+    result = fly_plan(plan="hover-check", out=tmp_path / "second", uri=uri)
+    assert result.aborted and result.cause.startswith("the Crazyflie is locked (supervisor.info")
+    assert "refusing to take off; power-cycle it" in result.cause
+    s = check_closed_with_stop(result)
+    assert (s["setpoints"].data["thrust"] == 0).all()
+    assert s["battery"].data["info"][0] & 0x40
+
+
 class _Listener:
     def __init__(self, fail_at: int | None = None) -> None:
         self.calls, self.fail_at, self.ended = 0, fail_at, None
