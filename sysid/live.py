@@ -213,8 +213,15 @@ class LiveIdentifier:
         w = self._w[:n]
         mu = self._prefix_arr[n] / n
         std = w.std(axis=0)
-        if np.any(std <= 1e-12 * max(float(std.max()), 1e-300)):
-            raise DataError("a channel is constant so far; excite it (or wait)")
+        flat = np.flatnonzero(std <= 1e-12 * max(float(std.max()), 1e-300))
+        if flat.size:
+            in_names, out_names = self.names[0], self.names[1]
+            names = [*(in_names or [f"u{i}" for i in range(self.m)]),
+                     *(out_names or [f"y{i}" for i in range(self.ell)])]
+            shown = ", ".join(names[j] for j in flat[:4])
+            more = f" and {flat.size - 4} more" if flat.size > 4 else ""
+            raise DataError(f"constant so far: {shown}{more}; excite it, or wait (motors "
+                            "constant at 0 are not running)")
         # s_a = sum_{j<M} w(j + a), from the running sums
         s = np.concatenate([self._prefix_arr[a + cols] - self._prefix_arr[a]
                             for a in range(blocks)])

@@ -78,6 +78,16 @@ def test_too_few_samples_and_bad_rows_are_errors() -> None:
         live.append(u=np.full((1, 2), np.nan), y=np.ones((1, 2)))
 
 
+def test_constant_channels_are_named() -> None:
+    """On a locked vehicle every motor stayed 0: "a channel is constant so far" named none."""
+    live = LiveIdentifier(n_inputs=2, n_outputs=1, order=2, past=5, future=5, dt=0.02,
+                          input_names=("motor.m1", "motor.m2"), output_names=("gyro.x",))
+    rng = np.random.default_rng(0)
+    live.append(u=np.zeros((200, 2)), y=rng.standard_normal((200, 1)))
+    with pytest.raises(DataError, match=r"constant so far: motor\.m1, motor\.m2; excite it"):
+        live.update()
+
+
 @pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX process priorities")
 def test_the_child_process_identifies_alike_at_a_lower_cpu_priority() -> None:
     """The engine in its own interpreter gives the same model, and runs nicer than the flight
