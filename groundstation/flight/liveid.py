@@ -313,7 +313,7 @@ class LiveIdListener:
 
     def _maybe_update(self) -> None:
         (start, stop), latest = self._grid.window, self._grid.latest
-        if start is not None and stop is None and not self.updates:
+        if start is not None and stop is None and not self.updates and not self.failed:
             n, need = self.ident.n_samples, self.ident.min_samples
             self.status = (f"live id: excitation on, {n}/{need} samples for the first update"
                            if n < need else "live id: first update running")

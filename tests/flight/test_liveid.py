@@ -337,10 +337,14 @@ def test_a_slow_or_failing_identification_never_touches_the_flight(sim_uri, tmp_
     lid = LiveIdListener(config=plan.live_id, observers=[_Broken()],
                          engine=_engine(delay=1.0, uri=uri) if kind == "slow"
                          else _engine(fail=True))
-    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid])
+    statuses: list[tuple[int, str]] = []  # (failures so far, the status line then)
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid],
+                      tick_hook=lambda k: statuses.append((lid.failed, lid.status)))
     assert not result.aborted, result.cause
     wait_for_stop(uri)
     s = check_closed_with_stop(result)
+    # after a failure the status says so (it went back to "first update running": review)
+    assert not [line for failed, line in statuses if failed and "first update" in line]
     assert result.summary["setpoints"]["scheduled"] == len(plan.compile())
     assert not any(e.level == "error" for e in s.events())
     if kind == "slow":  # each update takes 1 s of flight: 5 update periods come due unmet
