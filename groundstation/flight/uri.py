@@ -89,6 +89,10 @@ def connect_advice(why: str, *, uri: str) -> str:
     low = why.lower()
     if uri.startswith("udp://"):  # nothing but a simulator or SITL listens there
         parts = urlsplit(uri)
+        if any(k in low for k in ("name or service not known", "nodename nor servname",
+                                  "name resolution")):
+            return (f"the host name {parts.hostname!r} does not resolve; use the address of "
+                    f"the computer running the simulator, e.g. udp://127.0.0.1:{parts.port}")
         return (f"check that a simulator or SITL is listening on {parts.hostname}:{parts.port}"
                 f" (groundstation sim --port {parts.port}; with --firmware for SITL)")
     if "malformed uri" in low:

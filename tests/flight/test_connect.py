@@ -260,3 +260,13 @@ def test_a_refused_udp_connection_points_at_the_simulator_not_the_radio(tmp_path
     line = _fly_error(f"udp://127.0.0.1:{port}", tmp_path / "s")
     assert f"listening on 127.0.0.1:{port}" in line and f"groundstation sim --port {port}" in line
     assert "channel" not in line and "groundstation scan" not in line
+
+
+@pytest.mark.parametrize("why", ["Couldn't load link driver: [Errno -2] Name or service not "
+                                 "known", "[Errno -3] Temporary failure in name resolution"])
+def test_a_udp_host_that_does_not_resolve_says_so(why):
+    """(cflib's reasons as given; no lookup here: tests use no network.)"""
+    from groundstation.flight.uri import connect_advice
+
+    advice = connect_advice(why, uri="udp://nonexistent.invalid:19850")
+    assert advice.startswith("the host name 'nonexistent.invalid' does not resolve")
