@@ -130,7 +130,8 @@ def _scan(addr: int | None) -> None:
                    f"address {d['address']}){serial}")
     if not problem and not any(d["pid"] == 0x7777 for d in devices):
         problem = ("no Crazyradio found on USB; plug in a Crazyradio PA (1915:7777), "
-                   "or if it is plugged in, " + UDEV_HINT)
+                   "or if it is plugged in, " + UDEV_HINT + "; a simulator is not scanned: "
+                   "fly it by its URI (udp://127.0.0.1:PORT, sim://0)")
     uris = scan_crazyflies(addr)
     for uri in uris:
         click.echo(f"crazyflie {uri}")
