@@ -8,6 +8,9 @@
 
 Both raise :class:`click.BadParameter`, so each CLI prints one line and exits with 2.
 
+* :func:`whole_file`: a file a command writes goes beside its name and is renamed onto it
+  when complete, so a full disk or ``ulimit -f`` never leaves one cut short.
+
 * :class:`OneLineErrorGroup`: the click group both CLIs use. A user error (a usage error, one
   of the group's ``user_errors``, a missing or unreadable file) prints ``error: ...`` on one
   line and exits with 2, never a traceback; ``-h`` still shows the usage. Ctrl-C prints one
@@ -31,7 +34,7 @@ import io
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -42,7 +45,7 @@ from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLineErrorGroup",
            "check_output", "drop_failing_stdout", "output_console", "output_gone",
-           "output_table", "writing_stdout"]
+           "output_table", "whole_file", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
@@ -216,6 +219,24 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
         raise click.BadParameter(f"{str(path)!r} already exists; {how}choose another name",
                                  param_hint=option)
     return path
+
+
+@contextlib.contextmanager
+def whole_file(path: Path) -> Iterator[Path]:
+    """The name to write ``path``'s content to, beside it; renamed onto ``path`` once written,
+    removed if writing failed. The ``OSError`` then names ``path`` (the file the command
+    stopped at), whatever name failed underneath."""
+    path = Path(path)
+    part = path.with_name(f".{path.name}.{os.getpid()}.part")
+    try:
+        yield part
+        os.replace(part, path)
+    except OSError as exc:
+        raise OSError(exc.errno or errno.EIO, exc.strerror or "write failed", str(path)) \
+            from None
+    finally:
+        with contextlib.suppress(OSError):
+            part.unlink()
 
 
 def _same_file(a: Path, b: Path) -> bool:

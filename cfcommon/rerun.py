@@ -17,8 +17,6 @@ through :func:`panel_title`, which keeps them short enough not to be cut in a sm
 from __future__ import annotations
 
 import atexit
-import contextlib
-import errno
 import logging
 import os
 import re
@@ -32,6 +30,8 @@ from typing import Literal
 from urllib.parse import quote
 
 import rerun as rr
+
+from cfcommon.cli import whole_file
 
 __all__ = [
     "MODES",
@@ -140,18 +140,11 @@ def close_file(rec: rr.RecordingStream, path: Path) -> None:
         return
     data = stream.read(flush=True)
     rec.disconnect()
-    path = Path(path)
-    part = path.with_name(f".{path.name}.{os.getpid()}.part")
     try:
-        with open(part, "wb") as fh:
-            fh.write(data or b"")
-        os.replace(part, path)
+        with whole_file(Path(path)) as part:
+            part.write_bytes(data or b"")
     except OSError as exc:
-        raise RecordingFileError(exc.errno or errno.EIO, exc.strerror or "write failed",
-                                 str(path)) from None
-    finally:
-        with contextlib.suppress(OSError):
-            part.unlink()
+        raise RecordingFileError(exc.errno, exc.strerror, exc.filename) from None
 
 
 def discard_file(rec: rr.RecordingStream) -> None:

@@ -433,7 +433,8 @@ class SessionWriter:
                     if "events" in self._specs and self._specs["events"].kind == "events":
                         self.event(t=self._newest if math.isfinite(self._newest) else 0.0,
                                    text=note, level="error", source="recorder")
-                self._flush(fsync=False)
+                if self._bad_rows:  # those events
+                    self._flush(fsync=False)
                 a = self._file.attrs
                 a["closed_cleanly"] = np.int8(1)
                 if duration_s is not None:

@@ -22,27 +22,26 @@
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``).
 A damaged or crash-truncated session is exported as far as it reads, and each of its problems
 (those ``groundstation info`` lists) is logged as a warning naming the file. Each file is
-written beside its name and renamed onto it when complete (:func:`_whole`): a full disk or
-``ulimit -f`` leaves no file cut short, and the error names the file it stopped at.
+written beside its name and renamed onto it when complete (:func:`cfcommon.cli.whole_file`):
+a full disk or ``ulimit -f`` leaves no file cut short, and the error names the file it stopped
+at.
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import importlib
 import json
 import logging
 import os
 import re
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
 import click
 import numpy as np
 
-from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS, FiniteFloat
+from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS, FiniteFloat, whole_file
 from cfsession import Session, open_session, warn_problems
 from groundstation.errors import GroundStationError, SessionError
 
@@ -94,14 +93,14 @@ def export_csv(session: Session, folder: Path) -> list[Path]:
         cols = _columns(session, name)
         header = [f"{f} [{stream.units[f]}]" if stream.units.get(f) else f for f in cols]
         path = folder / f"{name}.csv"
-        with _whole(path) as part, part.open("w", newline="", encoding="utf-8") as fh:
+        with whole_file(path) as part, part.open("w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             lists = [c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values()]
             writer.writerows(zip(*lists, strict=True))
         files.append(path)
     meta = folder / "metadata.json"
-    with _whole(meta) as part:
+    with whole_file(meta) as part:
         part.write_text(json.dumps(_metadata(session), indent=1))
     return [*files, meta]
 
@@ -118,20 +117,6 @@ def _cell(values: Any) -> np.ndarray:
     for i, v in enumerate(values):
         cell[0, i] = str(v)
     return cell
-
-
-@contextlib.contextmanager
-def _whole(path: Path) -> Iterator[Path]:
-    """The name to write ``path``'s content to; renamed onto ``path`` once written, removed if
-    writing failed (an ``OSError`` then names ``path``, the file the export stopped at)."""
-    part = path.with_name(f".{path.name}.{os.getpid()}.part")
-    try:
-        yield part
-        os.replace(part, path)
-    except OSError as exc:
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
-    finally:
-        part.unlink(missing_ok=True)
 
 
 def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list[str],
@@ -178,7 +163,7 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
         "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
         "OutputUnit": _cell(data.output_units),
         "Window": "all" if window is None else str(window)}
-    with _whole(path) as part:
+    with whole_file(path) as part:
         savemat(part, {**content, "streams": streams, "units": units, "metadata": meta},
                 long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
     return left_out
@@ -202,7 +187,7 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
                                      schema=pa.schema(fields, metadata={
                                          "stream": name, "kind": stream.kind}))
         path = folder / f"{name}.parquet"
-        with _whole(path) as part:
+        with whole_file(path) as part:
             pq.write_table(table, part)
         files.append(path)
     return files
@@ -299,7 +284,7 @@ def command(session: Path, to: Format, out: Path | None, force: bool, inputs: st
         names = [[n.strip() for n in v.split(",") if n.strip()] for v in (inputs, outputs)]
         left_out = export_mat(s, target, inputs=names[0], outputs=names[1], window=win,
                               dt=dt, iddata="required" if given else "if-found")
-        click.echo(f"wrote {target}" + (f" (every stream; {left_out.split(':')[0]}: pass "
+        click.echo(f"wrote {target}" + (" (every stream; no iddata part (u, y): pass "
                                         "--inputs/--outputs/--window)" if left_out else ""))
         return
     try:

@@ -70,7 +70,13 @@ from typing import Any
 
 from cfsession.writer import standard_streams
 from groundstation.errors import FlightAborted, GroundStationError, SessionError
-from groundstation.flight.blocks import BATTERY_BLOCK, altitude_block_period, flight_blocks
+from groundstation.flight.blocks import (
+    BATTERY_BLOCK,
+    LOCKED_BIT,
+    TUMBLED_BIT,
+    altitude_block_period,
+    flight_blocks,
+)
 from groundstation.flight.clock import clock_for_uri
 from groundstation.flight.commander import SETPOINT_LATE_S, Commander, finite
 from groundstation.flight.drivers import install_drivers
@@ -96,9 +102,6 @@ __all__ = ["SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
            "altitude_block_period", "block_summary", "fly_plan"]
 
 log = logging.getLogger(__name__)
-
-TUMBLED_BIT, LOCKED_BIT = 1 << 5, 1 << 6
-"""Bits of ``supervisor.info`` (``supervisor.c``) that refuse a take-off."""
 
 
 class _Runner:
