@@ -15,12 +15,17 @@ import numpy as np
 
 from groundstation.flight import fly_plan
 from groundstation.plan import load_plan
-from tests.flight.checks import check_closed_with_stop, check_log_blocks, check_setpoints
+from tests.flight.checks import (
+    check_closed_with_stop,
+    check_fed_until_landed,
+    check_log_blocks,
+    check_setpoints,
+)
 
 
 def _motors_stopped_after_stop(s) -> None:
     sp = s["setpoints"].data
-    t_stop = sp["host_time"][-1]
+    t_stop = sp["host_time"][(sp["tick"] == -1) & (sp["thrust"] == 0)][1]  # row 0: the unlock
     motors = s["motors"]
     after = motors.values()[motors.time > t_stop + 0.1]
     assert len(after) > 0 and (after == 0).all()
@@ -34,6 +39,7 @@ def test_hover_check_flies_and_records(cf_uri, tmp_path):
     check_log_blocks(s, result)
     check_setpoints(s, plan, complete=True)
     _motors_stopped_after_stop(s)
+    check_fed_until_landed(s, result, slack_s=0.05)  # left unlocked for the next flight
     assert [n.decode() for n in s["phases"].data["name"]] == [p.name for p in plan.phases]
 
 
@@ -50,4 +56,5 @@ def test_ctrl_c_in_hover_descends_and_stops(cf_uri, tmp_path):
     s = check_closed_with_stop(result)
     assert [k.decode() for k in s["phases"].data["kind"]][-1] == "abort"
     _motors_stopped_after_stop(s)
+    check_fed_until_landed(s, result, slack_s=0.05)
     assert np.isfinite(s["battery"].values()).all()

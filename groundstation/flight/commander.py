@@ -14,6 +14,14 @@ the :meth:`~groundstation.plan.schedule.Schedule.abort_schedule` descent streams
 same rate, so there is never more than one period without a setpoint; never after a link loss:
 no telemetry, no descent), and when even that path failed (:meth:`Commander.last_stop`, the
 bare stop setpoint if recording it fails too).
+
+**After the stop** (:meth:`Commander.tail`). The firmware's supervisor counts the vehicle as
+flying until 2 s after a motor last ran above idle (``IS_FLYING_HYSTERESIS_THRESHOLD``); a
+commander silent for 0.5 s in that time sends it to level-out and, at 2 s, to *Locked*, which
+only a restart ends (``supervisor_state_machine.c``: level-out has no way to *Landed*). So a
+flight that ran its motors keeps sending the stop setpoint, one per setpoint period and each
+recorded (thrust 0, tick -1), until ``supervisor.info`` reports it landed (bit 4 clear;
+:data:`LANDED_WITHIN_S` at most; without ``supervisor.info`` in the log, :data:`FEED_BLIND_S`).
 """
 
 from __future__ import annotations
@@ -23,11 +31,12 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from groundstation.flight.blocks import BATTERY_BLOCK, FLYING_BIT
 from groundstation.flight.journal import Journal
 from groundstation.flight.telemetry import Telemetry
 from groundstation.plan import Schedule
 
-__all__ = ["SETPOINT_LATE_S", "Commander", "finite"]
+__all__ = ["FEED_BLIND_S", "LANDED_WITHIN_S", "SETPOINT_LATE_S", "Commander", "finite"]
 
 log = logging.getLogger("groundstation.flight.runner")  # the runner's way out: logged as its
 
@@ -35,6 +44,13 @@ log = logging.getLogger("groundstation.flight.runner")  # the runner's way out: 
 #: (``supervisor.c``) has levelled the vehicle out by then, so it no longer flies the plan. In
 #: the abort's descent the rest of it is re-timed from then instead (never a burst).
 SETPOINT_LATE_S = 0.5
+#: After the stop, the stop setpoint is fed at most this long (flight clock) for the supervisor
+#: to report the vehicle landed: its 2 s is-flying hysteresis, two periods of the battery block
+#: that logs ``supervisor.info`` (0.5 s), and a margin.
+LANDED_WITHIN_S = 4.0
+#: Without ``supervisor.info`` in the log: the stop setpoint is fed this long (the hysteresis
+#: and a margin).
+FEED_BLIND_S = 2.5
 
 Setpoint = tuple[float, float, float, int]  # roll deg, pitch deg, yaw rate deg/s, thrust PWM
 
@@ -54,6 +70,9 @@ class Commander:
         self.t_first = math.nan  # flight clock time setpoint 0 is due
         self.sent_t: list[float] = []
         self.stopped = False  # the stop setpoint has been delivered
+        self.t_stop = math.nan  # flight time it was (first) delivered
+        self.motors_ran = False  # a setpoint with thrust went out: the supervisor may count
+        self.fed: dict[str, Any] = {}  # the stop setpoints fed after it (:meth:`tail`)
 
     @property
     def link_down(self) -> bool:
@@ -72,6 +91,7 @@ class Commander:
         self.link.send_setpoint(roll=roll, pitch=pitch, yaw_rate=yaw_rate, thrust=thrust)
         t = self.journal.now()
         self.sent_t.append(t)
+        self.motors_ran = self.motors_ran or thrust > 0
         self.journal.pending["setpoints"].append((t, roll, pitch, yaw_rate, thrust, phase_id,
                                                   tick))
 
@@ -83,6 +103,8 @@ class Commander:
         self.telemetry.flying = False
         self.link.deliver_stop()
         self.stopped = True
+        if math.isnan(self.t_stop):
+            self.t_stop = t
         journal.pending["setpoints"].append((t, 0.0, 0.0, 0.0, 0, -1, -1))
         journal.event(f"stop setpoint sent ({why})",
                       source="safety" if journal.causes else "runner")
@@ -142,11 +164,63 @@ class Commander:
         self.stop(f"abort: {journal.causes[0]}")
 
     def tail(self, seconds: float = 0.5) -> None:
-        """Keep recording a moment after the stop so the file shows the motors at rest."""
+        """Keep recording at least ``seconds`` after the stop so the file shows the motors at
+        rest; after a flight that ran its motors, keep the stop setpoint fed until the vehicle
+        reports landed (module docstring). A stop request (Ctrl-C) or a lost link ends the feed
+        early; either way ``fed`` says how it ended and an event says what it means."""
         if self.link_down:
             return
-        t = self.journal.clock.now()
-        for _ in range(round(seconds / self.schedule.period)):
-            t += self.schedule.period
-            self.telemetry.wait(t)
-            self.journal.dispatch()
+        journal, telemetry, period = self.journal, self.telemetry, self.schedule.period
+        feed = self.motors_ran
+        requests = telemetry.requests
+        t = journal.clock.now()  # on the setpoint grid from the stop, as sent and recorded
+        t = min(t, self.t_stop + journal.origin) if math.isfinite(self.t_stop) else t
+        t0, n, landed, why = t, 0, None, ""
+        while True:
+            t += period
+            telemetry.wait(t)
+            journal.dispatch()
+            elapsed = t - t0
+            if feed:
+                landed = self._reports_landed()
+                why = ("landed" if landed else "link lost" if self.link_down
+                       else "stop requested" if telemetry.requests > requests
+                       else "no supervisor.info" if landed is None and elapsed >= FEED_BLIND_S
+                       else "timeout" if elapsed >= LANDED_WITHIN_S else "")
+                feed = not why
+            if elapsed >= seconds - 1e-9 and not feed:
+                break
+            if feed:
+                try:
+                    self.link.send_stop()
+                except Exception as exc:  # the stop was delivered; this only keeps it fed
+                    log.warning("stop setpoint not fed", exc_info=True)
+                    why, feed = f"send failed: {type(exc).__name__}: {exc}", False
+                    continue
+                n += 1
+                journal.pending["setpoints"].append((journal.now(), 0.0, 0.0, 0.0, 0, -1, -1))
+        if self.motors_ran:
+            self._fed(n=n, why=why, seconds=round(n * period, 3))
+
+    def _reports_landed(self) -> bool | None:
+        """Whether ``supervisor.info`` logged after the stop says not flying; None if the log
+        has no ``supervisor.info`` (False until a value sent after the stop arrives)."""
+        info = self.telemetry.supervisor
+        if info is None:
+            return None
+        if not self.telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > self.t_stop:
+            return False
+        return not info & FLYING_BIT
+
+    def _fed(self, *, n: int, why: str, seconds: float) -> None:
+        self.fed = {"setpoints": n, "seconds": seconds, "ended": why}
+        fed = f"the stop setpoint fed {n} more times ({seconds:g} s)"
+        if why == "landed":
+            self.journal.event(f"the Crazyflie reports landed; {fed}")
+        elif why == "no supervisor.info":
+            self.journal.event(f"{fed}, the supervisor's 2 s is-flying time and a margin (no "
+                               "supervisor.info in the log to see it land)")
+        else:
+            self.journal.event(f"{fed}; {why} before the Crazyflie reported landed: its "
+                               "supervisor may have locked it (a restart unlocks it; the next "
+                               "preflight says so)", level="warning", source="safety")

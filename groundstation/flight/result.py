@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,15 +65,17 @@ def block_summary(*, fw_ms: Sequence[int], period_s: float,
 
 
 def setpoint_summary(*, sent_t: Sequence[float], period_s: float, scheduled: int,
-                     planned: int, stopped: bool = False) -> dict[str, Any]:
+                     planned: int, stopped: bool = False,
+                     after_stop: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Setpoints sent on the grid (flight times ``sent_t``, s: the plan's, the thrust-lock
     release, an abort's descent), scheduled and planned, whether the stop setpoint (sent and
-    recorded apart, repeated until delivered) was delivered, and the jitter of the send period
-    against ``period_s`` in ms (p50, p99, max)."""
+    recorded apart, repeated until delivered) was delivered, how it was fed after
+    (``after_stop``: setpoints, seconds, why it ended; empty when not fed) and the jitter of
+    the send period against ``period_s`` in ms (p50, p99, max)."""
     dt = np.diff(np.asarray(sent_t, dtype=float))
     jitter = np.abs(dt - period_s) * 1000.0 if len(dt) else np.zeros(1)
     return {"sent": len(sent_t), "scheduled": scheduled, "planned": planned,
-            "stopped": stopped, "period_s": period_s,
+            "stopped": stopped, "after_stop": dict(after_stop or {}), "period_s": period_s,
             "jitter_ms": {"p50": round(float(np.percentile(jitter, 50)), 3),
                           "p99": round(float(np.percentile(jitter, 99)), 3),
                           "max": round(float(jitter.max()), 3)}}

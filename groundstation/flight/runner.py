@@ -284,8 +284,9 @@ class _Runner:
                 log.exception("abort path failed")
                 journal.cause(f"runner error while stopping: {type(exc).__name__}: {exc}")
         finally:  # each step guarded: one that raises never skips the file's end
-            if begun and not out.stopped:  # every path out ends with the stop
+            if begun and not out.stopped:  # every path out ends with the stop, kept fed
                 out.last_stop()
+                self._guarded("feeding the stop setpoint", out.tail)
             if self.params:
                 self._guarded("restoring the parameters", lambda: restore_after_flight(
                     link.cf, self.params, event=journal.event,
@@ -397,7 +398,8 @@ class _Runner:
             "setpoints": setpoint_summary(sent_t=self.out.sent_t, period_s=self.schedule.period,
                                           scheduled=self.n_scheduled,
                                           planned=len(self.schedule),
-                                          stopped=self.out.stopped),
+                                          stopped=self.out.stopped,
+                                          after_stop=self.out.fed),
         }
 
 

@@ -51,6 +51,7 @@ class Telemetry:
         self.console = ""
         self.flying = False  # the watches are on
         self.silent = False  # link loss found by the silence watch
+        self.requests = 0  # stop requests (Ctrl-C, a listener's) taken in
 
     def collect(self) -> None:
         """Drain the queue into pending rows; check link, signals and limits (no I/O)."""
@@ -86,6 +87,7 @@ class Telemetry:
             elif kind == "lost":  # always a cause: reported late, it may predate the stop
                 journal.cause(f"link lost: {item[2]}")
             elif kind == "abort":
+                self.requests += 1
                 journal.stop_request(item[2], level="warning")
             else:
                 journal.event(str(item[2]), level="warning", source="link")

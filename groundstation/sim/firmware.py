@@ -44,6 +44,7 @@ WDT_LEVEL_OUT_MS = 500
 WDT_SHUTDOWN_MS = 2000
 IS_FLYING_HYSTERESIS_MS = 2000
 FLIGHT_THRESHOLD_PWM = 1000
+LANDING_TIMEOUT_MS = 3000
 
 
 class Lpf2p:
@@ -299,14 +300,29 @@ class Commander:
 
 
 class Supervisor:
-    """``supervisor.c``, reduced to what a user can observe: arming, flying, level-out, lock."""
+    """``supervisor.c`` and ``supervisor_state_machine.c``, reduced to what a user can observe:
+    arming, flying, level-out, landed, lock.
+
+    *Flying* holds while a motor ran above idle within the last 2 s
+    (``IS_FLYING_HYSTERESIS_THRESHOLD``). From *Flying* a setpoint older than 0.5 s goes to
+    *WarningLevelOut*, whose only ways out are a fresh setpoint (back to *Flying*) or one older
+    than 2 s (*Locked*, until a restart): level-out has no way to *Landed*. So a commander that
+    falls silent within 2 s of the motors' last run above idle locks the vehicle even after a
+    stop setpoint; stop setpoints sent on until it reports landed (``supervisor.info`` bit 4
+    clear) leave it *Landed*, then *ReadyToFly* 3 s later (``LANDING_TIMEOUT_MS``).
+    """
 
     def __init__(self, *, auto_arm: bool = True) -> None:
         self.armed = auto_arm
         self.locked = False
         self.latest_thrust_ms = -1
-        self.is_flying = False
+        self.landed_ms = -1
         self.state = "ReadyToFly" if auto_arm else "PreFlChecksPassed"
+
+    @property
+    def is_flying(self) -> bool:
+        """``supervisor.isFlying`` (bit 4 of ``supervisor.info``): Flying or WarningLevelOut."""
+        return self.state in ("Flying", "WarningLevelOut")
 
     def update(self, *, now_ms: int, motor_sum: int, setpoint_age_ms: int) -> bool:
         """Update at 1 kHz; returns whether the motors may run. Sets ``locked`` on timeout."""
@@ -314,18 +330,25 @@ class Supervisor:
             return False
         if motor_sum > FLIGHT_THRESHOLD_PWM:
             self.latest_thrust_ms = now_ms
-        self.is_flying = (self.latest_thrust_ms >= 0
-                          and now_ms - self.latest_thrust_ms < IS_FLYING_HYSTERESIS_MS)
+        thrust_recent = (self.latest_thrust_ms >= 0
+                         and now_ms - self.latest_thrust_ms < IS_FLYING_HYSTERESIS_MS)
+        state = self.state
         if not self.armed:
             self.state = "PreFlChecksPassed"
             return False
-        if self.is_flying and setpoint_age_ms > WDT_SHUTDOWN_MS:
-            self.locked = True
-            self.is_flying = False
-            self.state = "Locked"
-            return False
-        if self.is_flying:
-            self.state = "WarningLevelOut" if setpoint_age_ms > WDT_LEVEL_OUT_MS else "Flying"
-        else:
+        if state in ("Flying", "WarningLevelOut"):
+            if setpoint_age_ms > WDT_SHUTDOWN_MS:
+                self.locked = True
+                self.state = "Locked"
+                return False
+            if setpoint_age_ms > WDT_LEVEL_OUT_MS:
+                self.state = "WarningLevelOut"
+            elif state == "WarningLevelOut":
+                self.state = "Flying"
+            elif not thrust_recent:
+                self.state, self.landed_ms = "Landed", now_ms
+        elif thrust_recent:
+            self.state = "Flying"
+        elif state != "Landed" or now_ms - self.landed_ms > LANDING_TIMEOUT_MS:
             self.state = "ReadyToFly"
         return True

@@ -302,7 +302,8 @@ class SimVehicle:
     # ----------------------------------------------------------------- read-only state
     @property
     def is_flying(self) -> bool:
-        """The supervisor's is-flying flag (motors above idle within the last 2 s)."""
+        """The supervisor's is-flying flag (``supervisor.isFlying``: state Flying or
+        WarningLevelOut, :class:`~groundstation.sim.firmware.Supervisor`)."""
         return self.supervisor.is_flying
 
     @property

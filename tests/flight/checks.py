@@ -100,6 +100,25 @@ def check_closed_with_stop(result: FlightResult) -> Session:
     return s
 
 
+def check_fed_until_landed(s: Session, result: FlightResult, *, slack_s: float = 0.0) -> None:
+    """After the stop, the stop setpoint went on every period (never near the firmware's 0.5 s
+    level-out), each recorded, until the supervisor reported landed: ``supervisor.info``
+    logged after the last one has neither the flying nor the locked bit, so the vehicle is left
+    unlocked for its next flight."""
+    fed = result.summary["setpoints"]["after_stop"]
+    assert fed["ended"] == "landed", fed
+    sp = s["setpoints"].data
+    stops = np.flatnonzero((sp["tick"] == -1) & (sp["thrust"] == 0))
+    after = sp[stops[stops > 0][0]:]  # from the stop (row 0 released the thrust lock)
+    assert (after["thrust"] == 0).all() and (after["tick"] == -1).all()
+    assert len(after) - 1 == fed["setpoints"] >= 15  # the 2 s is-flying hysteresis, at 10 Hz
+    assert np.diff(after["host_time"]).max() <= 0.12 + slack_s
+    battery = s["battery"]
+    info = battery.data["info"].astype(int)  # supervisor.info
+    assert battery.time[-1] > after["host_time"][0] and not info[-1] & 0x50, info  # landed
+    assert info[battery.time < after["host_time"][0]][-1] & 0x10  # it was flying at the stop
+
+
 def safety_events(s: Session) -> list:
     """The safety errors and warnings of a session, in order."""
     return [e for e in s.events() if e.source == "safety" and e.level in ("error", "warning")]

@@ -28,6 +28,9 @@ SPEED = 20
 BACKENDS = ("sim", "sitl", "radio")
 SITL_COST = ("real-time firmware: a whole plan costs its length (42-112 s); SITL flies hover-check "
              "and every safety path here, and the thesis experiment is docs/sitl.md's")
+SITL_HOST_SIDE = ("the ground station's own path, nothing in it the firmware does otherwise; SITL "
+                  "flies the abort paths that end in the firmware (a signal, a runner error, a "
+                  "rate limit, the stop policy, a low battery) and a whole flight")
 SIM_HOOK = "the test drives the vehicle through the sim:// registry (groundstation.sim.instance)"
 _counter = itertools.count(500)
 

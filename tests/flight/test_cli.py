@@ -23,10 +23,12 @@ def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
     assert s.closed_cleanly and summary["file"].startswith(str(tmp_path))
     assert s.json_meta("summary")["setpoints"] == summary["setpoints"]
     # every recorded setpoint row is counted: the plan's and the unlock on the grid, the stop
-    # apart (the summary said "+1 unlock/abort" for two extra rows: first-day audit)
+    # apart (the summary said "+1 unlock/abort" for two extra rows: first-day audit), then
+    # the stop fed until the Crazyflie reported landed
     sp = summary["setpoints"]
-    assert sp["stopped"] and len(s["setpoints"]) == sp["sent"] + 1
-    assert "then the stop" in summary_lines(summary)[-2]
+    fed = sp["after_stop"]
+    assert sp["stopped"] and len(s["setpoints"]) == sp["sent"] + 1 + fed["setpoints"]
+    assert f"then the stop (fed {fed['seconds']:g} s until landed)" in summary_lines(summary)[-2]
 
 
 def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
@@ -130,7 +132,7 @@ def test_info_shows_the_summary_stored_at_the_end_of_the_flight(sim_uri, tmp_pat
     shown = CliRunner().invoke(main, ["info", path, "--width", "200"])
     assert shown.exit_code == 0, shown.output
     assert "flight summary, stored when the flight ended" in shown.output
-    assert "100 of 100 planned sent (+1 unlock/descent, then the stop)" in shown.output
+    assert "100 of 100 planned sent (+1 unlock/descent, then the stop (fed " in shown.output
     described = json.loads(CliRunner().invoke(main, ["info", path, "--json"]).stdout)
     assert described["summary"]["setpoints"]["stopped"] is True
     huge = {"blocks": {"acc": {"received": 10**400, "expected": 1, "dropped": 0}}}

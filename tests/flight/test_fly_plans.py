@@ -16,6 +16,7 @@ from groundstation.plan import load_plan
 from .checks import (
     check_airborne,
     check_closed_with_stop,
+    check_fed_until_landed,
     check_log_blocks,
     check_log_blocks_jittery,
     check_setpoints,
@@ -43,8 +44,11 @@ def test_shipped_plan_flies_and_records(name, flight_uri, tmp_path):
     sitl = uri.startswith("udp://")
     result = fly_plan(plan=plan, out=tmp_path, uri=uri)
     assert not result.aborted, result.cause
-    wait_for_stop(uri)  # the vehicle saw the stop setpoint: motors off
+    sim = wait_for_stop(uri)  # the vehicle saw the stop setpoint: motors off
     s = check_closed_with_stop(result)
+    check_fed_until_landed(s, result, slack_s=wall_slack_s(uri))
+    if not sitl:  # SITL: the firmware's own supervisor.info in the file said it
+        assert not sim.vehicle.is_locked and sim.vehicle.supervisor_state == "Landed"
     if sitl:  # the firmware's log timer follows a loaded host's clock: jittery time stamps
         check_log_blocks_jittery(s, result)
     else:

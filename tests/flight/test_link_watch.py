@@ -27,8 +27,8 @@ from groundstation.plan import Schedule, load_plan
 from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port
 
-from .checks import check_closed_with_stop
-from .conftest import SIM_HOOK, backends, plan_variant, wait_for_stop
+from .checks import check_closed_with_stop, check_fed_until_landed
+from .conftest import SIM_HOOK, SITL_HOST_SIDE, backends, plan_variant, wait_for_stop
 
 BLOCKS = ("motors", "acc", "gyro")
 
@@ -69,6 +69,7 @@ def test_log_silence_on_sim_is_link_loss_and_the_stop_reaches_the_vehicle(flight
     assert not sim.vehicle.is_locked  # stopped by the stop setpoint, not by its watchdog
 
 
+@backends(sitl=SITL_HOST_SIDE)
 def test_failing_abort_path_still_delivers_and_records_the_stop(flight_uri, tmp_path,
                                                                   monkeypatch):
     """The plan raises, then the abort path raises too: the stop still reaches the vehicle."""
@@ -86,9 +87,9 @@ def test_failing_abort_path_still_delivers_and_records_the_stop(flight_uri, tmp_
     result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=hook)
     assert result.cause == "runner error: RuntimeError: injected fault"
     sim = wait_for_stop(uri)
-    if not uri.startswith("udp://"):  # SITL: the supervisor's lock is the firmware's own state
-        assert not sim.vehicle.is_locked  # stopped by the stop setpoint, not by its watchdog
     s = check_closed_with_stop(result)
+    check_fed_until_landed(s, result)  # the last resort's stop kept fed too
+    assert not sim.vehicle.is_locked and sim.vehicle.supervisor_state == "Landed"
     texts = _safety(s)
     assert "during the abort: runner error while stopping: RuntimeError: descent broken" in texts
     stops = [e.text for e in s.events() if e.text.startswith("stop setpoint sent")]
@@ -271,8 +272,8 @@ def test_udp_a_ground_station_held_up_past_the_watchdog_aborts_without_a_burst(u
     s = check_closed_with_stop(result)
     sp = s["setpoints"].data
     assert sp["tick"][sp["tick"] >= 0].max() == 12  # the late setpoint 13 was never sent
-    after = sp["host_time"][sp["host_time"] > sp["host_time"][sp["tick"] == 12][0]]
-    descent = after[:-1]  # then the stop
+    after = sp[sp["host_time"] > sp["host_time"][sp["tick"] == 12][0]]
+    descent = after["host_time"][after["thrust"] > 0]  # then the stop
     assert len(descent) == 10  # the 1 s descent at 10 Hz
     # from now, 0.1 s apart: 0.9 s and the 0.8 s hold (past-due deadlines sent at once: 0.2 s)
     assert descent[3] - descent[0] >= 0.2 and descent[-1] - descent[4] >= 0.35, np.diff(descent)

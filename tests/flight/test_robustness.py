@@ -24,7 +24,7 @@ from groundstation.plan.schedule import Schedule
 from groundstation.recorder import Recorder, session_path
 
 from .checks import check_closed_with_stop
-from .conftest import wait_for_stop
+from .conftest import SITL_HOST_SIDE, backends, wait_for_stop
 
 
 def one_line_error(res, *, code: int = 2) -> str:
@@ -103,6 +103,7 @@ def test_other_float_options_refuse_non_finite(cmd):
     assert "finite" in one_line_error(CliRunner().invoke(main, cmd))
 
 
+@backends(sitl=SITL_HOST_SIDE)
 def test_non_finite_setpoint_aborts_through_the_abort_path(flight_uri, tmp_path, monkeypatch):
     """A NaN reaching the runner is never sent: abort, plan's descent, stop, file kept."""
     setpoint = Schedule.setpoint

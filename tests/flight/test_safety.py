@@ -19,9 +19,15 @@ from groundstation.errors import LinkError
 from groundstation.flight import RateLimits, fly_plan
 from groundstation.plan import load_plan
 
-from .checks import check_closed_with_stop, check_descent, safety_events
+from .checks import (
+    check_closed_with_stop,
+    check_descent,
+    check_fed_until_landed,
+    safety_events,
+)
 from .conftest import (
     SIM_HOOK,
+    SITL_HOST_SIDE,
     backends,
     one_variant_on_sitl,
     plan_variant,
@@ -65,6 +71,7 @@ def test_exception_in_the_runner_aborts_safely(flight_uri, tmp_path):
     assert "injected fault" in safety_events(s)[0].text
     assert s["setpoints"].data["tick"].max() == 39
     check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
+    check_fed_until_landed(s, result, slack_s=wall_slack_s(uri))  # left unlocked
     # from the hover (39000, capped at the plan's 34000): the runner error lost the tick, and
     # the descent was computed for tick 0, the take-off's 20000 (review)
     sp = s["setpoints"].data
@@ -157,6 +164,7 @@ class _Listener:
         self.ended = summary
 
 
+@backends(sitl=SITL_HOST_SIDE)
 def test_failing_listener_is_dropped_and_the_flight_goes_on(flight_uri, tmp_path):
     bad, good = _Listener(fail_at=40), _Listener()
     # a 2 s hover and a 1 s landing: 50 setpoints (SITL flies in real time); the listener

@@ -12,7 +12,13 @@ import pytest
 from groundstation.errors import FlightAborted
 from groundstation.flight import fly_plan
 
-from .checks import check_closed_with_stop, check_descent, check_setpoints, safety_events
+from .checks import (
+    check_closed_with_stop,
+    check_descent,
+    check_fed_until_landed,
+    check_setpoints,
+    safety_events,
+)
 from .conftest import one_variant_on_sitl, plan_variant, wait_for_stop, wall_slack_s
 
 _SETTLE = 'kind = "hover"                 # level attitude, thrust = hover_thrust\nduration = '
@@ -78,6 +84,7 @@ def test_signal_mid_excitation_descends_then_stops(sig, flight_uri, tmp_path, re
     rows = check_setpoints(s, plan, complete=False, slack_s=wall_slack_s(uri))
     assert excitation.start_tick + 20 <= rows["tick"][-1] <= excitation.start_tick + 22
     check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
+    check_fed_until_landed(s, result, slack_s=wall_slack_s(uri))  # left unlocked
     with pytest.raises(FlightAborted, match=r"flight aborted: SIG.*session saved to"):
         result.raise_if_aborted()
 

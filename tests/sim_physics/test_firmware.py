@@ -126,13 +126,35 @@ def test_level_out_relocks_thrust(hovering):
     assert min(hovering.motors_pwm) > 30000
 
 
-def test_stop_setpoint_stops_motors_without_locking(hovering):
+def test_one_stop_setpoint_then_silence_locks_as_the_firmware_does(hovering):
+    """The stop stops the motors, but the supervisor counts the vehicle as flying 2 s longer;
+    a commander silent meanwhile levels out at 0.5 s and locks at 2 s (``supervisor.c``)."""
     fly(hovering, seconds=0.5)
     hovering.commander_stop()
     hovering.advance(0.004)
     assert hovering.motors_pwm == (0, 0, 0, 0) and hovering.stop_count == 1
-    hovering.advance(3.0)                   # not a watchdog lock: motors were stopped on purpose
-    assert not hovering.is_locked and not hovering.is_flying
+    hovering.advance(0.6)
+    assert hovering.supervisor_state == "WarningLevelOut" and hovering.is_flying
+    hovering.advance(1.5)
+    assert hovering.is_locked and hovering.supervisor_state == "Locked"
+
+
+def test_stop_setpoints_fed_until_landed_leave_the_vehicle_unlocked(hovering):
+    fly(hovering, seconds=0.5)
+    fed = 0
+    while hovering.is_flying and fed < 50:
+        hovering.commander_stop()
+        hovering.advance(0.1)
+        fed += 1
+    assert hovering.supervisor_state == "Landed" and 20 <= fed <= 21  # 2 s after the motors
+    assert hovering.read_log("supervisor.info") == 0b1111  # can arm, armed, auto, can fly
+    hovering.advance(2.0)                                  # then silence: no lock
+    assert not hovering.is_locked and hovering.supervisor_state == "Landed"
+    hovering.advance(1.1)
+    assert hovering.supervisor_state == "ReadyToFly"       # LANDING_TIMEOUT_MS later
+    fly(hovering, seconds=0.02, thrust=0)
+    fly(hovering, seconds=0.3)
+    assert min(hovering.motors_pwm) > 30000 and hovering.supervisor_state == "Flying"
 
 
 def test_notify_stop_lets_the_setpoint_expire(hovering):
