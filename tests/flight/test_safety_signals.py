@@ -9,6 +9,7 @@ import signal
 
 import pytest
 
+import groundstation.sim as gsim
 from groundstation.errors import FlightAborted
 from groundstation.flight import fly_plan
 
@@ -333,3 +334,11 @@ def test_a_signal_after_the_landing_leaves_the_flight_complete(sim_uri, tmp_path
     assert late.done and not result.aborted, result.cause
     s = check_closed_with_stop(result)
     assert any(e.text == "after landing: SIGINT received" for e in s.events())
+    # it also ends the stop's feed at once, and the file says what that may leave behind
+    fed = result.summary["setpoints"]["after_stop"]
+    assert fed["ended"] == "stop requested" and fed["setpoints"] <= 2, fed
+    assert any(e.text.startswith(f"the stop setpoint fed {fed['setpoints']} more times") and
+               "may have locked it" in e.text and e.level == "warning" for e in s.events())
+    # sim:// powers the vehicle off when the link closes: its state is the one at the close,
+    # still "flying" to the supervisor (left so, a real one levels out and locks at 2 s)
+    assert gsim.instance(uri).vehicle.is_flying
