@@ -31,11 +31,9 @@ from groundstation.flight.liveid import Engine, LiveIdListener
 from groundstation.live import open_view
 from groundstation.liveid_view import LiveIdView, send_rows
 from groundstation.plan import LiveIdConfig, load_plan, parse_plan
-from groundstation.sim import UdpServer
 from sysid import detrend_data, iem
 from sysid.model_io import load as load_model
 from sysid.preprocess import Stream, iodata_from_streams
-from tests.sim_crtp.helpers import free_udp_port
 from tests.viz.rrd import load as load_rrd
 from tests.viz.rrd import views as rrd_views
 
@@ -405,8 +403,9 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
 @pytest.mark.parametrize("flight_uri", ["radio", "sitl"], indirect=True)
 def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     """The same listener over cflib's radio driver (emulated dongle, 20x) and against the real
-    firmware in the loop (real time): updates recorded, the final model saved and equal to the
-    offline one of the recorded samples.
+    firmware in the loop (cflib's UDP driver, real time, as ``groundstation sim``'s server):
+    updates recorded, the final model saved and equal to the offline one of the recorded
+    samples.
 
     SITL runs on the wall clock beside the identification's child process: a host busy enough
     to starve the firmware for half a second ends the flight in a true link loss (docs/live-id.md:
@@ -437,20 +436,6 @@ def _check_final_model_is_offline(result, lid) -> None:
     offline = iem(detrend_data(_recorded_samples(s, model), kind="mean")[0], order=4, past=15,
                   future=8)
     _assert_same_model(model, offline)
-
-
-def test_live_id_over_the_udp_simulator(tmp_path):
-    """``groundstation sim``'s UDP server (cflib's UDP driver, real time): the same checks. A
-    link loss (a host stall on the wall clock) is accepted once updates came, as on SITL."""
-    install_drivers()
-    plan = _plan(6.0, SMALL, hover_s=1.0, land_s=1.0)
-    with UdpServer(port=free_udp_port(), seed=4) as server:
-        lid = live_id_listener(plan)
-        result = fly_plan(plan=plan, out=tmp_path, uri=server.uris[0], listeners=[lid])
-    lost = result.cause.startswith("link lost") and lid.updates >= 2
-    assert not result.aborted or lost, result.cause
-    assert lid.updates >= 2  # at least one update before the final one
-    _check_final_model_is_offline(result, lid)
 
 
 def test_in_step_with_real_time_never_holds_the_flight_behind_real_time():
