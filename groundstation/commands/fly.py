@@ -218,8 +218,8 @@ def summary_lines(summary: Mapping[str, Any]) -> list[str]:
     stop = {True: ", then the stop", False: ", NO stop delivered"}.get(sp.get("stopped"), "")
     fed = sp.get("after_stop") or {}
     if fed:
-        stop += (f" (fed {fed.get('seconds', 0):g} s until landed)" if fed.get("ended") == "landed"
-                 else f" (fed {fed.get('seconds', 0):g} s: {fed.get('ended')})")
+        stop += (f", fed {fed.get('seconds', 0):g} s until landed" if fed.get("ended") == "landed"
+                 else f", fed {fed.get('seconds', 0):g} s: {fed.get('ended')}")
     lines.append(f"  setpoints {sp.get('scheduled', 0)} of {sp.get('planned', 0)} planned sent "
                  f"(+{extra} unlock/descent{stop}); period jitter p50 {jit.get('p50', 0):.1f} ms, "
                  f"p99 {jit.get('p99', 0):.1f} ms, max {jit.get('max', 0):.1f} ms "

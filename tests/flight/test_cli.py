@@ -28,7 +28,7 @@ def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
     sp = summary["setpoints"]
     fed = sp["after_stop"]
     assert sp["stopped"] and len(s["setpoints"]) == sp["sent"] + 1 + fed["setpoints"]
-    assert f"then the stop (fed {fed['seconds']:g} s until landed)" in summary_lines(summary)[-2]
+    assert f"then the stop, fed {fed['seconds']:g} s until landed)" in summary_lines(summary)[-2]
 
 
 def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
@@ -132,7 +132,7 @@ def test_info_shows_the_summary_stored_at_the_end_of_the_flight(sim_uri, tmp_pat
     shown = CliRunner().invoke(main, ["info", path, "--width", "200"])
     assert shown.exit_code == 0, shown.output
     assert "flight summary, stored when the flight ended" in shown.output
-    assert "100 of 100 planned sent (+1 unlock/descent, then the stop (fed " in shown.output
+    assert "100 of 100 planned sent (+1 unlock/descent, then the stop, fed " in shown.output
     described = json.loads(CliRunner().invoke(main, ["info", path, "--json"]).stdout)
     assert described["summary"]["setpoints"]["stopped"] is True
     huge = {"blocks": {"acc": {"received": 10**400, "expected": 1, "dropped": 0}}}
