@@ -22,6 +22,9 @@ only a restart ends (``supervisor_state_machine.c``: level-out has no way to *La
 flight that ran its motors keeps sending the stop setpoint, one per setpoint period and each
 recorded (thrust 0, tick -1), until ``supervisor.info`` reports it landed (bit 4 clear;
 :data:`LANDED_WITHIN_S` at most; without ``supervisor.info`` in the log, :data:`FEED_BLIND_S`).
+A locked vehicle (bit 6; its flying bit is clear too) is reported locked, never landed. After
+a link loss found by the silence watch alone (no log packet, cflib's link still up: the stop
+setpoints may still reach the vehicle) the stop is fed blind for :data:`FEED_BLIND_S`.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from groundstation.flight.blocks import BATTERY_BLOCK, FLYING_BIT
+from groundstation.flight.blocks import BATTERY_BLOCK, FLYING_BIT, LOCKED_BIT
 from groundstation.flight.journal import Journal
 from groundstation.flight.telemetry import Telemetry
 from groundstation.plan import Schedule
@@ -104,7 +107,7 @@ class Commander:
         self.link.deliver_stop()
         self.stopped = True
         if math.isnan(self.t_stop):
-            self.t_stop = t
+            self.t_stop = self.telemetry.stop_t = t
         journal.pending["setpoints"].append((t, 0.0, 0.0, 0.0, 0, -1, -1))
         journal.event(f"stop setpoint sent ({why})",
                       source="safety" if journal.causes else "runner")
@@ -166,26 +169,28 @@ class Commander:
     def tail(self, seconds: float = 0.5) -> None:
         """Keep recording at least ``seconds`` after the stop so the file shows the motors at
         rest; after a flight that ran its motors, keep the stop setpoint fed until the vehicle
-        reports landed (module docstring). A stop request (Ctrl-C) or a lost link ends the feed
-        early; either way ``fed`` says how it ended and an event says what it means."""
-        if self.link_down:
+        reports landed (module docstring). A stop request does not end the feed (it only sends
+        motors-off, 4 s at most, and ending it early costs a restart); a lost link or a failed
+        send does. ``fed`` says how it ended and an event says what it means."""
+        if self._link_gone():
             return
         journal, telemetry, period = self.journal, self.telemetry, self.schedule.period
         feed = self.motors_ran
-        requests = telemetry.requests
-        t = journal.clock.now()  # on the setpoint grid from the stop, as sent and recorded
-        t = min(t, self.t_stop + journal.origin) if math.isfinite(self.t_stop) else t
-        t0, n, landed, why = t, 0, None, ""
+        blind = telemetry.silent  # no telemetry, but cflib's link is up: the stops may arrive
+        now = journal.clock.now()  # on the setpoint grid from the stop, never a burst
+        t = self.t_stop + journal.origin if math.isfinite(self.t_stop) else now
+        t += max(math.floor((now - t) / period) - 1, 0) * period  # one overdue at most
+        t0, n, why = t, 0, ""
         while True:
             t += period
             telemetry.wait(t)
             journal.dispatch()
             elapsed = t - t0
             if feed:
-                landed = self._reports_landed()
-                why = ("landed" if landed else "link lost" if self.link_down
-                       else "stop requested" if telemetry.requests > requests
-                       else "no supervisor.info" if landed is None and elapsed >= FEED_BLIND_S
+                said = None if blind else self._supervisor_says()
+                why = (said if said else "link lost" if self._link_gone()
+                       else ("no telemetry" if blind else "no supervisor.info")
+                       if said is None and elapsed >= FEED_BLIND_S
                        else "timeout" if elapsed >= LANDED_WITHIN_S else "")
                 feed = not why
             if elapsed >= seconds - 1e-9 and not feed:
@@ -202,15 +207,23 @@ class Commander:
         if self.motors_ran:
             self._fed(n=n, why=why, seconds=round(n * period, 3))
 
-    def _reports_landed(self) -> bool | None:
-        """Whether ``supervisor.info`` logged after the stop says not flying; None if the log
-        has no ``supervisor.info`` (False until a value sent after the stop arrives)."""
+    def _link_gone(self) -> bool:
+        """cflib lost the link, or one of its calls never returned: nothing more is sent."""
+        return bool(self.link.lost or getattr(self.link, "stuck", False))
+
+    def _supervisor_says(self) -> str | None:
+        """What ``supervisor.info`` logged after the stop says: ``"landed"`` (bit 4 clear),
+        ``"locked"`` (bit 6: its supervisor stopped it for good; the flying bit is clear then
+        too), ``""`` while it still flies or until a value sent after the stop arrives; None
+        if the log has no ``supervisor.info``."""
         info = self.telemetry.supervisor
         if info is None:
             return None
         if not self.telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > self.t_stop:
-            return False
-        return not info & FLYING_BIT
+            return ""
+        if info & LOCKED_BIT:
+            return "locked"
+        return "" if info & FLYING_BIT else "landed"
 
     def _fed(self, *, n: int, why: str, seconds: float) -> None:
         self.fed = {"setpoints": n, "seconds": seconds, "ended": why}
@@ -220,6 +233,16 @@ class Commander:
         elif why == "no supervisor.info":
             self.journal.event(f"{fed}, the supervisor's 2 s is-flying time and a margin (no "
                                "supervisor.info in the log to see it land)")
+        elif why == "locked":
+            self.journal.event(f"{fed}; the Crazyflie reports locked (supervisor.info "
+                               f"0x{self.telemetry.supervisor:04x}): its supervisor stopped it "
+                               "(a commander watchdog timeout, an emergency stop or a crash); "
+                               "only a restart unlocks it", level="warning", source="safety")
+        elif why == "no telemetry":
+            self.journal.event(f"{fed} without telemetry (the link went silent), the "
+                               "supervisor's 2 s is-flying time and a margin: if they did not "
+                               "reach it, its supervisor may have locked it (the next preflight "
+                               "says so)", level="warning", source="safety")
         else:
             self.journal.event(f"{fed}; {why} before the Crazyflie reported landed: its "
                                "supervisor may have locked it (a restart unlocks it; the next "

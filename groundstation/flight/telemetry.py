@@ -51,7 +51,8 @@ class Telemetry:
         self.console = ""
         self.flying = False  # the watches are on
         self.silent = False  # link loss found by the silence watch
-        self.requests = 0  # stop requests (Ctrl-C, a listener's) taken in
+        self.stop_t = math.inf  # flight time the stop setpoint went out (Commander.stop)
+        self.stop_seen = False  # the motors logged at 0 after it: the vehicle has it
 
     def collect(self) -> None:
         """Drain the queue into pending rows; check link, signals and limits (no I/O)."""
@@ -77,6 +78,8 @@ class Telemetry:
                     self.altitude_m = float(values[0])
                 elif block == "gyro" and self.flying:
                     self._check_rates(values)
+                elif block == "motors" and t > self.stop_t and not any(values):
+                    self.stop_seen = True
             elif kind == "console":
                 self.console += item[2]
                 *lines, self.console = self.console.split("\n")
@@ -84,10 +87,13 @@ class Telemetry:
                     journal.event(line.rstrip(), source="console")
             elif kind == "link":
                 journal.pending["link"].append((t, item[2], item[3]))
-            elif kind == "lost":  # always a cause: reported late, it may predate the stop
+            elif kind == "lost" and journal.landed and self.stop_seen:
+                journal.event(f"after landing: link lost: {item[2]} (the motors were logged "
+                              "stopped after the stop setpoint)", level="warning",
+                              source="safety")
+            elif kind == "lost":  # a cause: reported late, it may predate the stop
                 journal.cause(f"link lost: {item[2]}")
             elif kind == "abort":
-                self.requests += 1
                 journal.stop_request(item[2], level="warning")
             else:
                 journal.event(str(item[2]), level="warning", source="link")

@@ -158,11 +158,8 @@ class CrtpPeer:
         return [(hdr, text[i:i + MAX_PAYLOAD]) for i in range(0, len(text), MAX_PAYLOAD)]
 
     def supervisor_bits(self) -> int:
-        """The supervisor state bitfield (cflib ``Supervisor`` bit order)."""
-        v = self.vehicle
-        armed = self.armed and not v.is_locked
-        return (1 | armed << 1 | 1 << 2 | (armed and not v.is_locked) << 3
-                | bool(v.is_flying) << 4 | bool(v.is_locked) << 6)
+        """The supervisor state bitfield (cflib ``Supervisor`` bit order: ``supervisor.info``)."""
+        return self.vehicle.supervisor_info()
 
     # ------------------------------------------------------------------ link and platform
     def _linkctrl(self, ch: int, data: bytes) -> list[Packet]:

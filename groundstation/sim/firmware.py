@@ -337,8 +337,8 @@ class Supervisor:
             self.state = "PreFlChecksPassed"
             return False
         if state in ("Flying", "WarningLevelOut"):
-            if setpoint_age_ms > WDT_SHUTDOWN_MS:
-                self.locked = True
+            if setpoint_age_ms > WDT_SHUTDOWN_MS:  # locked, disarmed
+                self.locked, self.armed = True, False
                 self.state = "Locked"
                 return False
             if setpoint_age_ms > WDT_LEVEL_OUT_MS:

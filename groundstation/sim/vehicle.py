@@ -244,13 +244,14 @@ class SimVehicle:
             self.supervisor.armed = bool(armed)
 
     # ----------------------------------------------------------------- log, params, console
-    def _supervisor_info(self) -> int:
-        """``supervisor.info``: bit 0 can be armed, 1 armed, 2 auto-arm, 3 can fly, 4 flying,
-        6 locked (``supervisor.c``)."""
+    def supervisor_info(self) -> int:
+        """``supervisor.info`` (``supervisor.c`` ``updateLogData``): bit 0 can be armed (state
+        PreFlChecksPassed only), 1 armed, 2 auto-arm, 3 can fly, 4 flying (Flying or
+        WarningLevelOut), 6 locked."""
         sup = self.supervisor
         can_fly = sup.armed and not sup.locked
-        return ((not sup.locked) | sup.armed << 1 | self._auto_arm << 2 | can_fly << 3
-                | sup.is_flying << 4 | sup.locked << 6)
+        return ((sup.state == "PreFlChecksPassed") | sup.armed << 1 | self._auto_arm << 2
+                | can_fly << 3 | sup.is_flying << 4 | sup.locked << 6)
 
     def read_log(self, name: str) -> float:
         """Current value of log variable ``name`` (units as in the firmware: g, deg/s, deg, V)."""

@@ -127,3 +127,20 @@ def plan_variant(name: str, **replace: str):
         assert old in text, old
         text = text.replace(old, new)
     return parse_plan(text=text, source=f"{name}-variant", name=base.name)
+
+
+class AfterLanding:
+    """A listener that does ``action()`` once, when the landed flight's "flight complete"
+    event is recorded (the stop delivered, the file's tail recording)."""
+
+    def __init__(self, action) -> None:
+        self.action, self.done = action, False
+
+    def begin(self, **_kw) -> None: ...
+    def end(self, **_kw) -> None: ...
+
+    def rows(self, *, stream, rows) -> None:
+        if stream == "events" and not self.done and any(b"flight complete" in bytes(r[3])
+                                                         for r in rows):
+            self.done = True
+            self.action()

@@ -21,14 +21,23 @@ import groundstation.flight.link as link_mod
 import groundstation.sim as gsim
 from cfsession import open_session
 from groundstation.cli import main
+from groundstation.commands.fly import summary_lines
 from groundstation.flight import fly_plan
+from groundstation.flight.commander import FEED_BLIND_S
 from groundstation.flight.telemetry import LINK_SILENCE_S
 from groundstation.plan import Schedule, load_plan
 from groundstation.sim import UdpServer
 from tests.sim_crtp.helpers import free_udp_port
 
 from .checks import check_closed_with_stop, check_fed_until_landed
-from .conftest import SIM_HOOK, SITL_HOST_SIDE, backends, plan_variant, wait_for_stop
+from .conftest import (
+    SIM_HOOK,
+    SITL_HOST_SIDE,
+    AfterLanding,
+    backends,
+    plan_variant,
+    wait_for_stop,
+)
 
 BLOCKS = ("motors", "acc", "gyro")
 
@@ -302,3 +311,74 @@ def test_a_link_lost_just_before_the_landing_stop_is_no_complete_flight(sim_uri,
     result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[cut])
     assert cut.done and result.aborted and result.cause.startswith("link lost"), result.cause
     assert gsim.instance(uri).vehicle.stop_count == 0  # indeed, the stop never arrived
+
+
+def test_udp_a_vehicle_locked_in_flight_is_never_reported_landed(udp, tmp_path):
+    """The runner held up 2.5 s (SIGSTOP, a blocked write): the vehicle's watchdog locked it.
+    ``supervisor.info`` then has the flying bit clear and the locked bit set, and the stop's
+    feed read that as "the Crazyflie reports landed", the summary "fed 0.3 s until landed"
+    (review). It is reported locked, a warning."""
+    sim = udp.simulators[0]
+    plan = plan_variant("hover-check", **{
+        "duration = 2.0                 # s\nthrust_start": "duration = 1.0\nthrust_start",
+        "duration = 5.0 ": "duration = 1.0 "})
+
+    def hook(k: int) -> None:
+        if k == 12:
+            time.sleep(2.5)  # past the firmware's 2 s: locked
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=udp.uris[0], tick_hook=hook)
+    assert result.cause.startswith("setpoint 13 is "), result.cause
+    assert sim.vehicle.is_locked
+    fed = result.summary["setpoints"]["after_stop"]
+    assert fed["ended"] == "locked", fed
+    s = check_closed_with_stop(result)
+    assert not [e for e in s.events() if "reports landed" in e.text]
+    assert any("the Crazyflie reports locked (supervisor.info 0x" in t for t in _safety(s))
+    assert ", fed 0." in summary_lines(result.summary)[-2] and " s: locked)" in (
+        summary_lines(result.summary)[-2])
+
+
+@backends(sitl=SIM_HOOK, radio=SIM_HOOK)
+def test_log_silence_feeds_the_stop_blind_so_the_vehicle_is_not_left_to_lock(flight_uri,
+                                                                              tmp_path):
+    """Link loss found by the silence watch alone (every log packet lost, the setpoints still
+    arriving): the stop's feed was skipped as after cflib's link loss, and the vehicle, still
+    "flying" to its supervisor, locked 2 s later (review, on ``groundstation sim``'s UDP
+    server). The stop is fed blind for the supervisor's 2 s and a margin, with a warning."""
+    plan, uri = load_plan("hover-check"), flight_uri()
+
+    def silence(k: int) -> None:
+        if k == 40:
+            gsim.instance(uri).set_faults(drop=1.0)
+
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, tick_hook=silence)
+    _check_silence_abort(result, silenced_at_tick=40)
+    fed = result.summary["setpoints"]["after_stop"]
+    assert fed["ended"] == "no telemetry" and fed["seconds"] >= FEED_BLIND_S - 0.1, fed
+    sim = wait_for_stop(uri)
+    # sim:// keeps the state at the close: fed through the hysteresis, it landed
+    assert not sim.vehicle.is_locked and sim.vehicle.supervisor_state == "Landed"
+    s = check_closed_with_stop(result)
+    assert any(t.startswith(f"the stop setpoint fed {fed['setpoints']} more times") and
+               "without telemetry" in t for t in _safety(s))
+
+
+def test_a_link_lost_while_the_stop_is_fed_leaves_a_landed_flight_complete(sim_uri, tmp_path):
+    """The link cut 1 s into the stop's feed, the motors logged at 0 after the stop: the flight
+    read "ABORTED: link lost", exit 2 (review). The vehicle had the stop; the loss is an event
+    after landing and the feed's end a warning."""
+    uri = sim_uri()
+
+    def cut() -> None:
+        sim = gsim.instance(uri)
+        sim.set_faults(cut_at=sim.vehicle.time_s + 1.0)
+
+    late = AfterLanding(cut)
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[late])
+    assert late.done and not result.aborted, result.cause
+    assert result.summary["setpoints"]["after_stop"]["ended"] == "link lost"
+    s = check_closed_with_stop(result)
+    texts = _safety(s)
+    assert any(t.startswith("after landing: link lost: ") for t in texts), texts
+    assert any("link lost before the Crazyflie reported landed" in t for t in texts), texts

