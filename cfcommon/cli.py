@@ -20,6 +20,11 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
   command's output: what remains of it goes to the null device, so the command ends with its
   own exit status instead of a traceback.
 
+* A pipe whose reader quit (``groundstation info S | head -1``) ends any command of either CLI
+  as it ends ``cat`` or ``seq``: quietly, exit status :data:`READER_GONE` (141, the shell's
+  number for a program SIGPIPE ended), no traceback and no "Exception ignored" at exit (the
+  rest of the output goes to the null device). click exited 1, rich's console too.
+
 * :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
   terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
   plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``),
@@ -33,19 +38,23 @@ import errno
 import io
 import math
 import os
+import select
+import signal
+import stat
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NoReturn
 
 import click
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-__all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "FiniteFloat", "OneLineErrorGroup",
-           "check_output", "drop_failing_stdout", "output_console", "output_gone",
-           "output_table", "whole_file", "writing_stdout"]
+__all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "FiniteFloat",
+           "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
+           "output_console", "output_gone", "output_table", "reader_gone", "whole_file",
+           "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
@@ -61,6 +70,61 @@ _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never w
 #: What a write gets when the disk, a quota or ``ulimit -f`` has no room for it (also standard
 #: output redirected to a full disk or ``/dev/full``).
 NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+#: The exit status of a command whose output pipe's reader quit (``| head``): 128 + SIGPIPE,
+#: what the shell reports for ``cat``, ``seq`` or ``ls`` cut short the same way (they die of
+#: the signal; Python ignores it and gets EPIPE instead).
+READER_GONE = 128 + getattr(signal, "SIGPIPE", 13)
+
+
+def reader_gone(exc: BaseException) -> bool:
+    """True when ``exc`` is EPIPE from writing standard output or error, not a socket's (a
+    Dask scheduler, a link): the reader of the pipe quit. Told by the write that raised it
+    (:func:`writing_stdout`) or, for a write this cannot see (``print``, ``sys.stdout.write``
+    in a command), by the pipe itself (:func:`_pipe_reader_quit`)."""
+    return (isinstance(exc, OSError) and exc.errno == errno.EPIPE
+            and (writing_stdout(exc, stderr=True)
+                 or _pipe_reader_quit(sys.stdout) or _pipe_reader_quit(sys.stderr)))
+
+
+def _pipe_reader_quit(stream: Any) -> bool:
+    """Whether ``stream`` writes into a pipe nobody reads any more: poll reports an error on
+    its end (False where that cannot be known: no file descriptor, no ``poll``)."""
+    try:
+        fd = stream.fileno()
+        if not stat.S_ISFIFO(os.fstat(fd).st_mode):
+            return False
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is both
+        return False
+
+
+def end_reader_gone() -> NoReturn:
+    """End the command quietly with :data:`READER_GONE`, the standard streams pointed at the
+    null device first: the interpreter's flush at exit then has nowhere to fail (Python's
+    recipe, the ``signal`` module's note on SIGPIPE)."""
+    _to_null(1, 2)
+    sys.exit(READER_GONE)
+
+
+@contextlib.contextmanager
+def _quiet_when_reader_gone() -> Iterator[None]:
+    try:
+        yield
+    except OSError as exc:
+        if not reader_gone(exc):
+            raise
+        end_reader_gone()
+
+
+def _flush_stdout() -> None:
+    """``sys.stdout.flush()``, the stream a local (:func:`writing_stdout` knows it failed)."""
+    out = sys.stdout
+    if out is not None:
+        out.flush()
 
 
 def drop_failing_stdout() -> None:
@@ -83,16 +147,17 @@ def _to_null(*fds: int) -> None:
         os.close(null)
 
 
-def writing_stdout(exc: BaseException) -> bool:
-    """Whether ``exc`` was raised writing standard output: the innermost Python frame of its
-    traceback holds ``sys.stdout`` (``click.echo``'s ``file``) or is this module's stdout
-    wrapper (rich's console writes through it)."""
+def writing_stdout(exc: BaseException, *, stderr: bool = False) -> bool:
+    """Whether ``exc`` was raised writing standard output (or error too, with ``stderr``):
+    the innermost Python frame of its traceback holds ``sys.stdout`` (``click.echo``'s
+    ``file``) or is this module's stdout wrapper (rich's console writes through it)."""
     tb = exc.__traceback__
     if tb is None:
         return False
     while tb.tb_next is not None:
         tb = tb.tb_next
-    return any(v is sys.stdout or (isinstance(v, _TrimmedLines) and not v._stderr)
+    return any(v is sys.stdout or (stderr and v is sys.stderr)
+               or (isinstance(v, _TrimmedLines) and (stderr or not v._stderr))
                for v in tb.tb_frame.f_locals.values())
 
 
@@ -136,12 +201,21 @@ class _TrimmedLines(io.TextIOBase):
         self._stream().flush()
 
 
+class _Console(Console):
+    """rich's console, but a pipe whose reader quit ends the command as any other output does
+    (:func:`end_reader_gone`); rich's own answer is exit 1."""
+
+    def on_broken_pipe(self) -> None:
+        self.quiet = True
+        end_reader_gone()
+
+
 def output_console(*, width: int | None = None, stderr: bool = False) -> Console:
     """The console for a command's text output (module docstring); ``width`` in characters."""
     if Console(stderr=stderr).is_terminal:
-        return Console(highlight=False, width=width, stderr=stderr)
-    return Console(file=_TrimmedLines(stderr=stderr), highlight=False,
-                   width=width or _UNWRAPPED, no_color=True, soft_wrap=width is None)
+        return _Console(highlight=False, width=width, stderr=stderr)
+    return _Console(file=_TrimmedLines(stderr=stderr), highlight=False,
+                    width=width or _UNWRAPPED, no_color=True, soft_wrap=width is None)
 
 
 def output_table(*columns: str, console: Console, title: str | None = None) -> Table:
@@ -275,10 +349,21 @@ class OneLineErrorGroup(click.Group):
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
         """click's ``main``; a write refused for want of room (standard output redirected to a
-        full disk or ``/dev/full``, ``--help`` included) is one line and exit status 2."""
+        full disk or ``/dev/full``, ``--help`` included) is one line and exit status 2; a pipe
+        whose reader quit ends it quietly with :data:`READER_GONE`. What standard output still
+        buffers when the command ends is written here, so that either shows here too, not at
+        the interpreter's exit ("Exception ignored ... BrokenPipeError", exit 120)."""
         try:
-            return super().main(*args, **kwargs)
+            try:
+                rv = super().main(*args, **kwargs)
+            except SystemExit:  # how click's standalone main ends, whatever the exit status
+                _flush_stdout()
+                raise
+            _flush_stdout()
+            return rv
         except OSError as exc:
+            if reader_gone(exc):
+                end_reader_gone()
             if exc.errno not in NO_ROOM:
                 raise
             drop_failing_stdout()
@@ -287,9 +372,14 @@ class OneLineErrorGroup(click.Group):
             _say(f"error: cannot write {where}: {exc.strerror}")
             sys.exit(2)
 
+    def make_context(self, *args: Any, **kwargs: Any) -> click.Context:
+        with _quiet_when_reader_gone():  # the group's own --help and --version (click: exit 1)
+            return super().make_context(*args, **kwargs)
+
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            with _quiet_when_reader_gone():
+                return super().invoke(ctx)
         except KeyboardInterrupt:  # Ctrl-C: one line and the shell's code for SIGINT
             _say("error: interrupted (Ctrl-C)")
             sys.exit(130)

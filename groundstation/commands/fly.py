@@ -2,7 +2,8 @@
 
 Progress (phase, flight time, packets) is a ``rich`` bar on a terminal and, otherwise (``nohup``,
 CI logs), a plain line every :data:`PLAIN_EVERY_S` seconds of flight time and at each phase
-start. An aborted flight prints its cause and the session path on one line and exits 2; so
+start. An aborted flight prints its cause and the session path on one line and exits 2 (a
+flight a listener's ``SystemExit`` ended too, whatever its code: :func:`_listener_exit`); so
 does a session that could not be saved (``file_error`` in the summary: a disk that filled, a
 folder deleted while flying that could not be made again). A folder moved while flying moves
 the file: the summary names it where it is now, and the writer warns.
@@ -373,6 +374,8 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
         elif not output_gone(exc):
             raise
         url = None
+    if result.escaped is not None:  # a listener asked to end the program: no serving on
+        url = None
     if url and sys.stdin.isatty():
         _keep_serving(url)
     elif url:
@@ -383,10 +386,31 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
     if lost:  # the session lost, or only part of a flight that was not aborted
         raise GroundStationError(f"flight aborted: {result.cause}; {lost}" if result.cause
                                  else lost)
+    _listener_exit(result)
     result.raise_if_aborted()
     if unwritten:
         raise GroundStationError(f"cannot write the flight's summary to standard output "
                                  f"({unwritten}); the session is {result.path}")
+
+
+def _listener_exit(result: FlightResult) -> None:
+    """What a listener's ``SystemExit`` (or ``KeyboardInterrupt``) means for ``fly``'s exit,
+    once the summary is out.
+
+    A ``SystemExit`` that ended the flight (its cause, naming the listener and the code) is an
+    aborted flight, whatever its code: exit 2 and the one line of any abort (the code, even 0,
+    would read as the listener's verdict on the flight; a script tells an aborted flight by
+    2). One raised after the landing (the flight was whole) keeps a code of 0 (``None``) as
+    exit 0 and turns any other into one line and exit 2. A ``KeyboardInterrupt`` (or any other
+    exception that is no ``Exception``) goes on up as before: Ctrl-C's line and exit 130."""
+    escaped = result.escaped
+    if escaped is None:
+        return
+    if not isinstance(escaped, SystemExit):
+        raise escaped
+    if not result.aborted and escaped.code not in (None, 0):
+        raise GroundStationError(f"a listener exited (SystemExit: {escaped.code}) after the "
+                                 f"landing; session saved to {result.path}")
 
 
 def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
@@ -418,7 +442,8 @@ def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
                       limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
                       connect_timeout_s=timeout_s,
                       tick_hook=lid.in_step(real_time_s=1.0 / plan.setpoint_rate_hz)
-                      if lid is not None and _flat_out(uri) else None)
+                      if lid is not None and _flat_out(uri) else None,
+                      reraise=False)  # a listener's SystemExit: the summary first
     return result, url
 
 

@@ -21,11 +21,15 @@ end of a flight is not a missing packet."""
 
 @dataclass(frozen=True)
 class FlightResult:
-    """What :func:`fly_plan` returns: ``cause`` is ``""`` for a flight that ran to the end."""
+    """What :func:`fly_plan` returns: ``cause`` is ``""`` for a flight that ran to the end;
+    ``escaped`` the ``SystemExit`` (or other exception that is no ``Exception``) a listener
+    raised, which ended the flight, when ``fly_plan(reraise=False)`` returned it instead of
+    raising it."""
 
     path: Path
     summary: dict[str, Any] = field(default_factory=dict)
     cause: str = ""
+    escaped: BaseException | None = field(default=None, compare=False, repr=False)
 
     @property
     def aborted(self) -> bool:

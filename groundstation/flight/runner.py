@@ -43,7 +43,8 @@ the abort path failing included (:meth:`~groundstation.flight.link.Link.deliver_
 recorded as a row and an event. The summary counts the log packets missing up to the moment the link
 closed, so a link dead before the end shows as dropped packets. A listener that raises is dropped
 (with an event); the flight goes on, unless what it raised is no ``Exception`` (``SystemExit``):
-that is the cause, the flight lands, and the exception is raised once the file is closed.
+that is the cause, the flight lands, and the exception is raised once the file is closed
+(or returned in the result: ``fly_plan(reraise=False)``).
 Without its recorder the flight aborts; a session file that cannot be created (folder, name,
 no room) is a one-line error before take-off, nothing flown. A disk that fills (or the file
 size limit) is a cause too, told by the recorder while its reserve still holds the landing;
@@ -110,8 +111,9 @@ class _Runner:
     def __init__(self, *, plan: Plan, schedule: Schedule, uri: str, recorder: Recorder,
                  listeners: Sequence[FlightListener], limits: RateLimits,
                  connect_timeout_s: float, tick_hook: Callable[[int], None] | None,
-                 tag: str = "") -> None:
+                 tag: str = "", reraise: bool = True) -> None:
         self.plan, self.schedule, self.uri, self.tag = plan, schedule, uri, tag
+        self.reraise = reraise
         self.recorder, self.limits, self.tick_hook = recorder, limits, tick_hook
         self.connect_timeout_s = connect_timeout_s
         self.cancel = threading.Event()  # set by request_abort: also cancels a connect
@@ -308,9 +310,11 @@ class _Runner:
         cause = journal.causes[0] if journal.causes else ""
         if begun:
             cause = self.file_outcome(summary, cause)
-        if listeners.escaping is not None:  # landed and recorded: now it may end the program
-            raise listeners.escaping
-        return FlightResult(path=self.recorder.path, summary=summary, cause=cause)
+        result = FlightResult(path=self.recorder.path, summary=summary, cause=cause,
+                              escaped=listeners.escaping)
+        if listeners.escaping is not None and self.reraise:  # landed and recorded: now it
+            raise listeners.escaping  # may end the program
+        return result
 
     def _guarded(self, what: str, step: Callable[[], Any]) -> Any:
         """``step()``, or None after an event saying it failed (logged with its traceback):
@@ -406,7 +410,8 @@ class _Runner:
 def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI,
              listeners: Sequence[FlightListener] = (), limits: RateLimits | None = None,
              connect_timeout_s: float = 10.0,
-             tick_hook: Callable[[int], None] | None = None, tag: str = "") -> FlightResult:
+             tick_hook: Callable[[int], None] | None = None, tag: str = "",
+             reraise: bool = True) -> FlightResult:
     """Fly ``plan`` (a :class:`Plan`, a path or a shipped plan's name) over ``uri``, record the
     session into folder ``out`` and return the :class:`FlightResult`.
 
@@ -414,6 +419,11 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     the flight aborts safely). Raises :class:`~groundstation.errors.LinkError` when the Crazyflie
     cannot be reached or lacks a logged variable (nothing is flown then). ``tag`` (e.g.
     ``validation``) goes into the file name, ``PLAN-TAG-STAMP.h5``, and the ``tag`` metadata.
+
+    A ``SystemExit`` or ``KeyboardInterrupt`` a listener raised ends the flight (its landing
+    flown, the file closed) and is then raised from here; with ``reraise=False`` it is
+    returned instead, as :attr:`FlightResult.escaped`, so the caller can report the flight
+    first (``groundstation fly`` prints the summary, then exits as for any aborted flight).
     """
     check_uri(uri)
     plan = plan if isinstance(plan, Plan) else load_plan(plan)
@@ -426,6 +436,7 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     recorder = Recorder(session_path(out=out, plan_name=plan.name, tag=tag), unique=True)
     runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
                      listeners=listeners, limits=limits or RateLimits(),
-                     connect_timeout_s=connect_timeout_s, tick_hook=tick_hook, tag=tag)
+                     connect_timeout_s=connect_timeout_s, tick_hook=tick_hook, tag=tag,
+                     reraise=reraise)
     with signal_handlers(runner.request_abort), prompt_thread_switches():
         return runner.run()

@@ -143,3 +143,84 @@ def test_a_file_name_too_long_is_one_line(argv) -> None:
     assert res.exit_code == 2, res.output
     assert res.output.strip().splitlines()[-1].startswith(
         "error: File name too long (300 characters): xxxx"), res.output
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX pipes and SIGPIPE's exit status")
+@pytest.mark.parametrize("argv", [
+    ["groundstation", "info", "SESSION"],  # rich's console (it exited 1 on its own)
+    ["groundstation", "info", "SESSION", "--json"],  # click.echo
+    ["groundstation", "--help"],  # click's help, before any sub-command
+    ["sysid", "--version"],
+    ["sysid", "identify", "--help"],
+])
+def test_a_pipe_whose_reader_quit_ends_the_command_as_it_ends_cat(argv, tmp_path) -> None:
+    """``groundstation info S | head -1``: output into a pipe nobody reads any more exited 1
+    (click's and rich's answer to EPIPE); ``cat``, ``seq`` and ``ls`` end with 141 (killed by
+    SIGPIPE). Now both command lines do too, quietly: no traceback, no "Exception ignored" at
+    the interpreter's exit. The pipe's reader is closed before the command starts, so its
+    first write fails, whatever the timing."""
+    import subprocess
+    import sys
+
+    from tests.viz.sessions import write_session
+
+    session = write_session(tmp_path / "flight.h5")
+    code = (f"import sys; from {argv[0]}.cli import main; sys.argv[0] = {argv[0]!r}; main()")
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-c", code,
+                               *[str(session) if a == "SESSION" else a for a in argv[1:]]],
+                              stdout=write, stderr=subprocess.PIPE, text=True, timeout=120,
+                              cwd=root)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (141, "")  # 128 + SIGPIPE, as the shell says
+
+
+_BUFFERED = """
+import sys, click
+from cfcommon.cli import OneLineErrorGroup
+@click.group(cls=OneLineErrorGroup)
+def g(): pass
+@g.command()
+def w():
+    print("x" * 100)  # a plain print: still in the buffer when the command returns
+g()
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX pipes and SIGPIPE's exit status")
+def test_output_still_buffered_when_the_command_ends_goes_the_same_way() -> None:
+    """Output the command left in standard output's buffer failed only at the interpreter's
+    exit: "Exception ignored ... BrokenPipeError" on stderr and exit 120. The group flushes it
+    and ends as for any other write into the closed pipe."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-c", _BUFFERED, "w"], stdout=write,
+                              stderr=subprocess.PIPE, text=True, timeout=60, cwd=root, env=env)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (141, "")
+
+
+def test_a_broken_pipe_that_is_no_output_stays_an_error() -> None:
+    """Only standard output and error count as a reader gone: EPIPE from a socket (a Dask
+    scheduler, a link) is an error of its own, never a quiet exit."""
+    import socket
+
+    from cfcommon.cli import reader_gone
+
+    a, b = socket.socketpair()
+    b.close()
+    with a, pytest.raises(BrokenPipeError) as info:
+        for _ in range(100):
+            a.send(b"x" * 65536)
+    assert not reader_gone(info.value)

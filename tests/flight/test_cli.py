@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import sys
 
+import pytest
 import usb.core
 from click.testing import CliRunner
 
 from cfsession import open_session
 from groundstation.cli import main
-from groundstation.commands.fly import summary_lines
+from groundstation.commands.fly import PlainProgress, summary_lines
 
 
 def test_fly_prints_the_summary_and_records(sim_uri, tmp_path):
@@ -46,6 +47,55 @@ def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
     assert info[0].endswith("closed cleanly, flight ABORTED (its cause is under the flight "
                             "summary)")
     assert any(line.strip().startswith("ABORTED: link lost") for line in info)
+
+
+@pytest.mark.parametrize("code", [0, 3])
+def test_a_listener_exiting_mid_flight_is_an_aborted_flight_with_its_summary(
+        code, sim_uri, tmp_path, monkeypatch):
+    """A listener's ``SystemExit(0)`` aborted the flight (it landed and was recorded as
+    aborted), then went through ``fly`` unseen: no summary and exit 0, an aborted flight read
+    as a success. Now the summary with its ABORTED line, then the one line and exit 2 of any
+    abort, whatever the code (3 too: 2 is what tells a script the flight was aborted)."""
+    real = PlainProgress.rows
+
+    def quitting(self, stream, rows):
+        if stream == "setpoints" and any(r[6] == 20 for r in rows):
+            raise SystemExit(code)
+        return real(self, stream, rows)
+
+    monkeypatch.setattr(PlainProgress, "rows", quitting)
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(), "--out",
+                                    str(tmp_path)])
+    assert res.exit_code == 2, res.output
+    cause = f"PlainProgress.rows failed (SystemExit: {code}): the flight ends"
+    (path,) = tmp_path.glob("*.h5")
+    assert res.stdout.splitlines()[1] == f"  ABORTED: {cause}"
+    assert res.stdout.splitlines()[-1] == f"  file {path}"
+    assert res.output.strip().splitlines()[-1] == (f"error: flight aborted: {cause}; "
+                                                   f"session saved to {path}")
+    assert "Traceback" not in res.output
+    s = open_session(path)
+    assert s.closed_cleanly and s.json_meta("summary")["cause"] == cause
+
+
+@pytest.mark.parametrize(("code", "status"), [(0, 0), (None, 0), (3, 2)])
+def test_a_listener_exiting_after_the_landing_keeps_a_whole_flight(
+        code, status, sim_uri, tmp_path, monkeypatch):
+    """After the landing the flight is whole: the summary has no ABORTED line; a listener's
+    exit code 0 is exit 0, any other one line and exit 2."""
+    def quitting(self, **_kw):
+        raise SystemExit(code)
+
+    monkeypatch.setattr(PlainProgress, "end", quitting)
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", sim_uri(), "--out",
+                                    str(tmp_path)])
+    assert res.exit_code == status, res.output
+    (path,) = tmp_path.glob("*.h5")
+    assert "ABORTED" not in res.stdout and res.stdout.splitlines()[-1] == f"  file {path}"
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("error")]
+    assert errors == ([] if status == 0 else [
+        f"error: a listener exited (SystemExit: {code}) after the landing; session saved to "
+        f"{path}"])
 
 
 def test_fly_bad_plan_is_one_line(tmp_path):
