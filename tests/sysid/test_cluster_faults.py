@@ -633,8 +633,21 @@ def test_scheduler_killed_mid_sweep_is_scheduler_lost(
 # ------------------------------------------------------- a scheduler that stops answering
 def _stop(server: subprocess.Popen[str]) -> None:
     """The scheduler's process stops (SIGSTOP): its connections stay open and the system still
-    accepts new ones, but nothing answers (a hung scheduler; the fixture kills it)."""
+    accepts new ones, but nothing answers (a hung scheduler; the fixture kills it). Returns
+    once every thread of it is stopped: the signal is delivered asynchronously, and on a busy
+    host a thread still running answered one more request (the dashboard's, seen once in two
+    runs beside a second test run)."""
     os.kill(server.pid, signal.SIGSTOP)
+    deadline = time.monotonic() + 30.0
+    tasks = Path(f"/proc/{server.pid}/task")
+    while tasks.is_dir() and time.monotonic() < deadline:
+        states = []
+        for stat in tasks.glob("*/stat"):
+            with contextlib.suppress(OSError):  # a thread that ended meanwhile
+                states.append(stat.read_text().rsplit(")", 1)[1].split()[0])
+        if states and all(state in "Tt" for state in states):
+            return
+        time.sleep(0.005)
 
 
 def test_scheduler_that_stops_answering_before_the_client_starts_is_one_line(
