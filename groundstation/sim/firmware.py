@@ -324,9 +324,14 @@ class Supervisor:
         """``supervisor.isFlying`` (bit 4 of ``supervisor.info``): Flying or WarningLevelOut."""
         return self.state in ("Flying", "WarningLevelOut")
 
-    def update(self, *, now_ms: int, motor_sum: int, setpoint_age_ms: int) -> bool:
-        """Update at 1 kHz; returns whether the motors may run. Sets ``locked`` on timeout."""
+    def update(self, *, now_ms: int, motor_sum: int, setpoint_age_ms: int,
+               emergency_stop: bool = False) -> bool:
+        """Update at 1 kHz; returns whether the motors may run. Sets ``locked`` on timeout and
+        on an emergency stop (``stabilizer.stop``), in any state."""
         if self.locked:
+            return False
+        if emergency_stop:
+            self.locked, self.armed, self.state = True, False, "Locked"
             return False
         if motor_sum > FLIGHT_THRESHOLD_PWM:
             self.latest_thrust_ms = now_ms

@@ -186,7 +186,8 @@ class SimVehicle:
         sup = self.supervisor
         was_locked = sup.locked
         may_run = sup.update(now_ms=now, motor_sum=pwm[0] + pwm[1] + pwm[2] + pwm[3],
-                             setpoint_age_ms=cmd.age_ms(now))
+                             setpoint_age_ms=cmd.age_ms(now),
+                             emergency_stop=self._emergency_stop)
         if sup.locked and not was_locked:
             self.stop_count += 1
             self._console.append("SUPERVISOR: Locked due to setpoint timeout, reboot required\n")

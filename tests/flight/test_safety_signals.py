@@ -21,7 +21,9 @@ from .checks import (
     safety_events,
 )
 from .conftest import (
+    SITL_HOST_SIDE,
     AfterLanding,
+    backends,
     one_variant_on_sitl,
     plan_variant,
     wait_for_stop,
@@ -117,6 +119,7 @@ def test_ctrl_c_while_connecting_gives_up_at_once(tmp_path):
     assert not list(tmp_path.glob("*.h5"))  # nothing was flown, nothing recorded
 
 
+@backends(sitl=SITL_HOST_SIDE)
 def test_second_signal_during_the_descent_stops_at_once(flight_uri, tmp_path):
     plan, uri = _pitch_only(), flight_uri()
     hook = signal_in_excitation(plan, signal.SIGINT)
