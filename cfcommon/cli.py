@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import io
+import logging
 import math
 import os
 import select
@@ -53,8 +54,8 @@ from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "FiniteFloat",
            "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
-           "output_console", "output_gone", "output_table", "reader_gone", "whole_file",
-           "writing_stdout"]
+           "output_console", "output_gone", "output_table", "reader_gone", "setup_logging",
+           "whole_file", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
@@ -125,6 +126,36 @@ def _flush_stdout() -> None:
     out = sys.stdout
     if out is not None:
         out.flush()
+
+
+class _OneLineRecords(logging.Formatter):
+    """Each log record one line, ``LEVEL logger: message``; a record with an exception gets
+    its type and text on that line, and its traceback only with ``tracebacks`` (``-v``)."""
+
+    def __init__(self, *, tracebacks: bool) -> None:
+        super().__init__("%(levelname)s %(name)s: %(message)s")
+        self.tracebacks = tracebacks
+
+    def format(self, record: logging.LogRecord) -> str:
+        if self.tracebacks or not record.exc_info:
+            return super().format(record)
+        exc = record.exc_info[1]
+        saved = record.exc_info, record.exc_text, record.stack_info
+        record.exc_info = record.exc_text = record.stack_info = None
+        try:
+            text = super().format(record)
+        finally:
+            record.exc_info, record.exc_text, record.stack_info = saved
+        return f"{text} ({type(exc).__name__}: {exc}; -v shows the traceback)"
+
+
+def setup_logging(*, verbose: int) -> None:
+    """The command lines' logging on standard error: warnings and errors (``-v`` info, ``-vv``
+    debug), one line each; tracebacks only from ``-v`` on (a library's ``log.exception`` is
+    no traceback for the user of a command)."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(_OneLineRecords(tracebacks=verbose >= 1))
+    logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2), handlers=[handler])
 
 
 def drop_failing_stdout() -> None:

@@ -12,7 +12,7 @@ import signal
 
 import click
 
-from cfcommon.cli import OneLineErrorGroup
+from cfcommon.cli import OneLineErrorGroup, setup_logging
 from groundstation import __version__
 from groundstation.errors import GroundStationError, SessionError
 
@@ -75,8 +75,7 @@ def main(verbose: int) -> None:
         # flying (groundstation.flight.realtime), so it must not be lost while connecting
         # either: an operator's interrupt before take-off would then let the whole plan fly.
         signal.signal(signal.SIGINT, signal.default_int_handler)
-    level = logging.WARNING - 10 * min(verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    setup_logging(verbose=verbose)
     # cflib logs link failures with full tracebacks; we report them in one line (see -vv).
     logging.getLogger("cflib").setLevel(logging.DEBUG if verbose >= 2 else logging.CRITICAL)
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import click
 
-from cfcommon.cli import FiniteFloat, check_output, output_table
+from cfcommon.cli import FiniteFloat, check_output, output_table, setup_logging
 from sysid.batch import (
     GROUP_BY,
     GroupBy,
@@ -72,8 +72,7 @@ def main(verbose: int) -> None:
       sysid identify flight1.h5 flight2.h5 --order 8 --out model.h5
       sysid compare model.h5 validation.h5 --window-s 5 --horizon 10
     """
-    level = logging.WARNING - 10 * min(verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    setup_logging(verbose=verbose)
 
 
 main.add_command(compare_cmd)

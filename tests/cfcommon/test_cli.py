@@ -224,3 +224,36 @@ def test_a_broken_pipe_that_is_no_output_stays_an_error() -> None:
         for _ in range(100):
             a.send(b"x" * 65536)
     assert not reader_gone(info.value)
+
+
+_FAILING_LISTENER = """
+import sys
+from groundstation.commands import fly
+def rows(self, *, stream, rows):
+    raise RuntimeError("progress broken")
+fly.PlainProgress.rows = rows
+from groundstation.cli import main
+sys.argv[0] = "groundstation"
+main()
+"""
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_a_library_error_logged_in_a_command_is_one_line_unless_verbose(verbose, tmp_path):
+    """A listener that raised (the progress display here) was logged by the runner with its
+    full traceback on standard error, before the summary. A command's log is one line per
+    record, the exception's type and text on it; ``-v`` adds the traceback."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    argv = [*(["-v"] if verbose else []), "fly", "hover-check", "--uri", "sim://71?speed=inf",
+            "--out", str(tmp_path)]
+    done = subprocess.run([sys.executable, "-c", _FAILING_LISTENER, *argv], cwd=root,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr  # the listener is dropped, the flight goes on
+    failed = [line for line in done.stderr.splitlines() if "progress broken" in line]
+    assert failed and failed[0].startswith("ERROR groundstation.flight")
+    assert ("Traceback (most recent call last)" in done.stderr) is verbose
+    if not verbose:
+        assert failed[0].endswith("(RuntimeError: progress broken; -v shows the traceback)")
