@@ -291,6 +291,9 @@ def _speed_in_uri() -> None:
               help="Seconds the vehicle may stay silent while connecting (a connection that "
                    "keeps answering may take up to 120 s in all).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--arm", is_flag=True,
+              help="Arm a Crazyflie that does not arm itself (a Crazyflie Brushless) before "
+                   "take-off; without it such a vehicle is refused, nothing flown.")
 @click.option("--emulated-radio", is_flag=True,
               help="Fly radio:// through an emulated Crazyradio PA to a simulated Crazyflie on "
                    "channel 80, 2M, E7E7E7E7E7 (cflib unchanged; docs/flying.md).")
@@ -312,8 +315,8 @@ def _speed_in_uri() -> None:
 @click.option("--speed", hidden=True, expose_value=False, callback=lambda *_: _speed_in_uri())
 def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed: int | None,
             view: str, web_port: int, max_rate: float | None, timeout_s: float,
-            as_json: bool, emulated_radio: bool, emulated_radio_speed: float, live_id: bool,
-            until_converged: bool, converged_tol: float | None,
+            as_json: bool, arm: bool, emulated_radio: bool, emulated_radio_speed: float,
+            live_id: bool, until_converged: bool, converged_tol: float | None,
             converged_for: float | None) -> None:
     """Fly a flight plan and record it to a session file.
 
@@ -354,6 +357,7 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
         with bus:
             result, url = _fly(loaded, uri=uri, out=out, tag=tag, view=view, web_port=web_port,
                                max_rate=max_rate, timeout_s=timeout_s, as_json=as_json,
+                               arm=arm,
                                live_id=live_id or until_converged or loaded.live_id is not None,
                                convergence=convergence if until_converged else None)
     except BaseException:
@@ -414,7 +418,7 @@ def _listener_exit(result: FlightResult) -> None:
 
 
 def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
-         max_rate: float | None, timeout_s: float, as_json: bool, live_id: bool,
+         max_rate: float | None, timeout_s: float, as_json: bool, arm: bool, live_id: bool,
          convergence: Convergence | None) -> tuple[FlightResult, str | None]:
     """Check the live identification, open the view (before connecting: either failing stops
     us here), fly."""
@@ -438,7 +442,7 @@ def _fly(plan: Plan, *, uri: str, out: Path, tag: str, view: str, web_port: int,
         listeners.append(ProgressListener(duration_s=plan.duration, status=status))
     else:  # nohup, CI logs, --json: plain lines on stderr
         listeners.append(PlainProgress(duration_s=plan.duration, status=status))
-    result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag,
+    result = fly_plan(plan=plan, out=out, uri=uri, listeners=listeners, tag=tag, arm=arm,
                       limits=None if max_rate is None else RateLimits(max_rate_deg_s=max_rate),
                       connect_timeout_s=timeout_s,
                       tick_hook=lid.in_step(real_time_s=1.0 / plan.setpoint_rate_hz)

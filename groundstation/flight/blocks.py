@@ -44,9 +44,11 @@ BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
 SUPERVISOR_INFO = "supervisor.info"
 """The supervisor's state bits (``supervisor.c``), logged in the battery block where the TOC
 has it, for the take-off check."""
-FLYING_BIT, TUMBLED_BIT, LOCKED_BIT = 1 << 4, 1 << 5, 1 << 6
-"""Bits of :data:`SUPERVISOR_INFO`: flying (state Flying or WarningLevelOut: the stop setpoint
-is fed until it clears), and the two that refuse a take-off: upside down, locked."""
+ARMED_BIT, CAN_FLY_BIT, FLYING_BIT, TUMBLED_BIT, LOCKED_BIT = (1 << 1, 1 << 3, 1 << 4, 1 << 5,
+                                                              1 << 6)
+"""Bits of :data:`SUPERVISOR_INFO`: armed and can fly (the motors may run: a take-off needs
+both), flying (state Flying or WarningLevelOut: the stop setpoint is fed until it clears), and
+the two that refuse a take-off: upside down, locked."""
 ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
 """The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
 the radio's budget stays with the thesis' three 50 Hz blocks)."""

@@ -262,6 +262,12 @@ class Link:
         """The stop setpoint: motors off at once."""
         self._bounded(self.cf.commander.send_stop_setpoint, what="stop setpoint")
 
+    def request_arming(self) -> None:
+        """cflib's ``Supervisor.send_arming_request(True)``: arm a Crazyflie that does not arm
+        itself (a Crazyflie Brushless; the legacy platform channel on older firmware)."""
+        self._bounded(lambda: self.cf.supervisor.send_arming_request(True),
+                      what="arming request")
+
     def deliver_stop(self) -> None:
         """The stop setpoint, sent :data:`STOP_REPEATS` times :data:`STOP_SPACING_S` apart on
         the flight clock (one lost on the way is sent again), then wait, at most

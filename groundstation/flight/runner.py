@@ -72,7 +72,9 @@ from typing import Any
 from cfsession.writer import standard_streams
 from groundstation.errors import FlightAborted, GroundStationError, SessionError
 from groundstation.flight.blocks import (
+    ARMED_BIT,
     BATTERY_BLOCK,
+    CAN_FLY_BIT,
     LOCKED_BIT,
     TUMBLED_BIT,
     altitude_block_period,
@@ -99,10 +101,14 @@ from groundstation.plan import Plan, Schedule, load_plan
 from groundstation.plan.altitude import AltitudeHold
 from groundstation.recorder import Recorder, session_path
 
-__all__ = ["SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
+__all__ = ["ARM_WITHIN_S", "SETPOINT_LATE_S", "FlightListener", "FlightResult", "RateLimits",
            "altitude_block_period", "block_summary", "fly_plan"]
 
 log = logging.getLogger(__name__)
+
+ARM_WITHIN_S = 2.0
+"""With ``arm``: flight time the vehicle has to report itself armed after the request (the
+battery block that logs ``supervisor.info`` comes every 0.5 s)."""
 
 
 class _Runner:
@@ -111,9 +117,9 @@ class _Runner:
     def __init__(self, *, plan: Plan, schedule: Schedule, uri: str, recorder: Recorder,
                  listeners: Sequence[FlightListener], limits: RateLimits,
                  connect_timeout_s: float, tick_hook: Callable[[int], None] | None,
-                 tag: str = "", reraise: bool = True) -> None:
+                 tag: str = "", reraise: bool = True, arm: bool = False) -> None:
         self.plan, self.schedule, self.uri, self.tag = plan, schedule, uri, tag
-        self.reraise = reraise
+        self.reraise, self.arm = reraise, arm
         self.recorder, self.limits, self.tick_hook = recorder, limits, tick_hook
         self.connect_timeout_s = connect_timeout_s
         self.cancel = threading.Event()  # set by request_abort: also cancels a connect
@@ -176,9 +182,41 @@ class _Runner:
             journal.cause(f"the Crazyflie is upside down (supervisor.info 0x{bits:04x}): "
                           "refusing to take off; set it level")
             return False
+        if bits is not None and not bits & ARMED_BIT and not self._armed(bits):
+            return False
         battery = "no battery reading" if vbat is None else f"battery {vbat:.2f} V"
         journal.event(f"preflight ok: {battery}, log blocks {names} running")
         return True
+
+    def _armed(self, bits: int) -> bool:
+        """A vehicle that is not armed would "fly" the plan with its motors at 0: with ``arm``
+        (``fly --arm``) ask it to arm and wait, at most :data:`ARM_WITHIN_S` of flight time,
+        for ``supervisor.info`` logged after the request to say armed and able to fly; else
+        the cause, nothing flown."""
+        journal, telemetry = self.journal, self.telemetry
+        if not self.arm:
+            journal.cause(f"the Crazyflie is not armed (supervisor.info 0x{bits:04x}): its "
+                          "motors would not run. It does not arm itself (a Crazyflie "
+                          "Brushless, or auto-arming off); fly --arm arms it before take-off")
+            return False
+        asked = journal.now()
+        self.out.link.request_arming()
+        journal.event("arming requested (fly --arm)")
+        t = self.clock.now()
+        while journal.now() - asked < ARM_WITHIN_S and not journal.causes:
+            t += self.schedule.period
+            telemetry.wait(t)
+            journal.dispatch()
+            bits = telemetry.supervisor or 0
+            fresh = telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > asked
+            if fresh and bits & ARMED_BIT and bits & CAN_FLY_BIT:
+                journal.event(f"armed (supervisor.info 0x{bits:04x})")
+                return True
+        if not journal.causes:
+            journal.cause(f"the Crazyflie did not arm within {ARM_WITHIN_S:g} s of the request "
+                          f"(supervisor.info 0x{telemetry.supervisor or 0:04x}); refusing to "
+                          "take off")
+        return False
 
     def fly(self) -> int:
         """Unlock, then every scheduled setpoint; returns the next unsent tick."""
@@ -411,7 +449,7 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
              listeners: Sequence[FlightListener] = (), limits: RateLimits | None = None,
              connect_timeout_s: float = 10.0,
              tick_hook: Callable[[int], None] | None = None, tag: str = "",
-             reraise: bool = True) -> FlightResult:
+             reraise: bool = True, arm: bool = False) -> FlightResult:
     """Fly ``plan`` (a :class:`Plan`, a path or a shipped plan's name) over ``uri``, record the
     session into folder ``out`` and return the :class:`FlightResult`.
 
@@ -424,6 +462,9 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     flown, the file closed) and is then raised from here; with ``reraise=False`` it is
     returned instead, as :attr:`FlightResult.escaped`, so the caller can report the flight
     first (``groundstation fly`` prints the summary, then exits as for any aborted flight).
+
+    A vehicle that does not arm itself (a Crazyflie Brushless) is refused before take-off
+    unless ``arm``: then it is asked to arm (``fly --arm``).
     """
     check_uri(uri)
     plan = plan if isinstance(plan, Plan) else load_plan(plan)
@@ -437,6 +478,6 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     runner = _Runner(plan=plan, schedule=schedule, uri=uri, recorder=recorder,
                      listeners=listeners, limits=limits or RateLimits(),
                      connect_timeout_s=connect_timeout_s, tick_hook=tick_hook, tag=tag,
-                     reraise=reraise)
+                     reraise=reraise, arm=arm)
     with signal_handlers(runner.request_abort), prompt_thread_switches():
         return runner.run()

@@ -101,7 +101,6 @@ class CrtpPeer:
         self._param_crc = toc_crc(
             list(zip(self._param_names, self._param_types, strict=True)), b"param")
         self.last_rx_ms = vehicle.firmware_ms
-        self.armed = True  # a CF2.x arms itself
         self._handlers = {
             P_LINKCTRL: self._linkctrl, P_PLATFORM: self._platform, P_LOG: self.logs.handle,
             P_PARAM: self._param, P_MEM: self._mem, P_COMMANDER: self._commander,
@@ -250,7 +249,6 @@ class CrtpPeer:
         return []
 
     def _arm(self, armed: bool) -> None:
-        self.armed = armed
         self.vehicle.arm(armed=armed)
 
     def _supervisor(self, ch: int, data: bytes) -> list[Packet]:
@@ -262,7 +260,7 @@ class CrtpPeer:
             return []
         if cmd == 0x01 and len(data) >= 2:
             self._arm(bool(data[1]))
-            return [(hdr, bytes([0x81, 1, int(self.armed and not self.vehicle.is_locked)]))]
+            return [(hdr, bytes([0x81, 1, int(self.vehicle.supervisor.armed)]))]
         if cmd == 0x02:  # crash recovery: a locked vehicle stays locked until rebooted
             return [(hdr, bytes([0x82, 0, int(not self.vehicle.is_locked)]))]
         if cmd == 0x03:  # emergency stop

@@ -22,7 +22,8 @@ def simulator_for_uri(uri: str) -> Simulator:
     with _registry_lock:
         sim = _registry.get(opts.address)
         if sim is None or not sim.running:
-            sim = Simulator(address=opts.address, speed=opts.speed, seed=opts.seed)
+            sim = Simulator(address=opts.address, speed=opts.speed, seed=opts.seed,
+                            auto_arm=opts.auto_arm)
             _registry[opts.address] = sim
         return sim
 

@@ -64,11 +64,11 @@ class Simulator:
     def __init__(self, *, address: str = "0", speed: float = 1.0, seed: int = 0,
                  vehicle: Any = None, sink: Callable[[int, bytes], None] | None = None,
                  linger: bool = True, link_timeout_ms: int | None = None,
-                 max_backlog: int | None = None) -> None:
+                 max_backlog: int | None = None, auto_arm: bool = True) -> None:
         if vehicle is None:
             from groundstation.sim.vehicle import SimVehicle
 
-            vehicle = SimVehicle(seed=seed)
+            vehicle = SimVehicle(seed=seed, auto_arm=auto_arm)
         self.address, self.speed, self.vehicle = address, speed, vehicle
         self.peer = CrtpPeer(vehicle=vehicle, link_timeout_ms=link_timeout_ms)
         self.faults = Faults()

@@ -1,6 +1,7 @@
 """The options of a ``sim://`` URI.
 
-URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every option optional):
+URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5&autoarm=0`` (every option
+optional):
 
 ====================  ==========================================================================
 ``N``                 which simulated vehicle (default 0); one simulation per ``N`` at a time
@@ -10,6 +11,8 @@ URI: ``sim://N?speed=20&seed=3&drop=0.05&latency_ms=20&cut_at=12.5`` (every opti
 ``drop``              fraction of log data packets lost on the way down (default 0)
 ``latency_ms``        delay, in simulation ms, added to every packet the link returns
 ``cut_at``            simulation time, s, at which the link goes silent for good
+``autoarm``           1 (default): armed from power-on, as a Crazyflie 2.x; 0: armed only on
+                      request, as a Crazyflie Brushless (``fly --arm``)
 ====================  ==========================================================================
 """
 
@@ -46,6 +49,7 @@ class SimOptions:
     speed: float = 1.0
     seed: int = 0
     faults: Faults | None = None
+    auto_arm: bool = True
 
 
 def _number(name: str, text: str, *, kind: type, low: float, high: float = math.inf) -> Any:
@@ -84,8 +88,10 @@ def parse_uri(uri: str) -> SimOptions:
             faults.latency_ms = _number(key, text, kind=float, low=0.0, high=60_000.0)
         elif key == "cut_at":
             faults.cut_at = _number(key, text, kind=float, low=0.0)
+        elif key == "autoarm":
+            opts.auto_arm = bool(_number(key, text, kind=int, low=0, high=1))
         else:
             raise LinkError(f"unknown sim:// option {key!r}; "
-                            "use speed, seed, drop, latency_ms or cut_at")
+                            "use speed, seed, drop, latency_ms, cut_at or autoarm")
     opts.faults = faults
     return opts

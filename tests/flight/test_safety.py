@@ -130,7 +130,8 @@ def test_low_battery_refuses_to_take_off(flight_uri, tmp_path):
 def test_a_locked_vehicle_refuses_to_take_off(sim_uri, tmp_path):
     """A vehicle its supervisor locked (here: the commander watchdog after a link cut in the
     hover) runs no motors until restarted. A second flight "flew" it with its motors at 0,
-    every setpoint sent, exit 0 (SITL: after any flight; first-day review)."""
+    every setpoint sent, exit 0 (SITL: after any flight, before the stop was fed until
+    landed; first-day review)."""
     uri = sim_uri()
 
     def cut(k: int) -> None:
@@ -146,6 +147,25 @@ def test_a_locked_vehicle_refuses_to_take_off(sim_uri, tmp_path):
     s = check_closed_with_stop(result)
     assert (s["setpoints"].data["thrust"] == 0).all()
     assert s["battery"].data["info"][0] & 0x40
+
+
+def test_a_vehicle_that_does_not_arm_itself_is_refused_unless_fly_arm(sim_uri, tmp_path):
+    """A Crazyflie that does not arm itself (the Brushless; ``autoarm=0``) runs no motors until
+    armed: like a locked one, it "flew" a plan with its motors at 0, exit 0. It is refused,
+    nothing flown, unless ``arm`` (``fly --arm``): then armed and flown."""
+    refused = fly_plan(plan="hover-check", out=tmp_path / "refused", uri=sim_uri(autoarm=0))
+    assert refused.aborted and refused.cause.startswith("the Crazyflie is not armed (")
+    assert "fly --arm arms it before take-off" in refused.cause
+    s = check_closed_with_stop(refused)
+    assert (s["setpoints"].data["thrust"] == 0).all() and not s["battery"].data["info"][0] & 2
+    uri = sim_uri(autoarm=0)
+    flown = fly_plan(plan="hover-check", out=tmp_path / "armed", uri=uri, arm=True)
+    assert not flown.aborted, flown.cause
+    s = check_closed_with_stop(flown)
+    assert [e.text for e in s.events() if e.text.startswith(("arming", "armed"))] == [
+        "arming requested (fly --arm)", "armed (supervisor.info 0x000a)"]
+    assert s["motors"].values().max() > 20000  # it flew
+    check_fed_until_landed(s, flown)
 
 
 class _Listener:
