@@ -11,6 +11,9 @@ import pytest
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--uri", default=None,
                      help="Crazyflie URI to fly (default: $CF_URI); tests skip without one")
+    parser.addoption("--arm", action="store_true",
+                     help="arm the Crazyflie before each flight (a Crazyflie Brushless: "
+                          "groundstation fly --arm)")
 
 
 @pytest.fixture
@@ -19,3 +22,9 @@ def cf_uri(request: pytest.FixtureRequest) -> str:
     if not uri:
         pytest.skip("no Crazyflie: give --uri URI or set CF_URI")
     return uri
+
+
+@pytest.fixture
+def cf_arm(request: pytest.FixtureRequest) -> bool:
+    """Whether each flight arms the vehicle first (``--arm``)."""
+    return bool(request.config.getoption("--arm"))

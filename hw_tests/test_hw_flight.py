@@ -31,9 +31,9 @@ def _motors_stopped_after_stop(s) -> None:
     assert len(after) > 0 and (after == 0).all()
 
 
-def test_hover_check_flies_and_records(cf_uri, tmp_path):
+def test_hover_check_flies_and_records(cf_uri, cf_arm, tmp_path):
     plan = load_plan("hover-check")
-    result = fly_plan(plan=plan, out=tmp_path, uri=cf_uri)
+    result = fly_plan(plan=plan, out=tmp_path, uri=cf_uri, arm=cf_arm)
     assert not result.aborted, result.cause
     s = check_closed_with_stop(result)
     check_log_blocks(s, result)
@@ -43,7 +43,7 @@ def test_hover_check_flies_and_records(cf_uri, tmp_path):
     assert [n.decode() for n in s["phases"].data["name"]] == [p.name for p in plan.phases]
 
 
-def test_ctrl_c_in_hover_descends_and_stops(cf_uri, tmp_path):
+def test_ctrl_c_in_hover_descends_and_stops(cf_uri, cf_arm, tmp_path):
     plan = load_plan("hover-check")
     hover = next(p for p in plan.compile().phases if p.kind == "hover")
 
@@ -51,7 +51,7 @@ def test_ctrl_c_in_hover_descends_and_stops(cf_uri, tmp_path):
         if k == hover.start_tick + 10:
             os.kill(os.getpid(), signal.SIGINT)
 
-    result = fly_plan(plan=plan, out=tmp_path, uri=cf_uri, tick_hook=hook)
+    result = fly_plan(plan=plan, out=tmp_path, uri=cf_uri, tick_hook=hook, arm=cf_arm)
     assert "SIGINT" in result.cause
     s = check_closed_with_stop(result)
     assert [k.decode() for k in s["phases"].data["kind"]][-1] == "abort"

@@ -38,9 +38,10 @@ def test_scan_lists_the_dongle_and_the_vehicle(radio_uri):
     assert f"crazyflie radio://0/{channel}/{rate}" in res.output
 
 
-def test_fly_records_the_configuration_of_the_dongle_and_the_link(radio_uri, tmp_path):
+def test_fly_records_the_configuration_of_the_dongle_and_the_link(radio_uri, cf_arm, tmp_path):
     res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", radio_uri,
-                                    "--out", str(tmp_path), "--json"])
+                                    "--out", str(tmp_path), "--json",
+                                    *(["--arm"] if cf_arm else [])])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)
     s = open_session(summary["file"])
