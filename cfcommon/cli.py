@@ -113,12 +113,19 @@ def end_reader_gone() -> NoReturn:
 
 @contextlib.contextmanager
 def _quiet_when_reader_gone() -> Iterator[None]:
+    """A pipe whose reader quit ends the command quietly (:func:`end_reader_gone`); any other
+    EPIPE (a socket's, a pipe to a child process) is an error of its own: one line and exit
+    status 1 (click's ``main`` would end it with exit 1 and not a word)."""
     try:
         yield
     except OSError as exc:
-        if not reader_gone(exc):
+        if reader_gone(exc):
+            end_reader_gone()
+        if exc.errno != errno.EPIPE:
             raise
-        end_reader_gone()
+        _say(f"error: {exc.strerror or 'Broken pipe'} ({type(exc).__name__}): the other end "
+             "of a connection or pipe the command writes to closed (not standard output's)")
+        sys.exit(1)
 
 
 def _flush_stdout() -> None:
@@ -146,7 +153,11 @@ class _OneLineRecords(logging.Formatter):
             text = super().format(record)
         finally:
             record.exc_info, record.exc_text, record.stack_info = saved
-        return f"{text} ({type(exc).__name__}: {exc}; -v shows the traceback)"
+        if exc is None:  # exc_info=True outside an except clause: nothing to show
+            return text
+        lines = str(exc).splitlines()  # an exception's text may span lines: its first
+        what = f"{lines[0]} ..." if len(lines) > 1 else "".join(lines)
+        return f"{text} ({type(exc).__name__}: {what}; -v shows the traceback)"
 
 
 def setup_logging(*, verbose: int) -> None:
@@ -195,12 +206,25 @@ def writing_stdout(exc: BaseException, *, stderr: bool = False) -> bool:
 def output_gone(exc: BaseException) -> bool:
     """True when ``exc`` (raised writing to stdout or stderr) says the output has nowhere to go:
     EIO (the terminal closed: a hang-up) or EPIPE (the reader of a pipe quit). Standard output
-    and error are then pointed at the null device, so later writes (the error line, logging,
-    the interpreter's flush at exit) neither fail nor print a traceback."""
+    is then pointed at the null device, and so is standard error unless it still works (it
+    goes elsewhere: ``fly | head -1`` on a terminal keeps the error line that says how the
+    flight ended), so later writes (the error line, logging, the interpreter's flush at exit)
+    neither fail nor print a traceback."""
     if not isinstance(exc, OSError) or exc.errno not in (errno.EIO, errno.EPIPE):
         return False
-    _to_null(1, 2)
+    _to_null(*((1,) if _stderr_elsewhere() else (1, 2)))
     return True
+
+
+def _stderr_elsewhere() -> bool:
+    """Whether standard error is another file than standard output (not the same terminal or
+    pipe) and, if a pipe, one still read."""
+    try:
+        out, err = os.fstat(1), os.fstat(2)
+    except OSError:
+        return False
+    return ((out.st_dev, out.st_ino) != (err.st_dev, err.st_ino)
+            and not _pipe_reader_quit(sys.stderr))
 
 
 class _TrimmedLines(io.TextIOBase):

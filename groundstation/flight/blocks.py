@@ -44,11 +44,13 @@ BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
 SUPERVISOR_INFO = "supervisor.info"
 """The supervisor's state bits (``supervisor.c``), logged in the battery block where the TOC
 has it, for the take-off check."""
-ARMED_BIT, CAN_FLY_BIT, FLYING_BIT, TUMBLED_BIT, LOCKED_BIT = (1 << 1, 1 << 3, 1 << 4, 1 << 5,
-                                                              1 << 6)
-"""Bits of :data:`SUPERVISOR_INFO`: armed and can fly (the motors may run: a take-off needs
-both), flying (state Flying or WarningLevelOut: the stop setpoint is fed until it clears), and
-the two that refuse a take-off: upside down, locked."""
+(CAN_ARM_BIT, ARMED_BIT, AUTO_ARM_BIT, CAN_FLY_BIT, FLYING_BIT, TUMBLED_BIT, LOCKED_BIT,
+ CRASHED_BIT) = (1 << 0, 1 << 1, 1 << 2, 1 << 3, 1 << 4, 1 << 5, 1 << 6, 1 << 7)
+"""Bits of :data:`SUPERVISOR_INFO`: can be armed now (pre-flight checks passed: an arming
+request is taken only then), armed, arms itself (auto-arm), can fly (the motors may run: a
+take-off needs armed and can fly), flying (state Flying or WarningLevelOut: the stop setpoint
+is fed until it clears), the two that refuse a take-off: upside down, locked, and crashed
+(a crash recovery request or a restart clears it)."""
 ATTITUDE_BLOCK = ("attitude", ("stabilizer.roll", "stabilizer.pitch", "stabilizer.yaw"), 0.1)
 """The estimated attitude at the setpoint rate, to see roll/pitch setpoints against it (slow, so
 the radio's budget stays with the thesis' three 50 Hz blocks)."""

@@ -73,8 +73,11 @@ from cfsession.writer import standard_streams
 from groundstation.errors import FlightAborted, GroundStationError, SessionError
 from groundstation.flight.blocks import (
     ARMED_BIT,
+    AUTO_ARM_BIT,
     BATTERY_BLOCK,
+    CAN_ARM_BIT,
     CAN_FLY_BIT,
+    CRASHED_BIT,
     LOCKED_BIT,
     TUMBLED_BIT,
     altitude_block_period,
@@ -192,12 +195,23 @@ class _Runner:
         """A vehicle that is not armed would "fly" the plan with its motors at 0: with ``arm``
         (``fly --arm``) ask it to arm and wait, at most :data:`ARM_WITHIN_S` of flight time,
         for ``supervisor.info`` logged after the request to say armed and able to fly; else
-        the cause, nothing flown."""
+        the cause, nothing flown. One that cannot be armed now (bit 0 clear: crashed, its
+        pre-flight checks not passed; the firmware drops the request) is refused at once, and
+        one that locks while arming is refused as locked."""
         journal, telemetry = self.journal, self.telemetry
+        info = f"supervisor.info 0x{bits:04x}"
+        if not bits & CAN_ARM_BIT:  # the firmware refuses an arming request now: say why
+            why = ("crashed: send it a crash recovery request or restart it"
+                   if bits & CRASHED_BIT else "its pre-flight checks have not passed (set it "
+                   "level and still, or restart it)")
+            journal.cause(f"the Crazyflie is not armed and cannot be armed ({info}): {why}; "
+                          "refusing to take off")
+            return False
         if not self.arm:
-            journal.cause(f"the Crazyflie is not armed (supervisor.info 0x{bits:04x}): its "
-                          "motors would not run. It does not arm itself (a Crazyflie "
-                          "Brushless, or auto-arming off); fly --arm arms it before take-off")
+            itself = ("it arms itself once its pre-flight checks pass" if bits & AUTO_ARM_BIT
+                      else "it does not arm itself (a Crazyflie Brushless)")
+            journal.cause(f"the Crazyflie is not armed ({info}): its motors would not run; "
+                          f"{itself}; fly --arm arms it before take-off")
             return False
         asked = journal.now()
         self.out.link.request_arming()
@@ -209,6 +223,10 @@ class _Runner:
             journal.dispatch()
             bits = telemetry.supervisor or 0
             fresh = telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > asked
+            if fresh and bits & LOCKED_BIT:
+                journal.cause(f"the Crazyflie locked while arming (supervisor.info "
+                              f"0x{bits:04x}): refusing to take off; power-cycle it")
+                return False
             if fresh and bits & ARMED_BIT and bits & CAN_FLY_BIT:
                 journal.event(f"armed (supervisor.info 0x{bits:04x})")
                 return True

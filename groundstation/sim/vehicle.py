@@ -190,7 +190,8 @@ class SimVehicle:
                              emergency_stop=self._emergency_stop)
         if sup.locked and not was_locked:
             self.stop_count += 1
-            self._console.append("SUPERVISOR: Locked due to setpoint timeout, reboot required\n")
+            why = "an emergency stop" if self._emergency_stop else "setpoint timeout"
+            self._console.append(f"SUPERVISOR: Locked due to {why}, reboot required\n")
         ctrl = self.controller
         thrust = sp.thrust
         if thrust == 0.0:

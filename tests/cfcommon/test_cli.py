@@ -226,6 +226,36 @@ def test_a_broken_pipe_that_is_no_output_stays_an_error() -> None:
     assert not reader_gone(info.value)
 
 
+_SOCKET_EPIPE = """
+import socket, click
+from cfcommon.cli import OneLineErrorGroup
+@click.group(cls=OneLineErrorGroup)
+def g(): pass
+@g.command()
+def w():
+    a, b = socket.socketpair()
+    b.close()
+    for _ in range(100):
+        a.send(b"x" * 65536)
+g()
+"""
+
+
+def test_a_broken_pipe_that_is_no_output_is_one_line_not_a_silent_exit() -> None:
+    """EPIPE from a socket went on up to click's ``main``, which takes any EPIPE for its
+    output's reader gone: exit 1 and not a word. It is one line and exit 1."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    done = subprocess.run([sys.executable, "-c", _SOCKET_EPIPE, "w"], capture_output=True,
+                          text=True, timeout=60, cwd=root)
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [
+        "error: Broken pipe (BrokenPipeError): the other end of a connection or pipe the "
+        "command writes to closed (not standard output's)"]
+
+
 _FAILING_LISTENER = """
 import sys
 from groundstation.commands import fly
@@ -257,3 +287,26 @@ def test_a_library_error_logged_in_a_command_is_one_line_unless_verbose(verbose,
     assert ("Traceback (most recent call last)" in done.stderr) is verbose
     if not verbose:
         assert failed[0].endswith("(RuntimeError: progress broken; -v shows the traceback)")
+
+
+def test_a_log_record_stays_one_line_whatever_its_exception_says() -> None:
+    """An exception whose text spans lines (a Dask or HDF5 error's often does) made the
+    one-line record several lines; ``exc_info=True`` outside an except clause added
+    "(NoneType: None; ...)"."""
+    import logging
+
+    from cfcommon.cli import _OneLineRecords
+
+    fmt = _OneLineRecords(tracebacks=False)
+    try:
+        raise ValueError("first line\nsecond line")
+    except ValueError:
+        import sys
+
+        record = logging.LogRecord("x", logging.ERROR, __file__, 1, "it failed", None,
+                                   sys.exc_info())
+    assert fmt.format(record) == ("ERROR x: it failed (ValueError: first line ...; -v shows "
+                                  "the traceback)")
+    bare = logging.LogRecord("x", logging.ERROR, __file__, 1, "no exception", None,
+                             (None, None, None))
+    assert fmt.format(bare) == "ERROR x: no exception"

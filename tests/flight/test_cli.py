@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 
 import pytest
@@ -47,6 +48,33 @@ def test_fly_abort_exits_nonzero_with_cause_and_path(sim_uri, tmp_path):
     assert info[0].endswith("closed cleanly, flight ABORTED (its cause is under the flight "
                             "summary)")
     assert any(line.strip().startswith("ABORTED: link lost") for line in info)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX pipes")
+def test_an_aborted_flight_whose_summary_pipe_closed_still_says_so_on_stderr(tmp_path):
+    """``groundstation fly ... | head -1`` on a terminal: the summary's pipe closed, and the
+    error line that says how the flight ended and where its session is went to the null
+    device with it (standard error pointed there too, though it still worked). The exit
+    status said 2; the line is on standard error now. The pipe's reader is closed before the
+    command starts, so its first write fails, whatever the timing."""
+    import subprocess
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    code = "import sys; from groundstation.cli import main; sys.argv[0] = 'groundstation'; main()"
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-c", code, "fly", "hover-check", "--uri",
+                               "sim://0?speed=inf&autoarm=0", "--out", str(tmp_path)],
+                              stdout=write, stderr=subprocess.PIPE, text=True, timeout=120,
+                              cwd=root)
+    finally:
+        os.close(write)
+    (path,) = tmp_path.glob("*.h5")
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: flight aborted: the Crazyflie is not armed"), done.stderr
+    assert last.endswith(f"; session saved to {path}")
 
 
 @pytest.mark.parametrize("code", [0, 3])

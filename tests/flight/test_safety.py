@@ -168,6 +168,42 @@ def test_a_vehicle_that_does_not_arm_itself_is_refused_unless_fly_arm(sim_uri, t
     check_fed_until_landed(s, flown)
 
 
+def test_a_vehicle_that_cannot_be_armed_is_refused_at_once_for_what_it_is(
+        sim_uri, tmp_path, monkeypatch):
+    """A crashed Crazyflie (``supervisor.info`` bit 7; the firmware disarmed it and takes no
+    arming request until a crash recovery) was told "it does not arm itself ... fly --arm
+    arms it"; with ``--arm`` the request was dropped and the runner waited 2 s for "did not
+    arm". Bit 0 (can be armed) clear: refused at once, no request, the crash named."""
+    from groundstation.sim.vehicle import SimVehicle
+
+    monkeypatch.setattr(SimVehicle, "supervisor_info", lambda self: 0x0084)  # crashed, auto-arm
+    for arm in (False, True):
+        result = fly_plan(plan="hover-check", out=tmp_path / str(arm), uri=sim_uri(), arm=arm)
+        assert result.cause.startswith("the Crazyflie is not armed and cannot be armed "
+                                       "(supervisor.info 0x0084): crashed"), result.cause
+        s = check_closed_with_stop(result)
+        assert not [e for e in s.events() if e.text.startswith("arming requested")]
+        assert (s["setpoints"].data["thrust"] == 0).all()
+
+
+def test_a_vehicle_that_locks_while_arming_is_refused_as_locked(sim_uri, tmp_path,
+                                                                monkeypatch):
+    """A vehicle that locked during ``--arm``'s wait (an emergency stop here) was reported
+    "did not arm within 2 s" after the whole wait. It is refused as locked, at its first
+    report."""
+    from groundstation.sim.vehicle import SimVehicle
+
+    monkeypatch.setattr(SimVehicle, "arm", lambda self, *, armed: self.write_param(
+        "stabilizer.stop", 1))
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=sim_uri(autoarm=0), arm=True)
+    assert result.cause.startswith("the Crazyflie locked while arming (supervisor.info "
+                                   "0x0040)"), result.cause
+    s = check_closed_with_stop(result)
+    (asked,) = [e.t for e in s.events() if e.text == "arming requested (fly --arm)"]
+    (refused,) = [e.t for e in s.events() if e.text.startswith("the Crazyflie locked")]
+    assert refused - asked < 1.0  # the next battery report, not the end of the 2 s wait
+
+
 class _Listener:
     def __init__(self, fail_at: int | None = None) -> None:
         self.calls, self.fail_at, self.ended = 0, fail_at, None

@@ -189,6 +189,8 @@ def test_params_read_write_change_behaviour(hovering):
     fly(hovering, seconds=0.05)
     assert hovering.motors_pwm == (0, 0, 0, 0)
     assert hovering.is_locked and hovering.read_log("supervisor.info") == 0x44  # as the firmware
+    assert hovering.drain_console()[-1] == (
+        "SUPERVISOR: Locked due to an emergency stop, reboot required\n")  # no timeout's
     rev = hovering.read_param("firmware.revision0")
     hovering.write_param("firmware.revision0", 1)        # read-only: ignored
     assert hovering.read_param("firmware.revision0") == rev
