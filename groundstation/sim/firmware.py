@@ -309,11 +309,12 @@ class Supervisor:
     than 2 s (*Locked*, until a restart): level-out has no way to *Landed*. So a commander that
     falls silent within 2 s of the motors' last run above idle locks the vehicle even after a
     stop setpoint; stop setpoints sent on until it reports landed (``supervisor.info`` bit 4
-    clear) leave it *Landed*, then *ReadyToFly* 3 s later (``LANDING_TIMEOUT_MS``).
+    clear) leave it *Landed*; 3 s later (``LANDING_TIMEOUT_MS``) it is reset and disarmed, and
+    re-armed at once where it arms itself (*ReadyToFly*), else left *PreFlChecksPassed*.
     """
 
     def __init__(self, *, auto_arm: bool = True) -> None:
-        self.armed = auto_arm
+        self.armed = self.auto_arm = auto_arm
         self.locked = False
         self.latest_thrust_ms = -1
         self.landed_ms = -1
@@ -354,6 +355,10 @@ class Supervisor:
                 self.state, self.landed_ms = "Landed", now_ms
         elif thrust_recent:
             self.state = "Flying"
-        elif state != "Landed" or now_ms - self.landed_ms > LANDING_TIMEOUT_MS:
+        elif state != "Landed":
             self.state = "ReadyToFly"
+        elif now_ms - self.landed_ms > LANDING_TIMEOUT_MS:  # reset: disarmed, auto-arm re-arms
+            self.armed = self.auto_arm
+            self.state = "ReadyToFly" if self.armed else "PreFlChecksPassed"
+            return self.armed
         return True

@@ -167,6 +167,24 @@ def test_notify_stop_lets_the_setpoint_expire(hovering):
     assert hovering.motors_pwm == (0, 0, 0, 0)
 
 
+def test_a_vehicle_that_does_not_arm_itself_is_disarmed_at_the_landing_timeout():
+    """``supervisor.c``: Landed, 3 s later Reset, which disarms; a CF2.x re-arms itself at
+    once, a Brushless stays disarmed until asked again."""
+    v = SimVehicle(seed=1, auto_arm=False, start_z_m=0.5)
+    v.arm(armed=True)
+    fly(v, seconds=0.02, thrust=0)
+    fly(v, seconds=0.5)
+    assert v.supervisor_state == "Flying"
+    while v.is_flying:
+        v.commander_stop()
+        v.advance(0.1)
+    assert v.supervisor_state == "Landed" and v.read_log("supervisor.info") == 0b1010
+    v.advance(3.1)
+    assert v.supervisor_state == "PreFlChecksPassed" and v.read_log("supervisor.info") == 0b0001
+    fly(v, seconds=0.3)
+    assert v.motors_pwm == (0, 0, 0, 0)  # not armed: no motors until armed again
+
+
 def test_disarmed_vehicle_keeps_motors_off():
     v = SimVehicle(seed=1, auto_arm=False)
     assert v.supervisor_state == "PreFlChecksPassed"
