@@ -77,3 +77,65 @@ def test_real_firmware_watchdog_matches_the_simulated_one():
         assert obs["running_when_level"] > 0, (name, obs)  # levelled, still flying
         assert obs["stop_s"] == pytest.approx(2.0, abs=tol), (name, obs)
         assert obs["locked"] and not obs["locked_before"], (name, obs)
+
+
+STOP_BLOCK = {"st": ["motor.m1", "motor.m2", "motor.m3", "motor.m4", "supervisor.info"]}
+
+
+def observe_after_the_stop(uri: str, *, thrust: int) -> dict[str, float]:
+    """Fly 0.5 s, send one stop setpoint and keep sending it every 0.1 s until the log says
+    landed (bit 4 clear; 5 s at most); then fly 0.5 s again, one stop, and silence until the
+    log says locked (5 s at most). Times from the motors' stop (firmware clock, s)."""
+    clock = clock_for_uri(uri)
+    out: dict[str, float] = {}
+    with connect(uri, toc_cache=True) as scf:
+        cf = scf.cf
+        rec = Recorder(cf, blocks=STOP_BLOCK, period_ms=10)
+        cf.commander.send_setpoint(0, 0, 0, 0)  # release the thrust lock
+        for fed in (True, False):
+            t = clock.now()
+            for _ in range(25):
+                t += 0.02
+                clock.sleep_until(t)
+                cf.commander.send_setpoint(0, 0, 0, thrust)
+            cf.commander.send_stop_setpoint()
+            n_before = len(rec.rows("st")[0])
+            deadline = time.monotonic() + 20.0  # wall clock: a busy host
+            while time.monotonic() < deadline and clock.now() < t + 5.0:
+                clock.sleep_until(clock.now() + 0.1)
+                if fed:
+                    cf.commander.send_stop_setpoint()
+                fw_ms, v = rec.rows("st")
+                info = v[n_before:, 4].astype(int)
+                if len(info) and ((info[-1] & LOCKED) if not fed else not info[-1] & 0x10):
+                    break
+            fw_ms, v = rec.rows("st")
+            fw_s, v = fw_ms[n_before:] / 1000.0, v[n_before:]
+            off = fw_s[np.flatnonzero((v[:, :4] == 0).all(axis=1))[0]]
+            info = v[:, 4].astype(int)
+            key = "fed" if fed else "silent"
+            end = np.flatnonzero((info & LOCKED) if not fed else ~info & 0x10)
+            out[f"{key}_s"] = fw_s[end[0]] - off if len(end) else np.inf
+            out[f"{key}_locked"] = bool(info[-1] & LOCKED)
+    return out
+
+
+def test_after_a_stop_the_real_firmware_locks_unless_fed_as_the_simulated_one():
+    """What the ground station's stop feed rests on (``groundstation.flight.commander``): after
+    a stop setpoint the supervisor counts the vehicle flying 2 s more; fed stop setpoints it
+    reports landed then, left silent it locks then (level-out has no way to Landed)."""
+    gsim.install()
+    uri = f"sim://{8000 + int(time.monotonic() * 1000) % 1000}?speed=20"
+    try:
+        sim = observe_after_the_stop(uri, thrust=SimVehicle().hover_thrust() + 3000)
+    finally:
+        gsim.close_all()
+    try:
+        v = backend.start_vehicle()
+        real = observe_after_the_stop(v.uri, thrust=v.peer.hover_pwm() + 3000)
+    finally:
+        backend.close_all()
+    for name, obs, tol in (("sim", sim, 0.02), ("sitl", real, 0.15)):
+        assert obs["fed_s"] == pytest.approx(2.0, abs=tol) and not obs["fed_locked"], (name, obs)
+        assert obs["silent_s"] == pytest.approx(2.0, abs=tol) and obs["silent_locked"], (
+            name, obs)
