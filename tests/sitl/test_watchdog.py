@@ -58,18 +58,25 @@ def observe_watchdog(uri: str, *, thrust: int) -> dict[str, float]:
             "locked": bool(int(v[-1, 5]) & LOCKED), "locked_before": bool(int(v[0, 5]) & LOCKED)}
 
 
-def test_real_firmware_watchdog_matches_the_simulated_one():
+def on_both(observe, *, address: int) -> tuple[dict, dict]:
+    """``observe(uri, thrust=...)`` on ``sim://`` (20x), then on a fresh real firmware, each
+    3000 PWM above its hover thrust: (simulated, real)."""
     gsim.install()
-    uri = f"sim://{9000 + int(time.monotonic() * 1000) % 1000}?speed=20"
+    uri = f"sim://{address + int(time.monotonic() * 1000) % 1000}?speed=20"
     try:
-        sim = observe_watchdog(uri, thrust=SimVehicle().hover_thrust() + 3000)
+        sim = observe(uri, thrust=SimVehicle().hover_thrust() + 3000)
     finally:
         gsim.close_all()
     try:
         v = backend.start_vehicle()
-        real = observe_watchdog(v.uri, thrust=v.peer.hover_pwm() + 3000)
+        real = observe(v.uri, thrust=v.peer.hover_pwm() + 3000)
     finally:
         backend.close_all()
+    return sim, real
+
+
+def test_real_firmware_watchdog_matches_the_simulated_one():
+    sim, real = on_both(observe_watchdog, address=9000)
     # sim://: exact to the log period. SITL: its log, supervisor and stabilizer run as threads of
     # a real-time process on a busy host (measured here: 0.531 s and 2.001 s).
     for name, obs, tol in (("sim", sim, 0.011), ("sitl", real, 0.1)):
@@ -124,17 +131,7 @@ def test_after_a_stop_the_real_firmware_locks_unless_fed_as_the_simulated_one():
     """What the ground station's stop feed rests on (``groundstation.flight.commander``): after
     a stop setpoint the supervisor counts the vehicle flying 2 s more; fed stop setpoints it
     reports landed then, left silent it locks then (level-out has no way to Landed)."""
-    gsim.install()
-    uri = f"sim://{8000 + int(time.monotonic() * 1000) % 1000}?speed=20"
-    try:
-        sim = observe_after_the_stop(uri, thrust=SimVehicle().hover_thrust() + 3000)
-    finally:
-        gsim.close_all()
-    try:
-        v = backend.start_vehicle()
-        real = observe_after_the_stop(v.uri, thrust=v.peer.hover_pwm() + 3000)
-    finally:
-        backend.close_all()
+    sim, real = on_both(observe_after_the_stop, address=8000)
     for name, obs, tol in (("sim", sim, 0.02), ("sitl", real, 0.15)):
         assert obs["fed_s"] == pytest.approx(2.0, abs=tol) and not obs["fed_locked"], (name, obs)
         assert obs["silent_s"] == pytest.approx(2.0, abs=tol) and obs["silent_locked"], (
