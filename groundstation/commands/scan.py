@@ -130,13 +130,14 @@ def _scan(addr: int | None) -> None:
                    f"address {d['address']}){serial}")
     if not problem and not any(d["pid"] == 0x7777 for d in devices):
         problem = ("no Crazyradio found on USB; plug in a Crazyradio PA (1915:7777), "
-                   "or if it is plugged in, " + UDEV_HINT + "; a simulator is not scanned: "
-                   "fly it by its URI (udp://127.0.0.1:PORT, sim://0)")
+                   "or if it is plugged in, " + UDEV_HINT)
     uris = scan_crazyflies(addr)
     for uri in uris:
         click.echo(f"crazyflie {uri}")
-    if problem and not uris:
-        raise LinkError(problem)
+    if problem and not uris:  # cflib's UDP scan asks ports 19850-19859 of this host only
+        raise LinkError(f"{problem}; no simulator answered either (`groundstation sim` "
+                        "answers on ports 19850-19859 of this host; fly one elsewhere, or "
+                        "sim://0, by its URI)")
     if problem:
         click.echo(f"warning: {problem}", err=True)
     elif not uris:

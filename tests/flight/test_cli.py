@@ -141,10 +141,31 @@ def test_view_without_live_module_is_one_line(tmp_path, monkeypatch):
 
 def test_scan_without_dongle_names_the_fix(monkeypatch):
     monkeypatch.setattr(usb.core, "find", lambda **kw: iter(()))
+    monkeypatch.setattr("groundstation.commands.scan.scan_crazyflies", lambda addr: [])
     res = CliRunner().invoke(main, ["scan"])
     assert res.exit_code == 2
     assert res.output.startswith("error: no Crazyradio found") and "udev" in res.output
+    assert "no simulator answered either" in res.output
     assert res.output.count("\n") == 1
+
+
+def test_scan_lists_the_udp_simulator_and_warns_only_of_the_missing_dongle(monkeypatch):
+    """``groundstation sim`` on port 19850 answers cflib's UDP scan; the warning said "a
+    simulator is not scanned" under the simulator it had just listed."""
+    import cflib.crtp.udpdriver as udpdriver
+
+    from groundstation.sim import UdpServer
+    from tests.sim_crtp.helpers import free_udp_port
+
+    monkeypatch.setattr(usb.core, "find", lambda **kw: iter(()))
+    port = free_udp_port()  # cflib scans 19850-19859: here one free port instead
+    monkeypatch.setattr(udpdriver, "_BASE_PORT", port)
+    monkeypatch.setattr(udpdriver, "_NR_OF_PORTS_TO_SCAN", 1)
+    with UdpServer(port=port, seed=1):
+        res = CliRunner().invoke(main, ["scan"])
+    assert res.exit_code == 0, res.output
+    assert f"crazyflie udp://127.0.0.1:{port}" in res.stdout
+    assert res.stderr.startswith("warning: no Crazyradio found") and "simulator" not in res.stderr
 
 
 def test_scan_without_usb_permission_or_backend(monkeypatch):
@@ -156,6 +177,7 @@ def test_scan_without_usb_permission_or_backend(monkeypatch):
 
     monkeypatch.setattr(usb.core, "find", lambda **kw: iter([Dev()]))
     monkeypatch.setattr(usb.util, "get_string", denied)
+    monkeypatch.setattr("groundstation.commands.scan.scan_crazyflies", lambda addr: [])
     res = CliRunner().invoke(main, ["scan"])
     assert res.exit_code == 2 and "no permission" in res.output and "plugdev" in res.output
 
