@@ -34,7 +34,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from groundstation.flight.blocks import BATTERY_BLOCK, FLYING_BIT, LOCKED_BIT
+from groundstation.flight.blocks import BATTERY_BLOCK, CRASHED_BIT, FLYING_BIT, LOCKED_BIT
 from groundstation.flight.journal import Journal
 from groundstation.flight.telemetry import Telemetry
 from groundstation.plan import Schedule
@@ -214,8 +214,8 @@ class Commander:
     def _supervisor_says(self) -> str | None:
         """What ``supervisor.info`` logged after the stop says: ``"landed"`` (bit 4 clear),
         ``"locked"`` (bit 6: its supervisor stopped it for good; the flying bit is clear then
-        too), ``""`` while it still flies or until a value sent after the stop arrives; None
-        if the log has no ``supervisor.info``."""
+        too), ``"crashed"`` (bit 7: it tumbled in flight), ``""`` while it still flies or until
+        a value sent after the stop arrives; None if the log has no ``supervisor.info``."""
         info = self.telemetry.supervisor
         if info is None:
             return None
@@ -223,6 +223,8 @@ class Commander:
             return ""
         if info & LOCKED_BIT:
             return "locked"
+        if info & CRASHED_BIT:  # tumbled in flight: stopped, no lock to keep it from
+            return "crashed"
         return "" if info & FLYING_BIT else "landed"
 
     def _fed(self, *, n: int, why: str, seconds: float) -> None:
@@ -238,6 +240,11 @@ class Commander:
                                f"0x{self.telemetry.supervisor:04x}): its supervisor stopped it "
                                "(a commander watchdog timeout, an emergency stop or a crash); "
                                "only a restart unlocks it", level="warning", source="safety")
+        elif why == "crashed":
+            self.journal.event(f"{fed}; the Crazyflie reports crashed (supervisor.info "
+                               f"0x{self.telemetry.supervisor:04x}): it tumbled in flight and "
+                               "its motors are stopped; set it upright, then a crash recovery "
+                               "(cfclient) or a restart", level="warning", source="safety")
         elif why == "no telemetry":
             self.journal.event(f"{fed} without telemetry (the link went silent), the "
                                "supervisor's 2 s is-flying time and a margin: if they did not "
