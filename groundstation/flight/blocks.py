@@ -119,15 +119,16 @@ def flight_blocks(*, toc_type: TocType, altitude_variable: str | None,
                   ) -> list[BlockPlan]:
     """Every block a flight logs, checked by :func:`plan_blocks`: :data:`FLIGHT_BLOCKS`, the
     battery with :data:`SUPERVISOR_INFO` where the TOC has it (left out, with ``warn``, when
-    the TOC has no ``pm.vbat``: e.g. CrazySim's unpatched SITL) and the attitude, and
+    the TOC has no ``pm.vbat``: e.g. CrazySim's unpatched SITL; :data:`SUPERVISOR_INFO` is
+    then logged with the attitude) and the attitude, and
     ``altitude_variable`` (a plan's altitude hold) at :func:`altitude_block_period`."""
     blocks = plan_blocks(toc_type=toc_type, blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S)
+    info = (SUPERVISOR_INFO,) if toc_type(SUPERVISOR_INFO) is not None else ()
     name, variables, period = BATTERY_BLOCK
-    if toc_type(SUPERVISOR_INFO) is not None:
-        variables = (*variables, SUPERVISOR_INFO)
-    slow = [(name, variables, period), ATTITUDE_BLOCK]
-    if toc_type(BATTERY_BLOCK[1][0]) is None:
-        slow.pop(0)
+    slow = [(name, (*variables, *info), period), ATTITUDE_BLOCK]
+    if toc_type(BATTERY_BLOCK[1][0]) is None:  # supervisor.info with the attitude instead
+        a_name, a_variables, a_period = ATTITUDE_BLOCK
+        slow = [(a_name, (*a_variables, *info), a_period)]
         warn(f"no {BATTERY_BLOCK[1][0]} in the log TOC (no power management, e.g. an "
              "unpatched SITL build): battery check skipped")
     for name, variables, period in slow:

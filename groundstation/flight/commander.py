@@ -34,7 +34,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from groundstation.flight.blocks import BATTERY_BLOCK, CRASHED_BIT, FLYING_BIT, LOCKED_BIT
+from groundstation.flight.blocks import CRASHED_BIT, FLYING_BIT, LOCKED_BIT
 from groundstation.flight.journal import Journal
 from groundstation.flight.telemetry import Telemetry
 from groundstation.plan import Schedule
@@ -219,7 +219,7 @@ class Commander:
         info = self.telemetry.supervisor
         if info is None:
             return None
-        if not self.telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > self.t_stop:
+        if not self.telemetry.supervisor_t > self.t_stop:
             return ""
         if info & LOCKED_BIT:
             return "locked"

@@ -79,6 +79,7 @@ from groundstation.flight.blocks import (
     CAN_FLY_BIT,
     CRASHED_BIT,
     LOCKED_BIT,
+    SUPERVISOR_INFO,
     TUMBLED_BIT,
     altitude_block_period,
     flight_blocks,
@@ -222,7 +223,7 @@ class _Runner:
             telemetry.wait(t)
             journal.dispatch()
             bits = telemetry.supervisor or 0
-            fresh = telemetry.last_block.get(BATTERY_BLOCK[0], -math.inf) > asked
+            fresh = telemetry.supervisor_t > asked
             if fresh and bits & LOCKED_BIT:
                 journal.cause(f"the Crazyflie locked while arming (supervisor.info "
                               f"0x{bits:04x}): refusing to take off; power-cycle it")
@@ -308,6 +309,9 @@ class _Runner:
                                    altitude_variable=hold.variable if hold else None,
                                    warn=lambda text: journal.event(text, level="warning"))
             self.block_periods = {b.name: b.period_s for b in blocks}
+            self.telemetry.supervisor_at = {
+                b.name: [v for v, _ in b.variables].index(SUPERVISOR_INFO) for b in blocks
+                if any(v == SUPERVISOR_INFO for v, _ in b.variables)}
             changes = check_parameters(link.cf, self.plan.parameters)  # before any file
             meta = {**link.metadata(), **self._plan_metadata(),
                     **({"plan_parameters": {c.name: {"value": c.value, "was": c.old}

@@ -45,7 +45,9 @@ class Telemetry:
         self.last_log = -math.inf  # flight time of the newest log packet (any block)
         self.last_block: dict[str, float] = {}  # ... of each block
         self.vbat: float | None = None
-        self.supervisor: int | None = None  # supervisor.info where the battery block has it
+        self.supervisor: int | None = None  # supervisor.info where a block logs it
+        self.supervisor_t = -math.inf  # ... flight time it arrived
+        self.supervisor_at: dict[str, int] = {}  # block -> index of supervisor.info in it
         self.altitude_m: float | None = None  # last logged altitude for the altitude hold
         self.over_limit_runs = [0, 0, 0]  # consecutive packets beyond the rate limit, per axis
         self.console = ""
@@ -72,8 +74,9 @@ class Telemetry:
                 self.delivered[block] += 1
                 if block == BATTERY_BLOCK[0]:
                     self.vbat = float(values[0])
-                    if len(values) > 1:
-                        self.supervisor = int(values[1])
+                if block in self.supervisor_at:
+                    self.supervisor = int(values[self.supervisor_at[block]])
+                    self.supervisor_t = t
                 elif block == ALTITUDE_BLOCK:
                     self.altitude_m = float(values[0])
                 elif block == "gyro" and self.flying:

@@ -135,7 +135,9 @@ def test_host_stall_freezes_simulation_time(flight_uri, tmp_path):
 def test_a_firmware_without_power_management_flies_with_the_battery_check_skipped(
         sim_uri, tmp_path, monkeypatch):
     """A TOC without ``pm.vbat`` (CrazySim's SITL build without this project's pm patch): the
-    take-off battery check is skipped with a warning, the flight and its file are complete."""
+    take-off battery check is skipped with a warning, the flight and its file are complete;
+    ``supervisor.info`` comes with the attitude, so the stop is fed until it says landed (it
+    went without: fed blind)."""
     from groundstation.sim.vehicle import SimVehicle
 
     monkeypatch.setattr(SimVehicle, "LOG_VARIABLES", {
@@ -149,3 +151,5 @@ def test_a_firmware_without_power_management_flies_with_the_battery_check_skippe
     assert any(e.text.startswith("no pm.vbat in the log TOC") and e.level == "warning"
                for e in s.events())
     check_setpoints(s, plan, complete=True)
+    assert s["attitude"].value_fields == ["roll", "pitch", "yaw", "info"]
+    assert result.summary["setpoints"]["after_stop"]["ended"] == "landed"

@@ -12,8 +12,7 @@ from groundstation.flight.commander import Commander
 
 
 def _says(info: int | None, *, after_stop: bool = True) -> str | None:
-    telemetry = SimpleNamespace(supervisor=info,
-                                last_block={"battery": 5.0 if after_stop else 3.0})
+    telemetry = SimpleNamespace(supervisor=info, supervisor_t=5.0 if after_stop else 3.0)
     commander = Commander.__new__(Commander)
     commander.telemetry, commander.t_stop = telemetry, 4.0
     return commander._supervisor_says()
