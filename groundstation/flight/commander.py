@@ -22,9 +22,11 @@ only a restart ends (``supervisor_state_machine.c``: level-out has no way to *La
 flight that ran its motors keeps sending the stop setpoint, one per setpoint period and each
 recorded (thrust 0, tick -1), until ``supervisor.info`` reports it landed (bit 4 clear;
 :data:`LANDED_WITHIN_S` at most; without ``supervisor.info`` in the log, :data:`FEED_BLIND_S`).
-A locked vehicle (bit 6; its flying bit is clear too) is reported locked, never landed. After
-a link loss found by the silence watch alone (no log packet, cflib's link still up: the stop
-setpoints may still reach the vehicle) the stop is fed blind for :data:`FEED_BLIND_S`.
+A locked vehicle (bit 6; its flying bit is clear too) is reported locked, a crashed one (bit
+7) crashed, never landed. After a link loss found by the silence watch alone (no log packet,
+cflib's link still up: the stop setpoints may still reach the vehicle) the stop is fed blind
+for :data:`FEED_BLIND_S`. No stop request (Ctrl-C, a hangup) ends the feed; cflib's link loss,
+a failed send and :data:`LANDED_WITHIN_S` do.
 """
 
 from __future__ import annotations
