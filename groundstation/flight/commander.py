@@ -75,7 +75,6 @@ class Commander:
         self.t_first = math.nan  # flight clock time setpoint 0 is due
         self.sent_t: list[float] = []
         self.stopped = False  # the stop setpoint has been delivered
-        self.t_stop = math.nan  # flight time it was (first) delivered
         self.motors_ran = False  # a setpoint with thrust went out: the supervisor may count
         self.fed: dict[str, Any] = {}  # the stop setpoints fed after it (:meth:`tail`)
 
@@ -108,8 +107,7 @@ class Commander:
         self.telemetry.flying = False
         self.link.deliver_stop()
         self.stopped = True
-        if math.isnan(self.t_stop):
-            self.t_stop = self.telemetry.stop_t = t
+        self.telemetry.stop_t = min(self.telemetry.stop_t, t)  # the first one's time
         journal.pending["setpoints"].append((t, 0.0, 0.0, 0.0, 0, -1, -1))
         journal.event(f"stop setpoint sent ({why})",
                       source="safety" if journal.causes else "runner")
@@ -180,7 +178,8 @@ class Commander:
         feed = self.motors_ran
         blind = telemetry.silent  # no telemetry, but cflib's link is up: the stops may arrive
         now = journal.clock.now()  # on the setpoint grid from the stop, never a burst
-        t = self.t_stop + journal.origin if math.isfinite(self.t_stop) else now
+        stop_t = telemetry.stop_t
+        t = stop_t + journal.origin if math.isfinite(stop_t) else now
         t += max(math.floor((now - t) / period) - 1, 0) * period  # one overdue at most
         t0, n, why = t, 0, ""
         while True:
@@ -189,11 +188,7 @@ class Commander:
             journal.dispatch()
             elapsed = t - t0
             if feed:
-                said = None if blind else self._supervisor_says()
-                why = (said if said else "link lost" if self._link_gone()
-                       else ("no telemetry" if blind else "no supervisor.info")
-                       if said is None and elapsed >= FEED_BLIND_S
-                       else "timeout" if elapsed >= LANDED_WITHIN_S else "")
+                why = self._feed_ends(blind=blind, elapsed=elapsed)
                 feed = not why
             if elapsed >= seconds - 1e-9 and not feed:
                 break
@@ -209,6 +204,19 @@ class Commander:
         if self.motors_ran:
             self._fed(n=n, why=why, seconds=round(n * period, 3))
 
+    def _feed_ends(self, *, blind: bool, elapsed: float) -> str:
+        """Why the feed ends now, ``elapsed`` seconds after the stop: what ``supervisor.info``
+        says (:meth:`_supervisor_says`), the link gone, its blind time or its limit over;
+        ``""``: it goes on."""
+        said = None if blind else self._supervisor_says()
+        if said:
+            return said
+        if self._link_gone():
+            return "link lost"
+        if said is None and elapsed >= FEED_BLIND_S:
+            return "no telemetry" if blind else "no supervisor.info"
+        return "timeout" if elapsed >= LANDED_WITHIN_S else ""
+
     def _link_gone(self) -> bool:
         """cflib lost the link, or one of its calls never returned: nothing more is sent."""
         return bool(self.link.lost or getattr(self.link, "stuck", False))
@@ -221,7 +229,7 @@ class Commander:
         info = self.telemetry.supervisor
         if info is None:
             return None
-        if not self.telemetry.supervisor_t > self.t_stop:
+        if not self.telemetry.supervisor_t > self.telemetry.stop_t:
             return ""
         if info & LOCKED_BIT:
             return "locked"

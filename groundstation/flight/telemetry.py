@@ -74,15 +74,15 @@ class Telemetry:
                 self.delivered[block] += 1
                 if block == BATTERY_BLOCK[0]:
                     self.vbat = float(values[0])
-                if block in self.supervisor_at:
-                    self.supervisor = int(values[self.supervisor_at[block]])
-                    self.supervisor_t = t
                 elif block == ALTITUDE_BLOCK:
                     self.altitude_m = float(values[0])
                 elif block == "gyro" and self.flying:
                     self._check_rates(values)
                 elif block == "motors" and t > self.stop_t and not any(values):
                     self.stop_seen = True
+                if block in self.supervisor_at:  # the battery's, or the attitude's
+                    self.supervisor = int(values[self.supervisor_at[block]])
+                    self.supervisor_t = t
             elif kind == "console":
                 self.console += item[2]
                 *lines, self.console = self.console.split("\n")

@@ -12,9 +12,10 @@ from groundstation.flight.commander import Commander
 
 
 def _says(info: int | None, *, after_stop: bool = True) -> str | None:
-    telemetry = SimpleNamespace(supervisor=info, supervisor_t=5.0 if after_stop else 3.0)
+    telemetry = SimpleNamespace(supervisor=info, supervisor_t=5.0 if after_stop else 3.0,
+                                stop_t=4.0)
     commander = Commander.__new__(Commander)
-    commander.telemetry, commander.t_stop = telemetry, 4.0
+    commander.telemetry = telemetry
     return commander._supervisor_says()
 
 
