@@ -410,12 +410,9 @@ class OneLineErrorGroup(click.Group):
         the interpreter's exit ("Exception ignored ... BrokenPipeError", exit 120)."""
         try:
             try:
-                rv = super().main(*args, **kwargs)
-            except SystemExit:  # how click's standalone main ends, whatever the exit status
+                return super().main(*args, **kwargs)
+            finally:  # also when click's standalone main ends with SystemExit, as it does
                 _flush_stdout()
-                raise
-            _flush_stdout()
-            return rv
         except OSError as exc:
             if reader_gone(exc):
                 end_reader_gone()
