@@ -263,11 +263,17 @@ class CrtpPeer:
             return [(hdr, bytes([0x81, 1, int(self.vehicle.supervisor.armed)]))]
         if cmd == 0x02:  # crash recovery: a locked vehicle stays locked until rebooted
             return [(hdr, bytes([0x82, 0, int(not self.vehicle.is_locked)]))]
-        if cmd == 0x03:  # emergency stop
-            self.vehicle.commander_stop()
+        self._emergency(cmd)
         return []
 
     def _localization(self, ch: int, data: bytes) -> list[Packet]:
-        if ch == 1 and data[0] == 3:  # legacy emergency stop
-            self.vehicle.commander_stop()
+        if ch == 1:  # the legacy emergency stop and its watchdog: the same codes
+            self._emergency(data[0])
         return []
+
+    def _emergency(self, cmd: int) -> None:
+        """Emergency stop (3: locks the vehicle) and its watchdog's notification (4)."""
+        if cmd == 0x03:
+            self.vehicle.emergency_stop()
+        elif cmd == 0x04:
+            self.vehicle.emergency_stop_watchdog()

@@ -45,6 +45,7 @@ WDT_SHUTDOWN_MS = 2000
 IS_FLYING_HYSTERESIS_MS = 2000
 FLIGHT_THRESHOLD_PWM = 1000
 LANDING_TIMEOUT_MS = 3000
+ESTOP_WATCHDOG_MS = 1000  # DEFAULT_EMERGENCY_STOP_WATCHDOG_TIMEOUT
 
 
 class Lpf2p:
@@ -311,6 +312,7 @@ class Supervisor:
     stop setpoint; stop setpoints sent on until it reports landed (``supervisor.info`` bit 4
     clear) leave it *Landed*; 3 s later (``LANDING_TIMEOUT_MS``) it is reset and disarmed, and
     re-armed at once where it arms itself (*ReadyToFly*), else left *PreFlChecksPassed*.
+    An emergency stop locks it, in *Landed* only at the landing timeout (:meth:`update`).
     """
 
     def __init__(self, *, auto_arm: bool = True) -> None:
@@ -328,10 +330,14 @@ class Supervisor:
     def update(self, *, now_ms: int, motor_sum: int, setpoint_age_ms: int,
                emergency_stop: bool = False) -> bool:
         """Update at 1 kHz; returns whether the motors may run. Sets ``locked`` on timeout and
-        on an emergency stop (``stabilizer.stop``), in any state."""
+        on an emergency stop (``stabilizer.stop``, a CRTP emergency stop or its watchdog): at
+        once in every state but *Landed*, which has no transition for it
+        (``supervisor_state_machine.c``): there at the landing timeout, when the reset leads
+        through *PreFlChecksNotPassed* to *Locked*."""
         if self.locked:
             return False
-        if emergency_stop:
+        if emergency_stop and (self.state != "Landed"
+                               or now_ms - self.landed_ms > LANDING_TIMEOUT_MS):
             self.locked, self.armed, self.state = True, False, "Locked"
             return False
         if motor_sum > FLIGHT_THRESHOLD_PWM:

@@ -18,6 +18,7 @@ from typing import ClassVar
 
 from groundstation.errors import GroundStationError
 from groundstation.sim.firmware import (
+    ESTOP_WATCHDOG_MS,
     Commander,
     ImuFilter,
     PidController,
@@ -123,7 +124,9 @@ class SimVehicle:
         self._att = (0.0, 0.0, 0.0)             # roll, legacy pitch, yaw, deg
         self._predict_ms = 0                    # the Kalman estimator's next prediction
         self._predict_rng = random.Random(seed ^ 0x6B616C6D)  # its timing, apart from the noise
-        self._emergency_stop = False
+        self._stop_param = False         # stabilizer.stop (a parameter: set back to 0, gone)
+        self._stop_requested = False     # a CRTP emergency stop: until a restart
+        self._stop_watchdog_ms = -1      # the emergency-stop watchdog's last notification
         self._low_warned = False
         self.stop_count = 0
         self._console: list[str] = [
@@ -185,12 +188,12 @@ class SimVehicle:
         sp = cmd.current(now_ms=now)
         sup = self.supervisor
         was_locked = sup.locked
+        estop = self._emergency_stop(now)
         may_run = sup.update(now_ms=now, motor_sum=pwm[0] + pwm[1] + pwm[2] + pwm[3],
-                             setpoint_age_ms=cmd.age_ms(now),
-                             emergency_stop=self._emergency_stop)
+                             setpoint_age_ms=cmd.age_ms(now), emergency_stop=estop)
         if sup.locked and not was_locked:
             self.stop_count += 1
-            why = "an emergency stop" if self._emergency_stop else "setpoint timeout"
+            why = "an emergency stop" if estop else "setpoint timeout"
             self._console.append(f"SUPERVISOR: Locked due to {why}, reboot required\n")
         ctrl = self.controller
         thrust = sp.thrust
@@ -201,7 +204,7 @@ class SimVehicle:
             r, p, y = ctrl.update(sp=sp, roll=roll, pitch_legacy=pitch, yaw=yaw,
                                   gx=imu.gx, gy=imu.gy, gz=imu.gz)
             self._control = (thrust, r, p, y)
-        if may_run and not self._emergency_stop and thrust != 0.0:
+        if may_run and not estop and thrust != 0.0:
             t, r, p, y = self._control
             pwm = mix_legacy_x(thrust=t, roll=r, pitch=p, yaw=y)
         else:
@@ -239,6 +242,22 @@ class SimVehicle:
     def commander_notify_stop(self, *, remain_valid_ms: int) -> None:
         """Hand priority back; the last setpoint stays valid for ``remain_valid_ms``."""
         self.commander.notify_stop(remain_valid_ms=int(remain_valid_ms), now_ms=self._tick)
+
+    def emergency_stop(self) -> None:
+        """A CRTP emergency stop (cflib ``supervisor.send_emergency_stop``, or the legacy
+        localization packet): the firmware keeps the request until restarted, so the
+        supervisor locks the vehicle (``crtp_localization_service.c``, ``supervisor.c``)."""
+        self._stop_requested = True
+
+    def emergency_stop_watchdog(self) -> None:
+        """A notification of the emergency-stop watchdog: once one came, a gap of more than
+        1 s (``DEFAULT_EMERGENCY_STOP_WATCHDOG_TIMEOUT``) is an emergency stop."""
+        self._stop_watchdog_ms = self._tick
+
+    def _emergency_stop(self, now_ms: int) -> bool:
+        """``SUPERVISOR_CB_EMERGENCY_STOP`` at ``now_ms``."""
+        return self._stop_param or self._stop_requested or (
+            self._stop_watchdog_ms >= 0 and now_ms >= self._stop_watchdog_ms + ESTOP_WATCHDOG_MS)
 
     def arm(self, *, armed: bool) -> None:
         """Supervisor arming request (a CF2.1 is armed from power-on)."""
@@ -288,7 +307,7 @@ class SimVehicle:
             value = float(int(value))
         self._params[name] = float(value)
         if name == "stabilizer.stop":
-            self._emergency_stop = bool(value)
+            self._stop_param = bool(value)
 
     def _pid_for(self, name: str):
         if name not in self.PARAMS:

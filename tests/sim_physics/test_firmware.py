@@ -158,6 +158,42 @@ def test_stop_setpoints_fed_until_landed_leave_the_vehicle_unlocked(hovering):
     assert min(hovering.motors_pwm) > 30000 and hovering.supervisor_state == "Flying"
 
 
+def test_an_emergency_stop_in_landed_locks_only_at_the_landing_timeout(hovering):
+    """``supervisor_state_machine.c``: every state but *Landed* leaves for *Locked* (through
+    *ExceptFreeFall*) on an emergency stop; *Landed* has no such transition, and its landing
+    timeout resets it into a state that has: the lock comes 3 s after the landing."""
+    fly(hovering, seconds=0.5)
+    while hovering.is_flying:
+        hovering.commander_stop()
+        hovering.advance(0.1)
+    assert hovering.supervisor_state == "Landed"
+    hovering.emergency_stop()
+    hovering.advance(2.8)
+    assert hovering.supervisor_state == "Landed" and not hovering.is_locked
+    hovering.advance(0.4)
+    assert hovering.is_locked and hovering.read_log("supervisor.info") == 0x44
+    fly(hovering, seconds=0.1, thrust=0)
+    fly(hovering, seconds=0.3)
+    assert hovering.motors_pwm == (0, 0, 0, 0)
+
+
+def test_the_emergency_stop_watchdog_locks_a_second_after_its_last_notification(hovering):
+    """``supervisor.c`` ``checkEmergencyStopWatchdog``: off until its first notification,
+    then an emergency stop whenever the last one is more than 1 s old."""
+    fly(hovering, seconds=1.5)
+    hovering.emergency_stop_watchdog()
+    for _ in range(3):
+        fly(hovering, seconds=0.9)
+        hovering.emergency_stop_watchdog()
+    assert min(hovering.motors_pwm) > 30000 and not hovering.is_locked
+    fly(hovering, seconds=0.95)
+    assert min(hovering.motors_pwm) > 30000
+    fly(hovering, seconds=0.1)
+    assert hovering.is_locked and hovering.motors_pwm == (0, 0, 0, 0)
+    assert hovering.drain_console()[-1] == (
+        "SUPERVISOR: Locked due to an emergency stop, reboot required\n")
+
+
 def test_notify_stop_lets_the_setpoint_expire(hovering):
     fly(hovering, seconds=2.5)       # the firmware cannot age a setpoint past power-on
     hovering.commander_notify_stop(remain_valid_ms=100)
