@@ -1,5 +1,6 @@
 """Frozen channels: a stretch where one value repeats exactly is named (a sensor or log that
-stopped); a PRBS, a limit and noisy data are not; DaISy flutter's dead tail is."""
+stopped), with the data's mean or linear trend removed or not; a PRBS, a limit and noisy data
+are not; DaISy flutter's dead tail is."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 from click.testing import CliRunner
 
 import sysid
+from sysid.preprocess import detrend_data
 from sysid.quirks import data_warnings, find_frozen, frozen_warnings
 from tests.sysid import daisy
 from tests.sysid.systems import open_loop, random_stable_system
@@ -56,12 +58,50 @@ def test_a_prbs_input_a_limit_and_a_short_hold_are_no_freeze() -> None:
     assert find_frozen([sysid.IOData(u=u, y=y, dt=d.dt)]) == []
 
 
+def test_a_freeze_is_named_whether_or_not_the_data_were_detrended() -> None:
+    """A gyro frozen for 1 s of a 10 s, 50 Hz log that drifts: ``--detrend linear``
+    (``detrend_data(kind="linear")``, what the records reach :func:`data_warnings` as) turned
+    the freeze into a straight line, and it went unnamed. It is named at the same place
+    however the data were detrended; a PRBS's long holds and a limit, straight lines too once
+    detrended, are still no freeze, nor is a ramp in data whose mean alone was removed."""
+    rng = np.random.default_rng(4)
+    n, dt = 500, 0.02
+    t = np.arange(n) * dt
+    u = rng.standard_normal((n, 1))
+    y = np.column_stack([np.convolve(u[:, 0], [0.5, 0.3, 0.1])[:n], 0.4 * u[:, 0]])
+    y += 0.05 * rng.standard_normal((n, 2)) + [3.0, -40.0] + np.outer(t, [0.2, 1.5])
+    frozen = y.copy()
+    frozen[200:250, 1] = y[200, 1]  # gyro.x frozen for 1 s
+    raw = sysid.IOData(u=u, y=frozen, dt=dt, output_names=("acc.z", "gyro.x"))
+    for kind in (None, "mean", "linear"):
+        data = raw if kind is None else detrend_data(raw, kind=kind)[0]
+        assert [(f.name, f.start, f.length) for f in find_frozen([data])] == [
+            ("gyro.x", 200, 50)], kind
+        [line] = frozen_warnings([data])
+        assert line.startswith("output gyro.x holds one value exactly for 50 samples (1.0 s")
+        assert line in data_warnings([data])
+    prbs = np.sign(np.sin(np.arange(n) / 40.0))[:, None] + 0.3 * t[:, None]  # holds of 126
+    limited = y.copy()
+    limited[300:400, 0] = limited[:, 0].max() + 1.0  # 100 samples at its largest: a limit
+    clean = sysid.IOData(u=prbs, y=limited, dt=dt)
+    for kind in (None, "mean", "linear"):
+        data = clean if kind is None else detrend_data(clean, kind=kind)[0]
+        assert find_frozen([data]) == [], kind
+    limited[200:250, 1] = -40.0 + 1.5 * t[200:250] + 0.5  # a ramp mid-range
+    ramp = sysid.IOData(u=u, y=limited, dt=dt)
+    for kind in (None, "mean"):  # never named: judged on exact equality, as before
+        data = ramp if kind is None else detrend_data(ramp, kind=kind)[0]
+        assert find_frozen([data]) == [], kind
+
+
 def test_daisy_flutters_dead_tail_is_named() -> None:
     """The last 225 of flutter's 1024 samples hold one value (6.66e-8, 4.35e-8): two thirds of
     the benchmark protocol's validation third."""
     ident, val = daisy.load("flutter")
     names = {(f.kind, f.length) for f in find_frozen([ident, val])}
     assert names == {("input", 225), ("output", 225)}
+    detrended = [detrend_data(d, kind="linear")[0] for d in (ident, val)]
+    assert {(f.kind, f.length) for f in find_frozen(detrended)} == names
     assert find_frozen(list(daisy.load("dryer"))) == []
 
 
@@ -76,6 +116,27 @@ def test_identify_with_its_settings_given_says_so(tmp_path, caplog) -> None:
     flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=1500)
     args = ["identify", str(flight.path), "--order", "4", "--past", "20", "--future", "10",
             "--outputs", "gyro.x"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert "holds" not in caplog.text
+    with h5py.File(flight.path, "r+") as f:
+        gyro = f["gyro/data"][...]
+        gyro["x"][len(gyro) // 2:] = gyro["x"][len(gyro) // 2]
+        f["gyro/data"][...] = gyro
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert "output gyro.x holds one value exactly for" in caplog.text
+
+
+def test_identify_with_detrend_linear_names_a_frozen_gyro(tmp_path, caplog) -> None:
+    """``sysid identify --detrend linear``: the gyro frozen for the second half of the flight
+    went unsaid (the check saw the records detrended, the freeze a straight line)."""
+    import h5py
+
+    from sysid.cli import main
+    from tests.sysid.flights import known_system, write_flight
+
+    flight = write_flight(tmp_path / "f.h5", system=known_system(), seed=3, n=1500)
+    args = ["identify", str(flight.path), "--order", "4", "--past", "20", "--future", "10",
+            "--outputs", "gyro.x", "--detrend", "linear"]
     assert CliRunner().invoke(main, args).exit_code == 0
     assert "holds" not in caplog.text
     with h5py.File(flight.path, "r+") as f:
