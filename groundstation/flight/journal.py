@@ -25,6 +25,9 @@ from groundstation.flight.listeners import FlightListener, Listeners
 __all__ = ["Journal"]
 
 log = logging.getLogger("groundstation.flight.runner")  # events are the runner's: logged as its
+_LOG_LEVELS = {"error": logging.ERROR, "warning": logging.WARNING}
+"""How an event of each level is logged (any other level: ``INFO``); ``groundstation fly``
+shows warnings and errors on standard error."""
 
 
 class Journal:
@@ -47,7 +50,7 @@ class Journal:
         return self.clock.now() - self.origin
 
     def event(self, text: str, *, level: str = "info", source: str = "runner") -> None:
-        log.log(logging.ERROR if level == "error" else logging.INFO, "%s: %s", source, text)
+        log.log(_LOG_LEVELS.get(level, logging.INFO), "%s: %s", source, text)
         self.pending["events"].extend(event_rows(t=self.now(), text=text, level=level,
                                                  source=source))
 

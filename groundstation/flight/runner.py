@@ -188,6 +188,8 @@ class _Runner:
             return False
         if bits is not None and not bits & ARMED_BIT and not self._armed(bits):
             return False
+        if bits is None and self.arm:
+            self._arm_unconfirmed()
         battery = "no battery reading" if vbat is None else f"battery {vbat:.2f} V"
         journal.event(f"preflight ok: {battery}, log blocks {names} running")
         return True
@@ -236,6 +238,18 @@ class _Runner:
                           f"(supervisor.info 0x{telemetry.supervisor or 0:04x}); refusing to "
                           "take off")
         return False
+
+    def _arm_unconfirmed(self) -> None:
+        """``arm`` on a firmware whose log TOC has no ``supervisor.info`` (older firmware): its
+        supervisor state cannot be read, so neither can the arming. The request is sent all
+        the same (cflib falls back to the legacy platform channel there) and the flight goes
+        on, with a warning that says so: the firmware that needs arming reports its state, and
+        one that did not arm would "fly" the plan with its motors at 0."""
+        self.out.link.request_arming()
+        self.journal.event(f"fly --arm: no {SUPERVISOR_INFO} in the log TOC, the firmware "
+                           "reports no supervisor state: arming requested but it cannot be "
+                           "confirmed; flying on (a vehicle that did not arm keeps its motors "
+                           "at 0)", level="warning")
 
     def fly(self) -> int:
         """Unlock, then every scheduled setpoint; returns the next unsent tick."""
@@ -486,7 +500,8 @@ def fly_plan(*, plan: Plan | str | Path, out: str | Path, uri: str = DEFAULT_URI
     first (``groundstation fly`` prints the summary, then exits as for any aborted flight).
 
     A vehicle that does not arm itself (a Crazyflie Brushless) is refused before take-off
-    unless ``arm``: then it is asked to arm (``fly --arm``).
+    unless ``arm``: then it is asked to arm (``fly --arm``); on a firmware that logs no
+    ``supervisor.info`` the request is sent unconfirmed, with a warning, and the flight goes on.
     """
     check_uri(uri)
     plan = plan if isinstance(plan, Plan) else load_plan(plan)

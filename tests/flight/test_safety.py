@@ -168,6 +168,30 @@ def test_a_vehicle_that_does_not_arm_itself_is_refused_unless_fly_arm(sim_uri, t
     check_fed_until_landed(s, flown)
 
 
+def test_fly_arm_without_supervisor_info_requests_arming_and_says_it_cannot_be_confirmed(
+        sim_uri, tmp_path, monkeypatch, caplog):
+    """``fly --arm`` on a firmware whose log TOC has no ``supervisor.info`` skipped the arming
+    request and said nothing: a vehicle that does not arm itself "flew" the plan with its
+    motors at 0. The request is sent all the same, and a warning (logged and recorded) says
+    the arming cannot be confirmed and the flight goes on."""
+    from groundstation.sim.vehicle import SimVehicle
+
+    monkeypatch.setattr(SimVehicle, "LOG_VARIABLES", {
+        k: v for k, v in SimVehicle.LOG_VARIABLES.items() if k != "supervisor.info"})
+    with caplog.at_level("WARNING", logger="groundstation"):
+        result = fly_plan(plan="hover-check", out=tmp_path, uri=sim_uri(autoarm=0), arm=True)
+    assert not result.aborted, result.cause
+    s = check_closed_with_stop(result)
+    assert "info" not in s["battery"].value_fields
+    (warned,) = [e for e in s.events() if "fly --arm" in e.text]
+    assert warned.level == "warning" and warned.text.startswith(
+        "fly --arm: no supervisor.info in the log TOC"), warned.text
+    assert "cannot be confirmed; flying on" in warned.text
+    assert [r.getMessage() for r in caplog.records if r.levelname == "WARNING"
+            and "fly --arm" in r.getMessage()] == [f"runner: {warned.text}"]
+    assert s["motors"].values().max() > 20000  # armed: it flew
+
+
 def test_a_vehicle_that_cannot_be_armed_is_refused_at_once_for_what_it_is(
         sim_uri, tmp_path, monkeypatch):
     """A crashed Crazyflie (``supervisor.info`` bit 7; the firmware disarmed it and takes no
