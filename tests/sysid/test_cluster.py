@@ -154,12 +154,13 @@ def test_cli_batch_on_the_scheduler_equals_the_local_batch(client: Any, sessions
 
 def test_cli_scheduler_without_the_extra_is_one_line(monkeypatch: pytest.MonkeyPatch,
                                                      sessions: Any) -> None:
-    import sysid.cluster
+    import sysid.cluster.connection
 
     def missing() -> Any:
         raise MissingDependencyError(EXTRA_HINT)
 
-    monkeypatch.setattr(sysid.cluster, "require_distributed", missing)
+    # where connect() looks it up (the package's name is the same object, read by callers only)
+    monkeypatch.setattr(sysid.cluster.connection, "require_distributed", missing)
     res = _cli("sweep", sessions[0], "--scheduler", "tcp://127.0.0.1:8786")
     assert res.exit_code == 2
     assert res.stderr.strip().splitlines() == [f"error: {EXTRA_HINT}"]

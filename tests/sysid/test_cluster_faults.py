@@ -32,6 +32,8 @@ import pytest
 
 import sysid.batch
 import sysid.cluster
+import sysid.cluster.connection
+import sysid.cluster.runs
 from sysid.batch import BatchRow, run_batch
 from sysid.cluster import (
     CONNECT_ENV,
@@ -450,7 +452,7 @@ def test_sweep_whose_data_keep_being_lost_ends_in_one_line(
     """Every worker leaves as soon as it has the data (a worker that keeps crashing), no past
     ever finishes: after RESEND_LIMIT losses in a row the sweep ends with one line."""
     cluster, client = threads
-    real = sysid.cluster.scatter
+    real = sysid.cluster.runs.scatter
     scattered: list[int] = []
     joined: list[Any] = []
 
@@ -465,7 +467,7 @@ def test_sweep_whose_data_keep_being_lost_ends_in_one_line(
         if "no workers" in msg:
             joined.append(cluster_fakes.start_worker(cluster))
 
-    monkeypatch.setattr(sysid.cluster, "scatter", scatter_then_leave)
+    monkeypatch.setattr(sysid.cluster.runs, "scatter", scatter_then_leave)  # run_pasts' call
     cluster_fakes.GATE.clear()
     t0 = time.monotonic()
     try:
@@ -656,14 +658,14 @@ def test_scheduler_that_stops_answering_before_the_client_starts_is_one_line(
     """It answers the handshake check, then nothing: ``distributed.Client`` would wait for its
     own handshake forever; the command ends within the connect timeout."""
     server, address = killable
-    real = sysid.cluster.probe
+    real = sysid.cluster.connection.probe
 
     def probe_then_stop(*args: Any, **kwargs: Any) -> str | None:
         problem = real(*args, **kwargs)
         _stop(server)
         return problem
 
-    monkeypatch.setattr(sysid.cluster, "probe", probe_then_stop)
+    monkeypatch.setattr(sysid.cluster.connection, "probe", probe_then_stop)  # connect()'s call
     monkeypatch.setenv(CONNECT_ENV, str(CONNECT_S))
     before = set(threading.enumerate())
     res, took = _cli(*_sweep_args(session, address))
@@ -717,7 +719,7 @@ def test_scheduler_that_stops_answering_once_connected_is_one_line(
         _stop(server)
         return client
 
-    monkeypatch.setattr(sysid.cluster, "connect", connect_then_stop)
+    monkeypatch.setattr(sysid.cluster, "connect", connect_then_stop)  # the CLI imports it here
     monkeypatch.setenv(CONNECT_ENV, str(CONNECT_S))
     res, took = _cli(*_sweep_args(session, address))
     assert res.exit_code == 2, res.output
