@@ -19,7 +19,8 @@
 * ``parquet``: a folder with one ``STREAM.parquet`` per stream (each field's unit in its
   metadata, key ``unit``); needs ``pyarrow``.
 
-Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``).
+Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``;
+ASCII, at most 63 characters, ``_2``, ``_3``, ... when that name is taken).
 A damaged or crash-truncated session is exported as far as it reads, and each of its problems
 (those ``groundstation info`` lists) is logged as a warning naming the file. Each file is
 written beside its name and renamed onto it when complete (:func:`cfcommon.cli.whole_file`):
@@ -105,10 +106,36 @@ def export_csv(session: Session, folder: Path) -> list[Path]:
     return [*files, meta]
 
 
+_MATLAB_NAME = 63
+"""MATLAB's ``namelengthmax``: savemat refuses a longer field name."""
+
+
 def _identifier(name: str) -> str:
-    """A MATLAB identifier for ``name`` (``stateEstimate.z`` -> ``stateEstimate_z``)."""
-    ident = re.sub(r"\W", "_", name)
-    return ident if re.match(r"[A-Za-z]", ident) else f"f_{ident}"
+    """A MATLAB identifier for ``name`` (``stateEstimate.z`` -> ``stateEstimate_z``): ASCII
+    letters, digits and ``_``, a letter first, at most 63 characters."""
+    ident = re.sub(r"\W", "_", name, flags=re.ASCII)
+    ident = ident if re.match(r"[A-Za-z]", ident) else f"f_{ident}"
+    return ident[:_MATLAB_NAME]
+
+
+def _identifiers(names: Any) -> dict[str, str]:
+    """Distinct MATLAB identifiers for ``names``: a name that is one keeps it, the others are
+    made one (:func:`_identifier`) and, if that is taken, get ``_2``, ``_3``, ... (``acc+motor``
+    and ``acc_motor`` were both written as ``acc_motor``, one of them lost)."""
+    names = list(names)
+    out = {n: n for n in names if _identifier(n) == n}
+    taken = set(out)
+    for name in names:
+        if name in out:
+            continue
+        base, i = _identifier(name), 2
+        ident = base
+        while ident in taken:
+            suffix = f"_{i}"
+            ident, i = base[:_MATLAB_NAME - len(suffix)] + suffix, i + 1
+        taken.add(ident)
+        out[name] = ident
+    return out
 
 
 def _cell(values: Any) -> np.ndarray:
@@ -148,15 +175,19 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
                     left_out)
     streams: dict[str, dict[str, Any]] = {}
     units: dict[str, dict[str, str]] = {}
+    stream_ids = _identifiers(session.streams)
     for name, stream in session.streams.items():
         cols = _columns(session, name)
-        streams[_identifier(name)] = {
-            _identifier(f): (_cell(c).T if isinstance(c, list) else
-                             np.asarray(c, dtype=float).reshape(-1, 1))
+        field_ids = _identifiers(cols)
+        streams[stream_ids[name]] = {
+            field_ids[f]: (_cell(c).T if isinstance(c, list) else
+                           np.asarray(c, dtype=float).reshape(-1, 1))
             for f, c in cols.items()}
-        units[_identifier(name)] = {_identifier(f): stream.units.get(f, "") for f in cols}
-    meta = {_identifier(k): json.dumps(v) if not isinstance(v, str) else v
-            for k, v in _metadata(session).items()}
+        units[stream_ids[name]] = {field_ids[f]: stream.units.get(f, "") for f in cols}
+    metadata = _metadata(session)
+    meta_ids = _identifiers(metadata)
+    meta = {meta_ids[k]: json.dumps(v) if not isinstance(v, str) else v
+            for k, v in metadata.items()}
     content: dict[str, Any] = {} if data is None else {
         "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
         "Ts": float(data.dt), "InputName": _cell(data.input_names),

@@ -33,7 +33,7 @@ def _kind(path: Path) -> Kind | None:
     """``usd`` or ``csv`` from the first bytes, None for anything else."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(9)
+            head = fh.read(12).removeprefix(b"\xef\xbb\xbf")  # a UTF-8 BOM: Excel's save
     except OSError as exc:
         raise SessionError(f"{path}: cannot read ({exc.strerror}); check the path") from None
     if head[:1] == _USD_MAGIC:

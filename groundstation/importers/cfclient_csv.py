@@ -11,7 +11,8 @@ The timestamp is the Crazyflie's millisecond tick carried by the log packet; eve
 is one log variable ``group.name`` as ``str(value)``. :func:`read_cfclient_csv` returns the
 timestamps in seconds (shape ``(n,)``, 24-bit wrap-arounds undone) and one float64 array per
 variable (shape ``(n,)``).
-A last line cut short (the client was killed while writing) is dropped with a warning; any other
+A last line cut short (the client was killed while writing) is dropped with a warning; a file
+without samples (the block logged nothing) is an empty block, said in ``problems``; any other
 malformed line, a non-finite value (``nan``, ``inf``) or a timestamp going backwards (beyond the
 24-bit wrap-around) is a one-line :class:`CsvFormatError` naming the file and line.
 """
@@ -34,6 +35,7 @@ log = logging.getLogger(__name__)
 
 _STAMP_SUFFIX = re.compile(r"-\d{8}T\d{2}-\d{2}-\d{2}$")
 _INT32 = 2**31
+_UINT32 = 2**32
 _WRAP = 1 << 24
 
 
@@ -89,13 +91,14 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
     """Read one cfclient log CSV (module docstring); one-line :class:`CsvFormatError` if bad."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")  # a BOM: Excel's save
     except OSError as exc:
         raise CsvFormatError(f"{path}: cannot read ({exc.strerror}); check the path") from None
-    lines = [ln for ln in text.splitlines() if ln.strip()]
+    # (line number in the file, line): errors name the file's line, blank lines included
+    lines = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
     if not lines:
         raise CsvFormatError(f"{path}: empty file, not a cfclient log CSV")
-    header = [h.strip() for h in lines[0].split(",")]
+    header = [h.strip() for h in lines[0][1].split(",")]
     if header[0] != "Timestamp" or len(header) < 2:
         raise CsvFormatError(
             f"{path}: not a cfclient log CSV (header starts {header[0][:30]!r}, "
@@ -109,10 +112,10 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
     rows: list[list[float]] = []
     linenos: list[int] = []
     problems: list[str] = []
-    for i, line in enumerate(lines[1:], start=2):
+    for k, (i, line) in enumerate(lines[1:], start=2):
         row = _parse(line, path=path, lineno=i, width=len(header))
         if row is None:
-            if i == len(lines):
+            if k == len(lines):
                 problems.append(f"last line {i} is incomplete (client killed?); dropped")
                 log.warning("%s: %s", path, problems[-1])
                 break
@@ -122,8 +125,12 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
             )
         rows.append(row)
         linenos.append(i)
-    if not rows:
-        raise CsvFormatError(f"{path}: header only, no samples")
+    if not rows:  # one empty block need not keep the others of its flight out
+        problems.append("header only, no samples (the block logged nothing); no stream")
+        empty = np.zeros(0)
+        return CsvLog(path=path, name=block_name_of(path), timestamps_s=empty,
+                      values={v: empty for v in variables},
+                      ctypes=dict.fromkeys(variables, "double"), problems=problems)
     data = np.array(rows, dtype=np.float64)  # (n, 1 + n_variables)
     bad = np.flatnonzero(~np.all(np.isfinite(data), axis=1))
     if len(bad):
@@ -132,8 +139,10 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
         raise CsvFormatError(f"{path}: line {linenos[row]} has a non-finite {col} "
                              f"({data[row][header.index(col)]:g}); fix or delete that line")
     stamps_ms = data[:, 0]
-    if np.any(stamps_ms != np.round(stamps_ms)) or np.any(stamps_ms < 0):
-        raise CsvFormatError(f"{path}: Timestamp must be whole milliseconds >= 0")
+    if np.any(stamps_ms != np.round(stamps_ms)) or np.any(stamps_ms < 0) \
+            or np.any(stamps_ms >= _UINT32):
+        raise CsvFormatError(f"{path}: Timestamp must be whole milliseconds from 0 to "
+                             f"{_UINT32 - 1} (the Crazyflie's tick)")
     values, ctypes = {}, {}
     for j, var in enumerate(variables, start=1):
         col = data[:, j]

@@ -42,7 +42,7 @@ from cfsession.schema import (
 from cfsession.writer import SessionWriter
 from groundstation.errors import SessionError
 from groundstation.importers.airborne import Segment, find_segments
-from groundstation.importers.cfclient_csv import CsvLog, read_cfclient_csv
+from groundstation.importers.cfclient_csv import CsvFormatError, CsvLog, read_cfclient_csv
 from groundstation.importers.limits import check_variables
 from groundstation.importers.usd import read_usd
 
@@ -209,6 +209,10 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
     if len(blocks) > _MAX_BLOCKS:
         raise SessionError(f"{out}: {len(blocks)} log blocks; at most {_MAX_BLOCKS} fit one "
                            "session (import fewer files at once)")
+    here = Path(os.path.realpath(out.parent)) / out.name  # the entry a replace would hit
+    if any(Path(f) == here for f in metadata.get("source_files", [])):
+        raise SessionError(f"{out}: is the log being imported; write the session to another "
+                           "--out folder")
     if os.path.lexists(out) and (not force or out.is_dir()):
         raise SessionError(f"{out}: already exists; "
                            + ("a folder" if out.is_dir() else "pass --force to replace it"))
@@ -300,6 +304,12 @@ def csv_to_session(*, sources: Sequence[str | os.PathLike[str]],
     if not sources:
         raise SessionError(f"{out}: no CSV files given; pass the block CSVs of one flight")
     logs: list[CsvLog] = [read_cfclient_csv(p) for p in sources]
+    if not any(len(c.timestamps_s) for c in logs):
+        raise CsvFormatError(f"{_files_text([str(c.path) for c in logs])}: header only, no "
+                             "samples; nothing to import")
+    for c in logs:
+        if not len(c.timestamps_s):
+            log.warning("%s: %s", c.path, c.problems[-1])
     blocks = [ImportedBlock(c.name, c.timestamps_s, c.values, c.ctypes) for c in logs]
     problems = [f"{c.path.name}: {p}" for c in logs for p in c.problems]
     meta = {"source_format": "cfclient log-to-file CSV",

@@ -96,8 +96,11 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         data = path.read_bytes()
     except OSError as exc:
         raise UsdFormatError(f"{path}: cannot read ({exc.strerror}); check the path") from None
-    if len(data) < 9 or data[0] != _MAGIC:
+    if len(data) < 1 or data[0] != _MAGIC:
         raise UsdFormatError(f"{path}: not a uSD-card deck log (no 0xBC header byte)")
+    if len(data) < 9:  # the header byte, version, count and a CRC take 9
+        raise UsdFormatError(f"{path}: only {len(data)} bytes, cut short inside its header"
+                             f"{_NO_RECORDS}")
     body = data[:-4]
     (stored_crc,) = struct.unpack_from("<I", data, len(data) - 4)
     computed = zlib.crc32(body) & 0xFFFFFFFF
