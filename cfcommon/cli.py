@@ -400,6 +400,12 @@ class OneLineErrorGroup(click.Group):
             name = str(exc.filename or "")
             shown = name if len(name) <= 80 else f"{name[:60]}...{name[-12:]}"
             return f"{exc.strerror} ({len(name)} characters): {shown}"
+        if isinstance(exc, OSError) and exc.errno is not None and exc.errno not in NO_ROOM:
+            # the system's refusal (an I/O error, a read-only file system, too many open
+            # files, a connection refused): no defect of the command; -vv shows where
+            logging.getLogger(__name__).debug("%s", exc, exc_info=exc)
+            where = f": {exc.filename}" if exc.filename else ""
+            return f"{exc.strerror or os.strerror(exc.errno)} ({type(exc).__name__}){where}"
         return None
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
