@@ -13,7 +13,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import pytest
 
 import groundstation.sim as gsim
 from groundstation.flight.clock import clock_for_uri
@@ -25,6 +24,15 @@ from . import backend
 BLOCK = {"wd": ["controller.roll", "motor.m1", "motor.m2", "motor.m3", "motor.m4",
                 "supervisor.info"]}
 LOCKED = 0x40
+
+
+def between(fw_s: np.ndarray, first: int, then: int) -> tuple[float, float]:
+    """The time from the event first shown by log sample ``first`` to the one first shown by
+    ``then``, as (least, most): each happened between the sample that first shows it and the
+    one before. A log sample the host did not get, or a log task held up on a busy host,
+    widens the bracket instead of moving a point estimate (0.377 s for the 0.5 s level-out
+    was seen from the first samples alone, the real firmware beside three busy processes)."""
+    return fw_s[then - 1] - fw_s[first], fw_s[then] - fw_s[first - 1]
 
 
 def observe_watchdog(uri: str, *, thrust: int) -> dict[str, float]:
@@ -53,7 +61,7 @@ def observe_watchdog(uri: str, *, thrust: int) -> dict[str, float]:
     after = np.arange(len(fw_s)) > i_last
     i_level = np.flatnonzero(after & (v[:, 0] == 0.0))[0]
     i_off = np.flatnonzero(after & (v[:, 1:5] == 0).all(axis=1))[0]
-    return {"level_s": fw_s[i_level] - fw_s[i_last], "stop_s": fw_s[i_off] - fw_s[i_last],
+    return {"level_s": between(fw_s, i_last, i_level), "stop_s": between(fw_s, i_last, i_off),
             "running_when_level": float(v[i_level, 1:5].min()),
             "locked": bool(int(v[-1, 5]) & LOCKED), "locked_before": bool(int(v[0, 5]) & LOCKED)}
 
@@ -79,10 +87,11 @@ def test_real_firmware_watchdog_matches_the_simulated_one():
     sim, real = on_both(observe_watchdog, address=9000)
     # sim://: exact to the log period. SITL: its log, supervisor and stabilizer run as threads of
     # a real-time process on a busy host (measured here: 0.531 s and 2.001 s).
-    for name, obs, tol in (("sim", sim, 0.011), ("sitl", real, 0.1)):
-        assert obs["level_s"] == pytest.approx(0.5, abs=tol), (name, obs)
+    for name, obs, tol in (("sim", sim, 0.001), ("sitl", real, 0.1)):
+        for key, truth in (("level_s", 0.5), ("stop_s", 2.0)):
+            least, most = obs[key]
+            assert least - tol <= truth <= most + tol, (name, key, obs)
         assert obs["running_when_level"] > 0, (name, obs)  # levelled, still flying
-        assert obs["stop_s"] == pytest.approx(2.0, abs=tol), (name, obs)
         assert obs["locked"] and not obs["locked_before"], (name, obs)
 
 
@@ -117,12 +126,12 @@ def observe_after_the_stop(uri: str, *, thrust: int) -> dict[str, float]:
                 if len(info) and ((info[-1] & LOCKED) if not fed else not info[-1] & 0x10):
                     break
             fw_ms, v = rec.rows("st")
-            fw_s, v = fw_ms[n_before:] / 1000.0, v[n_before:]
-            off = fw_s[np.flatnonzero((v[:, :4] == 0).all(axis=1))[0]]
-            info = v[:, 4].astype(int)
+            fw_s, info = fw_ms / 1000.0, v[:, 4].astype(int)
+            off = n_before + np.flatnonzero((v[n_before:, :4] == 0).all(axis=1))[0]
+            end = n_before + np.flatnonzero(((info & LOCKED) if not fed else ~info & 0x10)
+                                            [n_before:])
             key = "fed" if fed else "silent"
-            end = np.flatnonzero((info & LOCKED) if not fed else ~info & 0x10)
-            out[f"{key}_s"] = fw_s[end[0]] - off if len(end) else np.inf
+            out[f"{key}_s"] = between(fw_s, off, end[0]) if len(end) else (np.inf, np.inf)
             out[f"{key}_locked"] = bool(info[-1] & LOCKED)
     return out
 
@@ -132,7 +141,8 @@ def test_after_a_stop_the_real_firmware_locks_unless_fed_as_the_simulated_one():
     a stop setpoint the supervisor counts the vehicle flying 2 s more; fed stop setpoints it
     reports landed then, left silent it locks then (level-out has no way to Landed)."""
     sim, real = on_both(observe_after_the_stop, address=8000)
-    for name, obs, tol in (("sim", sim, 0.02), ("sitl", real, 0.15)):
-        assert obs["fed_s"] == pytest.approx(2.0, abs=tol) and not obs["fed_locked"], (name, obs)
-        assert obs["silent_s"] == pytest.approx(2.0, abs=tol) and obs["silent_locked"], (
-            name, obs)
+    for name, obs, tol in (("sim", sim, 0.01), ("sitl", real, 0.15)):
+        for key in ("fed_s", "silent_s"):
+            least, most = obs[key]
+            assert least - tol <= 2.0 <= most + tol, (name, key, obs)
+        assert not obs["fed_locked"] and obs["silent_locked"], (name, obs)
