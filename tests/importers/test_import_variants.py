@@ -49,6 +49,9 @@ def test_errors_name_the_file_s_line_when_blank_lines_precede_it(tmp_path):
     assert res.exit_code == 0, res.output
     [problem] = open_session(tmp_path / "o" / f"{tmp_path.name}.h5").problems
     assert "a.csv: last line 6 is incomplete" in problem
+    f.write_text("Timestamp,acc.z\n100,1\n110,2,7\n")  # a last line too long is no cut
+    assert "line 3 has 3 columns (or empty ones), the header 2" in _one_line_error(
+        _import(f, "--out", tmp_path / "o2"))
 
 
 def test_a_timestamp_beyond_the_crazyflie_tick_is_one_line(tmp_path):
