@@ -115,7 +115,7 @@ def read_cfclient_csv(path: str | Path) -> CsvLog:
     for k, (i, line) in enumerate(lines[1:], start=2):
         row = _parse(line, path=path, lineno=i, width=len(header))
         if row is None:
-            if k == len(lines) and len(line.split(",")) < len(header):  # more is no cut
+            if k == len(lines) and len(line.split(",")) <= len(header):  # more is no cut
                 problems.append(f"last line {i} is incomplete (client killed?); dropped")
                 log.warning("%s: %s", path, problems[-1])
                 break
