@@ -17,7 +17,7 @@
                     'InputUnit', s.InputUnit, 'OutputUnit', s.OutputUnit);
 
 * ``parquet``: a folder with one ``STREAM.parquet`` per stream (each field's unit in its
-  metadata, key ``unit``); needs ``pyarrow``.
+  metadata, key ``unit``) and the same ``metadata.json`` as ``csv``; needs ``pyarrow``.
 
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``;
 ASCII, at most 63 characters, ``_2``, ``_3``, ... when that name is taken).
@@ -46,7 +46,7 @@ from cfcommon.cli import DEFAULT_INPUTS, DEFAULT_OUTPUTS, FiniteFloat, whole_fil
 from cfsession import Session, open_session, warn_problems
 from groundstation.errors import GroundStationError, SessionError
 
-__all__ = ["command", "export_csv", "export_mat", "export_parquet"]
+__all__ = ["command", "export_csv", "export_mat", "export_parquet", "write_metadata"]
 
 Format = Literal["csv", "mat", "parquet"]
 
@@ -86,6 +86,15 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
+def write_metadata(session: Session, folder: Path) -> Path:
+    """``folder/metadata.json``: the session's root attributes (``time_base``,
+    ``source_problems``, ...) as JSON, beside the stream files of a csv or parquet export."""
+    meta = folder / "metadata.json"
+    with whole_file(meta) as part:
+        part.write_text(json.dumps(_metadata(session), indent=1))
+    return meta
+
+
 def export_csv(session: Session, folder: Path) -> list[Path]:
     """One ``STREAM.csv`` per stream and ``metadata.json`` in ``folder``; returns the files."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -100,10 +109,7 @@ def export_csv(session: Session, folder: Path) -> list[Path]:
             lists = [c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values()]
             writer.writerows(zip(*lists, strict=True))
         files.append(path)
-    meta = folder / "metadata.json"
-    with whole_file(meta) as part:
-        part.write_text(json.dumps(_metadata(session), indent=1))
-    return [*files, meta]
+    return [*files, write_metadata(session, folder)]
 
 
 _MATLAB_NAME = 63
@@ -201,7 +207,8 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
 
 
 def export_parquet(session: Session, folder: Path) -> list[Path]:
-    """One ``STREAM.parquet`` per stream in ``folder`` (units in the field metadata)."""
+    """One ``STREAM.parquet`` per stream in ``folder`` (units in the field metadata) and
+    ``metadata.json``; returns the files."""
     try:
         pa = importlib.import_module("pyarrow")
         pq = importlib.import_module("pyarrow.parquet")
@@ -221,7 +228,7 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
         with whole_file(path) as part:
             pq.write_table(table, part)
         files.append(path)
-    return files
+    return [*files, write_metadata(session, folder)]
 
 
 def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:

@@ -1,4 +1,5 @@
-"""What a log variable list must satisfy to become a session stream (checked in linear time).
+"""What a log variable list must satisfy to become a session stream (checked in linear time),
+and the name a stream gets from its variables.
 
 A Crazyflie log variable is ``group.name`` (C identifiers, a few dozen characters); a log block
 holds a handful of them, a uSD event a few dozen. The limits below are far above that and below
@@ -11,7 +12,7 @@ from collections.abc import Sequence
 
 from groundstation.errors import SessionError
 
-__all__ = ["MAX_NAME", "MAX_VARIABLES", "check_variables"]
+__all__ = ["MAX_NAME", "MAX_VARIABLES", "check_variables", "stream_name_of_groups"]
 
 MAX_VARIABLES = 512
 """Variables per log block (one dataset's compound type)."""
@@ -40,3 +41,11 @@ def check_variables(names: Sequence[str], *, where: str) -> None:
         if name in seen:
             raise SessionError(f"{what} appears twice (also variable {seen[name]})")
         seen[name] = col
+
+
+def stream_name_of_groups(variables: Sequence[str]) -> str:
+    """A name saying what a block holds: its log groups in order, ``a+b+c+d+2-more`` past four."""
+    groups = list(dict.fromkeys(v.split(".", 1)[0] for v in variables))
+    if len(groups) > 4:
+        return "+".join(groups[:4]) + f"+{len(groups) - 4}-more"
+    return "+".join(groups) or "log"

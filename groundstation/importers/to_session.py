@@ -43,7 +43,7 @@ from cfsession.writer import SessionWriter
 from groundstation.errors import SessionError
 from groundstation.importers.airborne import Segment, find_segments
 from groundstation.importers.cfclient_csv import CsvFormatError, CsvLog, read_cfclient_csv
-from groundstation.importers.limits import check_variables
+from groundstation.importers.limits import check_variables, stream_name_of_groups
 from groundstation.importers.usd import read_usd
 
 __all__ = ["ImportedBlock", "csv_to_session", "field_names", "stream_name_of_groups",
@@ -58,6 +58,8 @@ _CFLIB_OF_DTYPE = {"uint8": "uint8_t", "int8": "int8_t", "uint16": "uint16_t",
 _RESERVED_FIELDS = frozenset({"host_time", "fw_time_ms"})
 _RESERVED_STREAMS = frozenset({"setpoints", "events", "phases", "link"})
 _MAX_BLOCKS = 256
+_ROWS_AT_ONCE = 1 << 15
+"""Rows handed to the session writer at once (as tuples: about 1 kB each in Python)."""
 TIME_BASE = "imported: host_time is the firmware time in seconds (no host clock in the log)"
 NO_START = "unknown (the log carries no wall-clock time)"
 
@@ -94,14 +96,6 @@ class ImportedBlock:
         median = float(np.median(steps))
         period = float(np.mean(steps[(steps > 0) & (steps <= 1.5 * median)]))
         return round(period, 7)
-
-
-def stream_name_of_groups(variables: Sequence[str]) -> str:
-    """A name saying what a block holds: its log groups in order, ``a+b+c+d+2-more`` past four."""
-    groups = list(dict.fromkeys(v.split(".", 1)[0] for v in variables))
-    if len(groups) > 4:
-        return "+".join(groups[:4]) + f"+{len(groups) - 4}-more"
-    return "+".join(groups) or "log"
 
 
 def _safe_stream_name(name: str, taken: set[str]) -> str:
@@ -152,6 +146,17 @@ def _spec(block: ImportedBlock, name: str) -> StreamSpec:
         attrs["source_event"] = block.source_event
     return StreamSpec(name=name, kind="log", fields=tuple(fields), period_s=block.period_s,
                       description=f"imported log block '{block.name}'", attrs=attrs)
+
+
+def _rows(*, spec: StreamSpec, block: ImportedBlock, start: int, stop: int) -> np.ndarray:
+    """Rows ``start:stop`` of ``block`` in the stream's fields."""
+    t = block.timestamps_s[start:stop]
+    ds = np.zeros(len(t), dtype=spec.dtype)
+    ds["host_time"] = t
+    ds["fw_time_ms"] = np.round(t * 1000.0).astype(np.int64) % _WRAP
+    for f, var in zip(spec.fields[2:], block.values, strict=True):
+        ds[f.name] = block.values[var][start:stop]
+    return ds
 
 
 def _phase_rows(segments: Sequence[Segment], t_first: float,
@@ -250,12 +255,10 @@ def write_imported_session(*, blocks: Sequence[ImportedBlock], out: str | os.Pat
                         text=f"damaged source: {problem}")
             w.event(t=t_first, source="import", text=how)
             for spec, b in zip(specs, blocks, strict=True):
-                ds = np.zeros(len(b.timestamps_s), dtype=spec.dtype)
-                ds["host_time"] = b.timestamps_s
-                ds["fw_time_ms"] = np.round(b.timestamps_s * 1000.0).astype(np.int64) % _WRAP
-                for f, var in zip(spec.fields[2:], b.values, strict=True):
-                    ds[f.name] = b.values[var]
-                w.extend(spec.name, ds.tolist())
+                for a in range(0, len(b.timestamps_s), _ROWS_AT_ONCE):
+                    rows = _rows(spec=spec, block=b, start=a, stop=a + _ROWS_AT_ONCE)
+                    w.extend(spec.name, rows.tolist())
+                    w.flush()  # the writer takes tuples: a few at a time, not the whole log
             w.close(duration_s=t_last - t_first, summary={
                 "imported": True,
                 "rows": {s.name: len(b.timestamps_s) for s, b in zip(specs, blocks, strict=True)},
@@ -286,8 +289,7 @@ def usd_to_session(*, source: str | os.PathLike[str], out: str | os.PathLike[str
             log.info("%s: event %r has no records; skipped", source, ev.name)
             continue
         ctypes = {k: _CFLIB_OF_DTYPE[v.dtype.name] for k, v in ev.values.items()}
-        name = stream_name_of_groups(list(ev.values)) if ev.name == "fixedFrequency" else ev.name
-        blocks.append(ImportedBlock(name, ev.timestamps_s, ev.values, ctypes,
+        blocks.append(ImportedBlock(ev.block_name, ev.timestamps_s, ev.values, ctypes,
                                     source_event=ev.name))
     src = Path(source)
     crc = "CRC ok" if usd.crc_ok else "CRC MISMATCH"  # what was done: usd.problems

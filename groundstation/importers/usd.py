@@ -8,7 +8,9 @@ Layout (little endian)::
     last 4 bytes: zlib CRC32 of everything before them
 
 :func:`read_usd` returns, per event, the timestamps in seconds (shape ``(n,)``) and one array per
-variable (shape ``(n,)``, in the firmware's units; the dtype follows the type letter).
+variable (shape ``(n,)``, in the firmware's units; the dtype follows the type letter). The
+records are decoded with numpy (:mod:`groundstation.importers.usd_records`): reading a log takes
+about 2.5 times its size in memory (``python -m bench usd``).
 """
 
 from __future__ import annotations
@@ -16,15 +18,22 @@ from __future__ import annotations
 import logging
 import struct
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from groundstation.errors import SessionError
-from groundstation.importers.limits import check_variables
+from groundstation.importers.limits import check_variables, stream_name_of_groups
+from groundstation.importers.usd_records import (
+    decode_fields,
+    event_times,
+    record_starts,
+    steps_back,
+)
 
-__all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "read_usd"]
+__all__ = ["UsdEvent", "UsdFormatError", "UsdLog", "event_block_name", "read_usd"]
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +44,7 @@ _SALVAGE = ("; import with --allow-damaged (allow_damaged=True from Python) to s
             "records")
 _TYPES = {"B": np.uint8, "b": np.int8, "H": np.uint16, "h": np.int16, "I": np.uint32,
           "i": np.int32, "f": np.float32, "e": np.float16}
+_LE = {t: np.dtype(d).newbyteorder("<") for t, d in _TYPES.items()}  # as the file holds them
 
 
 class UsdFormatError(SessionError):
@@ -49,6 +59,11 @@ class UsdEvent:
     name: str
     timestamps_s: np.ndarray
     values: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def block_name(self) -> str:
+        """The name of the log block (session stream) it becomes (:func:`event_block_name`)."""
+        return event_block_name(event=self.name, variables=list(self.values))
 
     def as_array(self, names: list[str] | None = None) -> np.ndarray:
         """Variables stacked as float64 columns, shape (n_samples, n_variables)."""
@@ -69,12 +84,18 @@ class UsdLog:
     problems: list[str] = field(default_factory=list)
 
 
-def _cstring(data: bytes, idx: int, *, path: Path, what: str) -> tuple[str, int]:
-    end = data.find(b"\0", idx)
-    if end < 0:
+def event_block_name(*, event: str, variables: list[str]) -> str:
+    """``fixedFrequency`` (the deck's fixed-rate logging) is named after the log groups it holds
+    (``stateEstimate+controller``); another event keeps its firmware name."""
+    return stream_name_of_groups(variables) if event == "fixedFrequency" else event
+
+
+def _cstring(data: bytes, idx: int, *, end: int, path: Path, what: str) -> tuple[str, int]:
+    stop = data.find(b"\0", idx, end)
+    if stop < 0:
         raise UsdFormatError(f"{path}: header truncated inside {what} at byte {idx}{_NO_RECORDS}")
     try:
-        return data[idx:end].decode("ascii"), end + 1
+        return data[idx:stop].decode("ascii"), stop + 1
     except UnicodeDecodeError:
         raise UsdFormatError(f"{path}: non-ASCII {what} at byte {idx}; the header is damaged")\
             from None
@@ -90,6 +111,10 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     damaged value is returned as whatever it decodes to); only damage the record layout itself
     locates (a last record cut short, a record of no declared event) drops records: those from
     that byte on.
+
+    An event whose time goes back (beyond the format-1 tick's wrap-around, which is undone:
+    :mod:`groundstation.importers.usd_records`) keeps every record, in file order; the log is
+    not refused, and the steps back are listed in :attr:`UsdLog.problems` (and logged).
     """
     path = Path(path)
     try:
@@ -101,44 +126,15 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
     if len(data) < 9:  # the header byte, version, count and a CRC take 9
         raise UsdFormatError(f"{path}: only {len(data)} bytes, cut short inside its header"
                              f"{_NO_RECORDS}")
-    body = data[:-4]
-    (stored_crc,) = struct.unpack_from("<I", data, len(data) - 4)
-    computed = zlib.crc32(body) & 0xFFFFFFFF
+    end = len(data) - 4  # the records end where the CRC starts (no copy of a large file)
+    (stored_crc,) = struct.unpack_from("<I", data, end)
+    computed = zlib.crc32(memoryview(data)[:end]) & 0xFFFFFFFF
     crc_ok = computed == stored_crc
     problems: list[str] = []
     version, n_types = struct.unpack_from("<HH", data, 1)
     if version not in (1, 2):
         raise UsdFormatError(f"{path}: uSD log version {version} is not supported (1 or 2)")
-    idx = 5
-    layouts: dict[int, tuple[str, struct.Struct, list[str], str]] = {}
-    seen_names: set[str] = set()
-    for _ in range(n_types):
-        if idx + 2 > len(body):
-            raise UsdFormatError(f"{path}: header truncated in the event-type table{_NO_RECORDS}")
-        (event_id,) = struct.unpack_from("<H", body, idx)
-        name, idx = _cstring(body, idx + 2, path=path, what="event name")
-        shown = repr(name[:64])
-        if idx + 2 > len(body):
-            raise UsdFormatError(f"{path}: header truncated in event {shown}{_NO_RECORDS}")
-        (count,) = struct.unpack_from("<H", body, idx)
-        idx += 2
-        names, fmt = [], "<"
-        for _ in range(count):
-            entry, idx = _cstring(body, idx, path=path, what=f"variable of event {shown}")
-            if len(entry) < 4 or entry[-3] != "(" or entry[-1] != ")" or entry[-2] not in _TYPES:
-                raise UsdFormatError(f"{path}: bad variable entry {entry[:80]!r} in event {shown}; "
-                                     "expected 'name(t)' with t in BbHhIife")
-            names.append(entry[:-3])
-            fmt += entry[-2]
-        if event_id in layouts or name in seen_names:
-            raise UsdFormatError(f"{path}: event {shown} (id {event_id}) is declared twice in "
-                                 "the header; the header is damaged")
-        seen_names.add(name)
-        try:
-            check_variables(names, where=f"{path}: event {shown}")
-        except SessionError as exc:
-            raise UsdFormatError(str(exc)) from None
-        layouts[event_id] = (name, struct.Struct(fmt), names, fmt[1:])
+    layouts, idx = _header(data, end=end, n_types=n_types, path=path)
     if not crc_ok:  # after the header: a file cut inside it has nothing to salvage, and its
         # header's own error says so
         msg = f"CRC mismatch (stored {stored_crc:#010x}, computed {computed:#010x})"
@@ -147,37 +143,109 @@ def read_usd(path: str | Path, *, allow_damaged: bool = False) -> UsdLog:
         _problem(path, problems, f"{msg}: the file is damaged or truncated, and a CRC over the "
                  "whole file cannot say where; every record that decodes is kept as read, so "
                  "any value may be wrong")
-    head = struct.Struct("<HI" if version == 1 else "<HQ")
-    scale = 1e-3 if version == 1 else 1e-6
-    rows: dict[int, list[tuple]] = {k: [] for k in layouts}
-    stamps: dict[int, list[int]] = {k: [] for k in layouts}
-    end = len(body)
-    while idx < end:
-        if idx + head.size > end:
-            _damaged(path, f"last record truncated at byte {idx}", allow_damaged, problems)
-            break
-        event_id, stamp = head.unpack_from(body, idx)
-        layout = layouts.get(event_id)
-        if layout is None:
-            _damaged(path, f"record at byte {idx} has unknown event id {event_id}",
-                     allow_damaged, problems, rest=end - idx)
-            break
-        rec = layout[1]
-        if idx + head.size + rec.size > end:
-            _damaged(path, f"last record truncated at byte {idx}", allow_damaged, problems)
-            break
-        rows[event_id].append(rec.unpack_from(body, idx + head.size))
-        stamps[event_id].append(stamp)
-        idx += head.size + rec.size
-    events: dict[str, UsdEvent] = {}
-    for event_id, (name, _rec, names, types) in layouts.items():
-        cols = list(zip(*rows[event_id], strict=True)) if rows[event_id] else [()] * len(names)
-        values = {n: np.asarray(col, dtype=_TYPES[t]) for n, t, col in zip(names, types, cols,
-                                                                            strict=True)}
-        events[name] = UsdEvent(event_id=event_id, name=name,
-                                timestamps_s=np.asarray(stamps[event_id], dtype=np.float64) * scale,
-                                values=values)
+    head = 6 if version == 1 else 10  # event id and timestamp
+    starts, ids, stop = record_starts(data, start=idx, end=end, head=head, sizes={
+        k: head + struct.calcsize("<" + "".join(types)) for k, (_, _, types) in layouts.items()})
+    if stop < end:
+        _stopped(data, stop=stop, end=end, head=head, known=layouts, path=path,
+                 allow=allow_damaged, problems=problems)
+    events = _events(data, layouts=layouts, starts=starts, ids=ids, version=version, path=path,
+                     problems=problems)
     return UsdLog(path=path, version=version, crc_ok=crc_ok, events=events, problems=problems)
+
+
+def _header(data: bytes, *, end: int, n_types: int,
+            path: Path) -> tuple[dict[int, tuple[str, list[str], list[str]]], int]:
+    """The event types, ``{event id: (name, variables, type letters)}``, and the first record's
+    byte."""
+    idx = 5
+    layouts: dict[int, tuple[str, list[str], list[str]]] = {}
+    seen_names: set[str] = set()
+    for _ in range(n_types):
+        if idx + 2 > end:
+            raise UsdFormatError(f"{path}: header truncated in the event-type table{_NO_RECORDS}")
+        (event_id,) = struct.unpack_from("<H", data, idx)
+        name, idx = _cstring(data, idx + 2, end=end, path=path, what="event name")
+        shown = repr(name[:64])
+        if idx + 2 > end:
+            raise UsdFormatError(f"{path}: header truncated in event {shown}{_NO_RECORDS}")
+        (count,) = struct.unpack_from("<H", data, idx)
+        idx += 2
+        names, types = [], []
+        for _ in range(count):
+            entry, idx = _cstring(data, idx, end=end, path=path,
+                                  what=f"variable of event {shown}")
+            if len(entry) < 4 or entry[-3] != "(" or entry[-1] != ")" or entry[-2] not in _TYPES:
+                raise UsdFormatError(f"{path}: bad variable entry {entry[:80]!r} in event {shown}; "
+                                     "expected 'name(t)' with t in BbHhIife")
+            names.append(entry[:-3])
+            types.append(entry[-2])
+        if event_id in layouts or name in seen_names:
+            raise UsdFormatError(f"{path}: event {shown} (id {event_id}) is declared twice in "
+                                 "the header; the header is damaged")
+        seen_names.add(name)
+        try:
+            check_variables(names, where=f"{path}: event {shown}")
+        except SessionError as exc:
+            raise UsdFormatError(str(exc)) from None
+        layouts[event_id] = (name, names, types)
+    return layouts, idx
+
+
+def _stopped(data: bytes, *, stop: int, end: int, head: int, known: Mapping[int, object],
+             path: Path, allow: bool, problems: list[str]) -> None:
+    """What ends the records at byte ``stop`` before ``end``: refused, or (``allow``) said."""
+    event_id = data[stop] | data[stop + 1] << 8 if stop + head <= end else None
+    if event_id is None or event_id in known:
+        _damaged(path, f"last record truncated at byte {stop}", allow, problems)
+    else:
+        _damaged(path, f"record at byte {stop} has unknown event id {event_id}", allow, problems,
+                 rest=end - stop)
+
+
+def _events(data: bytes, *, layouts: Mapping[int, tuple[str, list[str], list[str]]],
+            starts: np.ndarray, ids: np.ndarray, version: int, path: Path,
+            problems: list[str]) -> dict[str, UsdEvent]:
+    """Each declared event's records (at ``starts``, of event ``ids``) as arrays, in header
+    order; the steps back of its time said in ``problems``."""
+    stamp = "<u4" if version == 1 else "<u8"
+    order = np.argsort(ids, kind="stable")  # the records of each event, in file order
+    sorted_ids = ids[order]
+    events: dict[str, UsdEvent] = {}
+    for event_id, (name, names, types) in layouts.items():
+        lo, hi = np.searchsorted(sorted_ids, [event_id, event_id + 1])
+        mine = starts[order[lo:hi]]
+        layout = np.dtype([("id", "<u2"), ("t", stamp),
+                           *((f"v{k}", _LE[t]) for k, t in enumerate(types))])
+        cols = decode_fields(data, starts=mine, layout=layout, out={
+            "t": np.dtype(stamp[1:]), **{f"v{k}": _TYPES[t] for k, t in enumerate(types)}})
+        seconds, wraps = event_times(cols.pop("t"), version=version)
+        if wraps:
+            log.info("%s: event %r: the 32-bit ms tick wrapped around %d time(s); undone",
+                     path, name, wraps)
+        back = steps_back(seconds)
+        if len(back):
+            _problem(path, problems, _back_text(event=name, variables=names, seconds=seconds,
+                                                back=back, starts=mine))
+        events[name] = UsdEvent(event_id=event_id, name=name, timestamps_s=seconds,
+                                values={n: cols[f"v{k}"] for k, n in enumerate(names)})
+    return events
+
+
+def _back_text(*, event: str, variables: list[str], seconds: np.ndarray, back: np.ndarray,
+               starts: np.ndarray) -> str:
+    """The steps back of one event's time, in a sentence: which event (and block), how many,
+    the first, the largest."""
+    k = int(back[0])
+    size = seconds[back - 1] - seconds[back]
+    block = event_block_name(event=event, variables=variables)
+    named = f"event {event!r}" + (f" (block {block!r})" if block != event else "")
+    text = (f"{named}: time goes back at {len(back)} of its {len(seconds) - 1} steps, "
+            f"first at row {k} (from 0; byte {int(starts[k])} of the file): {seconds[k]:.6f} s "
+            f"after {seconds[k - 1]:.6f} s, {size[0]:.6g} s back")
+    if len(back) > 1:
+        text += f"; the largest {float(size.max()):.6g} s back"
+    return text + "; every row kept, in file order"
 
 
 def _problem(path: Path, problems: list[str], text: str) -> None:
