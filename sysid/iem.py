@@ -381,7 +381,7 @@ def iem(data: IOData | Sequence[IOData], *, order: int, past: int, future: int,
     a, b, c, d, k, cov = mats
     model = build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
                         y_scale=products.y_scale, template=products.flights[0],
-                        provenance=prov)
+                        provenance=prov, flights=products.flights)
     if fin.moved and _STABILITY_COST.get():
         free, _, _ = realize_iem(gamma_lp, sig, stability="free", **common)
         model = stability_report(model=model, fin=fin, free=free, products=products)

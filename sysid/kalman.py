@@ -5,6 +5,11 @@ identified from data can come with a predictor ``A - K C`` that is unstable; its
 predictions (:func:`sysid.validate.predict`) then diverge. :func:`stable_predictor` replaces
 K by the steady-state Kalman gain of the model's own noise description, which keeps the output
 spectrum and makes ``A - K C`` stable whenever ``(A, C)`` is detectable.
+
+:func:`one_step_errors` runs a model's one-step predictor over flights (with that gain when its
+own diverges) and :func:`error_covariance` is the covariance of the errors: what residual
+analysis, the information criteria and every identified model's ``noise_cov``
+(:mod:`sysid.innovation_cov`) are computed from.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from sysid.errors import DataError, DimensionError
 from sysid.model import StateSpaceModel
 from sysid.validate import predict
 
-__all__ = ["stable_predictor"]
+__all__ = ["error_covariance", "one_step_errors", "stable_predictor"]
 
 log = logging.getLogger("sysid.validate")  # reported with the validation it serves
 
@@ -64,7 +69,8 @@ def stable_predictor(
     ``model.noise_cov``, else the identity (for a single output the gain does not depend on it).
     A, B, C, D are unchanged, so simulation is unchanged; ``A - K C`` becomes stable whenever
     ``(A, C)`` is detectable. The returned ``noise_cov`` is the new innovation covariance, or,
-    if ``data`` is given, the covariance of the new predictor's one-step errors on it.
+    if ``data`` is given, the covariance of the new predictor's one-step errors on it
+    (:func:`error_covariance`, the convention of identified models).
     A model whose predictor is already stable is returned as it is.
     """
     if model.predictor_is_stable:
@@ -81,9 +87,33 @@ def stable_predictor(
         "predictor_radius_before": before,
     })
     if data is not None:
-        errs = [d.y - predict(out, u=d.u, y=d.y, horizon=1)[0] for d in as_flights(data)]
-        res = np.vstack(errs)
-        out = out.replace(noise_cov=np.atleast_2d(np.cov(res, rowvar=False)))
+        errs, _ = one_step_errors(out, flights=as_flights(data))
+        out = out.replace(noise_cov=error_covariance(errs))
     log.info("predictor stabilised: max |eig(A - KC)| %.4f -> %.4f", before,
              float(np.max(np.abs(out.predictor_poles()))))
     return out
+
+
+def one_step_errors(model: StateSpaceModel, *, flights: Sequence[IOData]
+                    ) -> tuple[list[np.ndarray], bool]:
+    """The one-step prediction errors :math:`y(t) - \\hat y(t|t-1)` of ``model``, ``(N_i, l)``
+    per flight, each flight from its own least-squares initial state
+    (:func:`sysid.validate.predict`), and whether the predictor was stabilised: a model whose
+    ``A - K C`` is unstable is run with its steady-state Kalman gain
+    (:func:`sysid.stable_predictor`), as its own predictor diverges. Errors that overflow are
+    returned as they are (inf, NaN) for the caller to judge."""
+    stabilised = not model.predictor_is_stable
+    if stabilised:
+        model = stable_predictor(model)
+    errs = []
+    for d in flights:
+        with np.errstate(over="ignore", invalid="ignore"):
+            errs.append(d.y - predict(model, u=d.u, y=d.y, horizon=1)[0])
+    return errs, stabilised
+
+
+def error_covariance(errors: Sequence[np.ndarray]) -> np.ndarray:
+    """``(l, l)`` :math:`\\frac1N \\sum_t e(t) e(t)^T` over the errors ``(N_i, l)`` of all flights,
+    ``N`` their total count (no mean removed: the model's innovations have mean zero)."""
+    e = np.vstack(errors)
+    return e.T @ e / e.shape[0]

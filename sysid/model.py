@@ -6,7 +6,11 @@
 
 with ``A (n, n)``, ``B (n, m)``, ``C (l, n)``, ``D (l, m)``, ``K (n, l)``, sample period ``dt``
 seconds, ``e`` white with covariance ``noise_cov (l, l)``. Matrices are in the physical units
-of the channels (any scaling used during identification is already undone). Files: HDF5
+of the channels (any scaling used during identification is already undone). An identified
+model's ``noise_cov`` is the covariance :math:`\\frac1N \\sum_t e e^T` of its own one-step
+prediction errors :math:`e(t) = y(t) - \\hat y(t|t-1)` on the identification data
+(:mod:`sysid.innovation_cov`): the innovation covariance that goes with its K (for K = 0, the
+simulation-error covariance). Files: HDF5
 (``.h5``/``.hdf5``), JSON (``.json``) and MATLAB (``.mat``) via :meth:`StateSpaceModel.save`
 and :func:`load_model`.
 """
@@ -52,9 +56,12 @@ def _matrix(name: str, value: object, shape: tuple[int, int], dims: str) -> np.n
 class StateSpaceModel:
     """A discrete-time innovation-form model (see the module docstring).
 
-    ``D`` and ``K`` default to zeros. ``provenance`` records how the model was made (method,
-    horizons, order, data, software version); ``scaling`` the per-channel scales used inside
-    the identification (informative only: the matrices are already in physical units).
+    ``D`` and ``K`` default to zeros. ``noise_cov`` ``(l, l)`` (None if unknown) is the
+    innovation covariance; an identified model's is that of its own one-step prediction errors
+    on the identification data (:mod:`sysid.innovation_cov`), MATLAB's ``NoiseVariance`` of an
+    ``idss``. ``provenance`` records how the model was made (method, horizons, order, data,
+    software version); ``scaling`` the per-channel scales used inside the identification
+    (informative only: the matrices are already in physical units).
     """
 
     A: np.ndarray

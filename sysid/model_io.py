@@ -3,7 +3,11 @@
 HDF5 layout (root attributes ``format``, ``version``, ``dt`` with ``dt_unit = "s"``,
 ``provenance`` as a JSON string, channel names/units as JSON lists): one dataset per matrix
 ``A, B, C, D, K`` (and ``noise_cov`` when known), each with attributes ``row_units`` and
-``col_units`` (JSON lists; state coordinates are ``"state"``).
+``col_units`` (JSON lists; state coordinates are ``"state"``). MAT files hold the same matrices
+under the same names, ``Ts`` and the names, units and provenance; ``noise_cov`` is the
+innovation covariance that goes with K (:mod:`sysid.innovation_cov`), what MATLAB's ``idss``
+takes as ``NoiseVariance``: ``idss(A, B, C, D, K, zeros(n, 1), Ts, "NoiseVariance",
+noise_cov)``.
 
 :func:`save` refuses, in one line and before writing, a model that :func:`load` would refuse
 (more than :data:`MAX_DIMENSION` states, inputs or outputs; a ``.mat`` or ``.json`` file over

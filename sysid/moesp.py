@@ -145,7 +145,8 @@ def po_moesp(data: IOData | Sequence[IOData], *, order: int, past: int, future: 
                     moved=[[abs(p0), abs(p1)] for p0, p1 in moved])
         return build_model(a=a, b=b, c=c, d=d, k=None, noise_cov=None,
                            u_scale=products.u_scale, y_scale=products.y_scale,
-                           template=products.flights[0], provenance=prov)
+                           template=products.flights[0], provenance=prov,
+                           flights=products.flights)
 
     def realize(mode: Stability) -> Finished:
         return finish(gamma=gamma, gamma_lp=gamma_lp, sig=sig, feedthrough=feedthrough,
@@ -162,7 +163,8 @@ def po_moesp(data: IOData | Sequence[IOData], *, order: int, past: int, future: 
     a, b, c, d, k, cov = mats
     model = build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov,
                         u_scale=products.u_scale, y_scale=products.y_scale,
-                        template=products.flights[0], provenance=prov)
+                        template=products.flights[0], provenance=prov,
+                        flights=products.flights)
     if fin.moved:
         model = stability_report(model=model, fin=fin, free=realize("free"), products=products)
     return model

@@ -14,10 +14,9 @@ from sysid.data import IOData, as_flights
 from sysid.errors import OrderError, ParameterError, SysIdError, first_line
 from sysid.factor import build_products
 from sysid.finish import check_flags
-from sysid.kalman import stable_predictor
+from sysid.kalman import error_covariance, one_step_errors
 from sysid.methods import DEFAULT_METHOD, Method, get_method
 from sysid.sweep import quiet_models
-from sysid.validate import predict
 
 __all__ = ["GAP_MIN_DECADES", "InformationCriteria", "OrderSuggestion", "information_criteria",
            "singular_values", "suggest_order"]
@@ -112,7 +111,7 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
     for n in orders:
         try:
             log_det.append(_log_det(meth, flights, order=n, past=past, future=future,
-                                    options=opts, products=products, n_total=n_total))
+                                    options=opts, products=products))
         except (SysIdError, np.linalg.LinAlgError) as exc:
             failed[n] = first_line(exc)
             log_det.append(np.nan)
@@ -137,17 +136,15 @@ def information_criteria(data: IOData | Sequence[IOData], *, orders: Sequence[in
 
 
 def _log_det(meth: Method, flights: Sequence[IOData], *, order: int, past: int, future: int,
-             options: Any, products: Any, n_total: int) -> float:
+             options: Any, products: Any) -> float:
     """``log det`` of the one-step error covariance of the order-``order`` model (``inf``
     when it is not positive definite or not finite)."""
     with quiet_models():  # a warning per order would flood the log
         model = meth.identify(flights, order=order, past=past, future=future, options=options,
                               products=products)
-    if not model.predictor_is_stable:
-        model = stable_predictor(model)
+    errs, _ = one_step_errors(model, flights=flights)  # a Kalman gain if A - K C is unstable
     with np.errstate(over="ignore", invalid="ignore"):
-        err = np.vstack([d.y - predict(model, u=d.u, y=d.y, horizon=1)[0] for d in flights])
-    cov = err.T @ err / n_total
+        cov = error_covariance(errs)
     sign, ld = np.linalg.slogdet(cov) if np.isfinite(cov).all() else (0.0, np.inf)
     return float(ld) if sign > 0 else np.inf
 

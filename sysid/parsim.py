@@ -185,4 +185,4 @@ def parsim_k(data: IOData | Sequence[IOData] | None, *, order: int, past: int, f
     a, b, c, d, k, cov = mats
     return build_model(a=a, b=b, c=c, d=d, k=k, noise_cov=cov, u_scale=products.u_scale,
                        y_scale=products.y_scale, template=products.flights[0],
-                       provenance=prov)
+                       provenance=prov, flights=products.flights)

@@ -33,6 +33,7 @@ from __future__ import annotations
 import functools
 import importlib.metadata
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -41,6 +42,7 @@ import scipy.linalg
 
 from sysid.data import IOData
 from sysid.errors import OrderError
+from sysid.innovation_cov import own_noise_cov
 from sysid.model import StateSpaceModel
 from sysid.output_error import mode_power
 
@@ -351,26 +353,30 @@ def _held_response(lam: np.ndarray, vec: np.ndarray, c: np.ndarray, k: np.ndarra
 
 def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
                 k: np.ndarray | None, noise_cov: np.ndarray | None, u_scale: np.ndarray,
-                y_scale: np.ndarray, template: IOData, provenance: dict[str, Any]
-                ) -> StateSpaceModel:
+                y_scale: np.ndarray, template: IOData, provenance: dict[str, Any],
+                flights: Sequence[IOData] = ()) -> StateSpaceModel:
     """Undo the channel scaling and wrap the matrices with names, units and provenance.
 
     Scaled model: ``u_s = S_u^{-1} u``, ``y_s = S_y^{-1} y``; physical model
     ``B = B_s S_u^{-1}``, ``C = S_y C_s``, ``D = S_y D_s S_u^{-1}``, ``K = K_s S_y^{-1}``,
-    noise covariance ``S_y Sigma_s S_y``.
+    noise covariance ``S_y Sigma_s S_y``. ``noise_cov`` ``(l, l)`` is the method's own estimate;
+    with ``flights`` (the identification data, physical units, ``u (N_i, m)``, ``y (N_i, l)``)
+    the model's ``noise_cov`` is that of its own one-step prediction errors on them
+    (:func:`sysid.innovation_cov.own_noise_cov`).
     """
     su_inv = 1.0 / u_scale
     prov = dict(provenance)
     prov.setdefault("software", _software())
     prov["scaling"] = {"u_scale": u_scale.tolist(), "y_scale": y_scale.tolist(),
                        "note": "identification ran on channels divided by these; undone"}
-    return StateSpaceModel(
+    model = StateSpaceModel(
         A=a, B=b * su_inv, C=y_scale[:, None] * c, D=y_scale[:, None] * d * su_inv,
         K=None if k is None else k / y_scale, dt=template.dt,
         noise_cov=None if noise_cov is None else noise_cov * np.outer(y_scale, y_scale),
         input_names=template.input_names, output_names=template.output_names,
         input_units=template.input_units, output_units=template.output_units,
         provenance=prov)
+    return own_noise_cov(model, flights=flights) if flights else model
 
 
 @functools.cache

@@ -60,9 +60,8 @@ import numpy as np
 
 from sysid.data import IOData, as_flights
 from sysid.errors import DataError, DimensionError, ParameterError
-from sysid.kalman import stable_predictor
+from sysid.kalman import one_step_errors
 from sysid.model import StateSpaceModel
-from sysid.validate import predict
 
 __all__ = ["ResidualResult", "residuals"]
 
@@ -229,14 +228,9 @@ def residuals(model: StateSpaceModel, data: IOData | Sequence[IOData], *, max_la
     if max_lag >= min(d.n_samples for d in flights):
         raise ParameterError(f"max_lag={max_lag} is not shorter than the shortest flight "
                              f"({min(d.n_samples for d in flights)} samples); pass a smaller one")
-    stabilised = not model.predictor_is_stable
-    if stabilised:
+    if not model.predictor_is_stable:
         log.warning("predictor A - KC is unstable: residuals use the steady-state Kalman gain")
-        model = stable_predictor(model)
-    errs = []
-    for d in flights:
-        with np.errstate(over="ignore", invalid="ignore"):
-            errs.append(d.y - predict(model, u=d.u, y=d.y, horizon=1)[0])
+    errs, stabilised = one_step_errors(model, flights=flights)
     if not all(np.isfinite(e).all() for e in errs):
         raise DataError("one-step residuals diverged; check the model (its poles, its K)")
     ee = np.zeros((2 * max_lag + 1, ell, ell))

@@ -50,6 +50,7 @@ from sysid.errors import DataError, ParameterError, SysIdError, first_line
 from sysid.factor import DataProducts, grid_values
 from sysid.grid import HorizonGrid, build_grid, grid_products
 from sysid.iem import without_stability_cost
+from sysid.innovation_cov import without_own_noise_cov
 from sysid.methods import DEFAULT_METHOD, Method, Options, get_method, method_loggers
 from sysid.model import StateSpaceModel
 from sysid.parsimony import block_errors, block_shares, parsimonious
@@ -195,9 +196,13 @@ def _past_task(
     Models the sweep does not keep skip the measurement of what their stability step cost
     (:func:`sysid.iem.without_stability_cost`): it is provenance only, and a second
     identification and two runs over the identification data for each model whose poles
-    were moved."""
-    unmeasured = contextlib.nullcontext() if keep_models else without_stability_cost()
-    with one_blas_thread(), quiet_models(), unmeasured:
+    were moved; and the covariance of their own one-step errors
+    (:func:`sysid.innovation_cov.without_own_noise_cov`: a run of the predictor over the
+    data, half to two thirds of the identification at the thesis size)."""
+    with one_blas_thread(), quiet_models(), contextlib.ExitStack() as unmeasured:
+        if not keep_models:
+            unmeasured.enter_context(without_stability_cost())
+            unmeasured.enter_context(without_own_noise_cov())
         return _past_rows(grid=grid, validation=validation, method=method, options=options,
                           past=past, futures=futures, orders=orders, horizon=horizon,
                           window=window, keep_models=keep_models, row_done=row_done)

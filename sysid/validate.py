@@ -129,15 +129,15 @@ def fit_percent(y_true: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
 def observability_matrix(*, A: np.ndarray, C: np.ndarray, length: int) -> np.ndarray:
     """Extended observability matrix ``[C; CA; ...; CA^(L-1)]`` stacked as (L, l, n).
 
-    Built by doubling (``log2 L`` matrix products), so long records cost no Python loop.
+    Built by doubling (``log2 L`` matrix products), so long records cost no Python loop, and
+    only the ``L`` rows asked for are formed (no ``(L, n, n)`` stack of the powers of A).
     """
-    n = A.shape[0]
-    powers = np.eye(n)[None]  # A^0 .. A^(2^j - 1), (2^j, n, n)
-    step = A.copy()  # A^(2^j)
-    while powers.shape[0] < length:
-        powers = np.concatenate([powers, powers @ step], axis=0)
+    obs = np.array(C, dtype=float)[None]  # C A^0 .. C A^(k-1), (k, l, n)
+    step = np.asarray(A, dtype=float)  # A^k
+    while obs.shape[0] < length:
+        obs = np.concatenate([obs, obs[:length - obs.shape[0]] @ step], axis=0)
         step = step @ step
-    return C[None] @ powers[:length]
+    return obs[:length]
 
 
 #: Runs at least this long go through the modal filters (:func:`_run_states_modal`).
@@ -234,8 +234,9 @@ def _x0_given_obs(*, obs: np.ndarray, A: np.ndarray, C: np.ndarray, residual: np
     r = residual
     w = r.shape[0]
     with np.errstate(over="ignore", invalid="ignore"):
-        # An unstable A makes late rows explode: keep the samples where all is finite and sane.
-        size = np.abs(obs).max(axis=(1, 2), initial=0.0)
+        # An unstable A makes late rows explode: keep the samples where all is finite and sane
+        # (max |obs| without a copy of obs: it is (L, l, n), a whole record's on long ones).
+        size = np.maximum(obs.max(axis=(1, 2), initial=0.0), -obs.min(axis=(1, 2), initial=0.0))
     usable = np.isfinite(size) & (size <= _MAX_GROWTH * max(np.abs(C).max(initial=0.0), 1.0))
     usable &= np.isfinite(r).all(axis=(0, 2))
     if not usable.any():
@@ -244,7 +245,7 @@ def _x0_given_obs(*, obs: np.ndarray, A: np.ndarray, C: np.ndarray, residual: np
     if scale.shape != (C.shape[0],):
         raise DimensionError(f"weights has shape {scale.shape}; pass ({C.shape[0]},), one per "
                              "output channel")
-    obs_k = (obs[usable] * scale[:, None]).reshape(-1, A.shape[0])
+    obs_k = ((obs if usable.all() else obs[usable]) * scale[:, None]).reshape(-1, A.shape[0])
     rhs = (r[:, usable] * scale).reshape(w, -1).T
     x0, *_ = np.linalg.lstsq(obs_k, rhs, rcond=None)
     return x0.T
@@ -315,8 +316,9 @@ def predict(
             x0v = np.zeros(n)
     else:
         x0v = _as_state(x0, n)
-    # One-step predicted states x(j|j-1), (N, n): forced part plus the free response of x0.
-    xh = forced + observability_matrix(A=ak, C=np.eye(n), length=n_samples) @ x0v
+    # One-step predicted states x(j|j-1), (N, n): the predictor run again, from x0 (the forced
+    # part plus the free response of x0, without an (N, n, n) stack of powers of A_K)
+    xh = _run_states(A=ak, Bu=bu[None], x0=x0v[None])[0] if x0v.any() else forced
     h = min(horizon, n_samples)
     y_pred = np.empty((n_samples, C.shape[0]))
     if h > 1:  # samples with no measurement h steps back: simulation from x0
