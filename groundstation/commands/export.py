@@ -2,7 +2,10 @@
 
 * ``csv``: a folder with one ``STREAM.csv`` per stream (header ``field [unit]``, values at full
   precision, text decoded as UTF-8, an event's continued text joined into one row) and
-  ``metadata.json``; ``pandas.read_csv`` reads each.
+  ``metadata.json``; ``pandas.read_csv`` reads each. Two streams whose names differ only in
+  case (``Motors``, ``motors``) would share a file on a case-insensitive file system (macOS,
+  Windows, a FAT card): the later one's file gets ``_2``, ``_3``, ... (``motors_2.csv``), and
+  ``metadata.json`` maps every stream to its file (``stream_files``).
 * ``mat``: one MATLAB file holding what ``iddata`` needs, ``u`` (N x m), ``y`` (N x l), ``Ts``
   (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit`` (cell arrays): the data
   ``sysid identify`` identifies from, with its default channels and the logged period
@@ -17,7 +20,8 @@
                     'InputUnit', s.InputUnit, 'OutputUnit', s.OutputUnit);
 
 * ``parquet``: a folder with one ``STREAM.parquet`` per stream (each field's unit in its
-  metadata, key ``unit``) and the same ``metadata.json`` as ``csv``; needs ``pyarrow``.
+  metadata, key ``unit``; files named as for ``csv``) and the same ``metadata.json`` as
+  ``csv``; needs ``pyarrow``.
 
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``;
 ASCII, at most 63 characters, ``_2``, ``_3``, ... when that name is taken).
@@ -36,6 +40,8 @@ import json
 import logging
 import os
 import re
+import unicodedata
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -86,30 +92,48 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
-def write_metadata(session: Session, folder: Path) -> Path:
+def write_metadata(session: Session, folder: Path, *,
+                   files: Mapping[str, str] | None = None) -> Path:
     """``folder/metadata.json``: the session's root attributes (``time_base``,
-    ``source_problems``, ...) as JSON, beside the stream files of a csv or parquet export."""
+    ``source_problems``, ...) as JSON, beside the stream files of a csv or parquet export, and
+    under ``stream_files`` which file holds each stream (``files``, if given)."""
     meta = folder / "metadata.json"
+    content = {**_metadata(session), **({"stream_files": dict(files)} if files else {})}
     with whole_file(meta) as part:
-        part.write_text(json.dumps(_metadata(session), indent=1))
+        part.write_text(json.dumps(content, indent=1))
     return meta
 
 
+def _caseless(name: str) -> str:
+    """``name`` as a case-insensitive file system compares it (Unicode caseless matching: a
+    macOS volume also takes composed and decomposed accents as one)."""
+    return unicodedata.normalize("NFD", unicodedata.normalize("NFD", name).casefold())
+
+
+def _file_names(streams: Any, suffix: str) -> dict[str, str]:
+    """``{stream: file name}``, distinct however a file system compares case (``Motors``,
+    ``motors`` -> ``Motors.csv``, ``motors_2.csv``; :func:`_distinct`)."""
+    stems = _distinct(streams, made=str, key=_caseless)
+    return {name: f"{stem}{suffix}" for name, stem in stems.items()}
+
+
 def export_csv(session: Session, folder: Path) -> list[Path]:
-    """One ``STREAM.csv`` per stream and ``metadata.json`` in ``folder``; returns the files."""
+    """One ``STREAM.csv`` per stream (:func:`_file_names`) and ``metadata.json`` in
+    ``folder``; returns the files."""
     folder.mkdir(parents=True, exist_ok=True)
     files = []
+    names = _file_names(session.streams, ".csv")
     for name, stream in session.streams.items():
         cols = _columns(session, name)
         header = [f"{f} [{stream.units[f]}]" if stream.units.get(f) else f for f in cols]
-        path = folder / f"{name}.csv"
+        path = folder / names[name]
         with whole_file(path) as part, part.open("w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             lists = [c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values()]
             writer.writerows(zip(*lists, strict=True))
         files.append(path)
-    return [*files, write_metadata(session, folder)]
+    return [*files, write_metadata(session, folder, files=names)]
 
 
 _MATLAB_NAME = 63
@@ -125,23 +149,35 @@ def _identifier(name: str) -> str:
 
 
 def _identifiers(names: Any) -> dict[str, str]:
-    """Distinct MATLAB identifiers for ``names``: a name that is one keeps it, the others are
-    made one (:func:`_identifier`) and, if that is taken, get ``_2``, ``_3``, ... (``acc+motor``
-    and ``acc_motor`` were both written as ``acc_motor``, one of them lost)."""
+    """Distinct MATLAB identifiers for ``names`` (:func:`_identifier`, :func:`_distinct`:
+    ``acc+motor`` and ``acc_motor`` were both written as ``acc_motor``, one of them lost)."""
+    return _distinct(names, made=_identifier, limit=_MATLAB_NAME)
+
+
+def _distinct(names: Any, *, made: Callable[[str], str], key: Callable[[str], str] = str,
+              limit: int | None = None) -> dict[str, str]:
+    """``{name: new name}``, the new names distinct as ``key`` compares them: a name that
+    ``made`` leaves as it is keeps it (the first of those ``key`` takes alike), the others are
+    ``made(name)`` and, if that is taken, get ``_2``, ``_3``, ... (at most ``limit``
+    characters with it)."""
     names = list(names)
-    out = {n: n for n in names if _identifier(n) == n}
-    taken = set(out)
+    out: dict[str, str] = {}
+    taken: set[str] = set()
+    for name in names:
+        if made(name) == name and key(name) not in taken:
+            out[name] = name
+            taken.add(key(name))
     for name in names:
         if name in out:
             continue
-        base, i = _identifier(name), 2
-        ident = base
-        while ident in taken:
+        base, i = made(name), 2
+        new = base
+        while key(new) in taken:
             suffix = f"_{i}"
-            ident, i = base[:_MATLAB_NAME - len(suffix)] + suffix, i + 1
-        taken.add(ident)
-        out[name] = ident
-    return out
+            new, i = base[:None if limit is None else limit - len(suffix)] + suffix, i + 1
+        taken.add(key(new))
+        out[name] = new
+    return {name: out[name] for name in names}  # in the order given
 
 
 def _cell(values: Any) -> np.ndarray:
@@ -207,8 +243,8 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
 
 
 def export_parquet(session: Session, folder: Path) -> list[Path]:
-    """One ``STREAM.parquet`` per stream in ``folder`` (units in the field metadata) and
-    ``metadata.json``; returns the files."""
+    """One ``STREAM.parquet`` per stream in ``folder`` (units in the field metadata; named as
+    :func:`export_csv` names them) and ``metadata.json``; returns the files."""
     try:
         pa = importlib.import_module("pyarrow")
         pq = importlib.import_module("pyarrow.parquet")
@@ -217,6 +253,7 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
                                  "(or use --to csv)") from None
     folder.mkdir(parents=True, exist_ok=True)
     files = []
+    names = _file_names(session.streams, ".parquet")
     for name, stream in session.streams.items():
         cols = _columns(session, name)
         fields = [pa.field(f, pa.string() if isinstance(c, list) else pa.from_numpy_dtype(
@@ -224,11 +261,11 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
         table = pa.Table.from_arrays([pa.array(c) for c in cols.values()],
                                      schema=pa.schema(fields, metadata={
                                          "stream": name, "kind": stream.kind}))
-        path = folder / f"{name}.parquet"
+        path = folder / names[name]
         with whole_file(path) as part:
             pq.write_table(table, part)
         files.append(path)
-    return [*files, write_metadata(session, folder)]
+    return [*files, write_metadata(session, folder, files=names)]
 
 
 def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:

@@ -292,7 +292,8 @@ def usd_to_session(*, source: str | os.PathLike[str], out: str | os.PathLike[str
         blocks.append(ImportedBlock(ev.block_name, ev.timestamps_s, ev.values, ctypes,
                                     source_event=ev.name))
     src = Path(source)
-    crc = "CRC ok" if usd.crc_ok else "CRC MISMATCH"  # what was done: usd.problems
+    crc = ("CRC ok" if usd.crc_ok else "CRC MISMATCH" if usd.has_crc else
+           "NO CRC, cut before the deck wrote it")  # what was done: usd.problems
     meta = {"source_format": f"crazyflie uSD-card deck log, format {usd.version} ({crc})",
             "source_files": [str(src.resolve())], "crc_ok": int(usd.crc_ok),
             "source_mtime_ns": src.stat().st_mtime_ns,

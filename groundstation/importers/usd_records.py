@@ -13,6 +13,14 @@ when they are evenly spaced, else gathered about :data:`CHUNK_BYTES` at a time.
 Timestamps (:func:`event_times`): a format-1 log stamps records with the 32-bit millisecond
 tick, which wraps after 49.7 days; a step across 2**32 of at most :data:`WRAP_STEP_MS` is that
 wrap and is undone. Format 2 stamps 64-bit microseconds, which never wrap.
+
+Two records of one event with one stamp (:func:`steps_repeated`) are legitimate in format 1:
+its stamp is the 1 kHz FreeRTOS tick, and two records fall in one tick when an event is raised
+twice within a millisecond, or when ``fixedFrequency`` logs at 1 kHz (in step with the
+stabilizer loop, which the IMU paces, not the tick; or catching up after a late tick). Format 2
+stamps each record from ``usecTimestamp()`` (a 1 MHz timer) as ``usddeck.c`` buffers it, which
+takes longer than a microsecond, so a repeated stamp there is damage, flagged as time going
+back is.
 """
 
 from __future__ import annotations
@@ -23,7 +31,7 @@ from collections.abc import Iterator, Mapping
 import numpy as np
 
 __all__ = ["CHUNK_BYTES", "WRAP_STEP_MS", "decode_fields", "event_times", "record_starts",
-           "steps_back"]
+           "steps_back", "steps_repeated"]
 
 CHUNK_BYTES = 1 << 20
 """Bytes of records gathered at once when an event's records are unevenly spaced (the index
@@ -166,3 +174,8 @@ def event_times(stamps: np.ndarray, *, version: int) -> tuple[np.ndarray, int]:
 def steps_back(seconds: np.ndarray) -> np.ndarray:
     """Rows whose time is before the row's before them (indices of the later row)."""
     return np.flatnonzero(seconds[1:] < seconds[:-1]) + 1
+
+
+def steps_repeated(stamps: np.ndarray) -> np.ndarray:
+    """Rows whose stamp equals the row's before them (indices of the later row)."""
+    return np.flatnonzero(stamps[1:] == stamps[:-1]) + 1

@@ -38,8 +38,11 @@ def test_parquet_writes_the_metadata_json_csv_does(imported, tmp_path):
         assert files == ["events." + to, "metadata.json", "motor+acc." + to, "phases." + to]
         assert res.output.strip() == f"wrote {len(files)} files to {out}"
         texts[to] = (out / "metadata.json").read_text()
-    assert texts["parquet"] == texts["csv"]
-    meta = json.loads(texts["parquet"])
+    meta, csv_meta = json.loads(texts["parquet"]), json.loads(texts["csv"])
+    for to, m in (("parquet", meta), ("csv", csv_meta)):  # which file holds which stream
+        assert m.pop("stream_files") == {s: f"{s}.{to}" for s in ("motor+acc", "events",
+                                                                   "phases")}
+    assert meta == csv_meta
     assert meta["time_base"] == TIME_BASE
     [problem] = json.loads(meta["source_problems"])
     assert problem.startswith("CRC mismatch")

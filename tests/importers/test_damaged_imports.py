@@ -77,11 +77,29 @@ def test_a_last_record_cut_short_is_dropped_and_said(tmp_path, caplog):
     s, warned = _import(tmp_path, data[:-10], caplog)  # the card pulled while writing
     assert len(s["acc+motor"]) == N - 1
     cut = first + (N - 1) * RECORD
-    assert len(warned) == 2 and "CRC mismatch" in warned[0]
+    assert len(warned) == 2 and "no CRC trailer: the file ends inside a record" in warned[0]
     assert warned[1].endswith(f"last record truncated at byte {cut}; dropped, the records "
                               "before it kept")
     assert s.problems == [f"imported log: {w.split(': ', 1)[1]}" for w in warned]
     assert len(_damage_events(s)) == 2
+
+
+def test_a_log_cut_before_its_crc_keeps_every_record_and_says_so(tmp_path, caplog):
+    """Power lost while logging: the deck had not written its CRC (it does when logging
+    stops). The last record, whose last 4 bytes were taken as the CRC, was dropped."""
+    data, _, acc = _log()
+    s, warned = _import(tmp_path, data[:-4], caplog)
+    np.testing.assert_array_equal(s["acc+motor"].data["x"], acc)  # all N rows
+    [said] = warned
+    problem = said.split(": ", 1)[1]
+    assert problem == ("no CRC trailer: the file ends after a complete record, cut before the "
+                       "deck wrote its CRC (it does when logging is stopped; power lost or the "
+                       "card pulled while logging?); nothing can be checked, every complete "
+                       "record is kept as read")
+    assert s.problems == [f"imported log: {problem}"] and s.meta["crc_ok"] == 0
+    assert s.meta["source_format"].endswith("(NO CRC, cut before the deck wrote it)")
+    info = CliRunner().invoke(gs, ["info", str(s.path)])
+    assert f"problem: imported log: {problem}" in " ".join(info.stdout.split())
 
 
 def test_a_record_of_no_declared_event_drops_the_rest_and_says_so(tmp_path, caplog):
@@ -150,3 +168,20 @@ def test_a_log_cut_inside_its_header_says_nothing_can_be_salvaged(tmp_path, allo
     assert line.endswith("(the file ends before its first record: nothing to import or "
                          "salvage)")
     assert "--allow-damaged" not in res.output
+
+
+@pytest.mark.parametrize("allow", [False, True])
+def test_a_log_cut_after_its_header_says_nothing_can_be_salvaged(tmp_path, allow):
+    """Power lost before the first record: a whole header and no CRC, nothing to import."""
+    data, first, _ = _log()
+    src = tmp_path / "log07"
+    src.write_bytes(bytes(data[:first]))
+    res = CliRunner().invoke(gs, ["import", str(src), "--out", str(tmp_path / "o"),
+                                  *(["--allow-damaged"] if allow else [])])
+    assert res.exit_code == 2
+    line = res.output.strip().splitlines()[-1]
+    assert line.endswith("nothing to import (every log block is empty)" if allow else
+                         "no CRC trailer: the file ends after its header, cut before the deck "
+                         "wrote its CRC (it does when logging is stopped; power lost or the "
+                         "card pulled while logging?): no record, nothing to import or "
+                         "salvage"), line

@@ -174,3 +174,83 @@ def test_time_going_back_keeps_every_row_and_is_a_problem_info_lists(tmp_path, c
     np.testing.assert_array_equal(s["g"].data["a"], np.arange(7, dtype=np.float32))
     info = CliRunner().invoke(gs, ["info", str(s.path)])
     assert f"problem: imported log: {text}" in " ".join(info.stdout.split())
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_a_repeated_stamp_is_a_problem_in_format_2_only(tmp_path, caplog, version):
+    """Format 2 stamps each record in µs as it is written (``usecTimestamp()``): two records
+    of one event at one instant is damage, said as a cfclient CSV's repeated Timestamp is,
+    every row kept. Format 1 stamps the 1 kHz tick: two records in one ms are how the deck logs
+    at 1 kHz (or one event raised twice in a ms), said nowhere. A stamp another event shares
+    (event 9's, row 0's) is no repeat."""
+    stamps = [1000, 2000, 2000, 3000, 4000, 4000, 5000]  # µs (format 2) or ms (format 1)
+    (tmp_path / "log09").write_bytes(_ff(stamps, version=version))
+    with caplog.at_level(logging.WARNING, logger="groundstation.importers.usd"):
+        res = CliRunner().invoke(gs, ["import", str(tmp_path / "log09"), "--out",
+                                      str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    s = open_session(tmp_path / "o" / "log09.h5")
+    np.testing.assert_array_equal(s["g"].time, np.array(stamps) * (1e-3 if version == 1 else
+                                                                   1e-6))
+    np.testing.assert_array_equal(s["g"].data["a"], np.arange(7, dtype=np.float32))
+    if version == 1:
+        assert caplog.messages == [] and s.problems == []
+        return
+    byte = len(usd_header(version=2, events=FF)) + 2 * (10 + 7) + (10 + 2)  # row 2 of event 7
+    text = (f"event 'fixedFrequency' (block 'g'): 2 row(s) repeat the time of the row before, "
+            f"first at row 2 (from 0; byte {byte} of the file): 0.002000 s; every row kept, "
+            "the later row's values hold at that time")
+    assert caplog.messages == [f"{tmp_path / 'log09'}: {text}"]  # a warning on stderr
+    assert s.problems == [f"imported log: {text}"]
+    info = CliRunner().invoke(gs, ["info", str(s.path)])
+    assert f"problem: imported log: {text}" in " ".join(info.stdout.split())
+
+
+_CUTS = (1, 2, 3, 4, 5, 9, 25)
+"""Bytes of one more record (30 in format 2, 26 in format 1) the log is cut after: 4, as
+many as a CRC (beginning with an event id, so a record cut short), up to one byte short."""
+
+
+def _cut_log(version: int, case: str) -> tuple[list, bytes, bytes]:
+    """Records of every event size, the last one of 'mark' (the shortest record); the intact
+    log (trailer); and the log as ``case`` leaves it: ``intact``, ``bad-crc`` (a trailer that
+    does not match), ``no-trailer`` (cut after the last record, before the deck wrote its
+    CRC), ``cut-K`` (cut K bytes into one more record)."""
+    records = [*_records(events=ALL_TYPES, n=300, seed=4), (300, 99_000, b"")]
+    whole = build_usd(version=version, events=ALL_TYPES, records=records, crc=False)
+    crc = struct.pack("<I", zlib.crc32(whole))
+    if case.startswith("cut-"):
+        more = build_usd(version=version, events=ALL_TYPES, records=[(7, 99_500, bytes(20))],
+                         crc=False)[len(usd_header(version=version, events=ALL_TYPES)):]
+        return records, whole + crc, whole + more[:int(case[4:])]
+    return records, whole + crc, {"intact": whole + crc, "no-trailer": whole,
+                                  "bad-crc": whole + bytes([crc[0] ^ 1]) + crc[1:]}[case]
+
+
+@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("case", ["intact", "bad-crc", "no-trailer",
+                                  *(f"cut-{k}" for k in _CUTS)])
+def test_a_log_cut_before_its_crc_trailer_keeps_every_complete_record(tmp_path, version, case):
+    """The deck writes its CRC only when logging stops; cut before that (power lost), the last
+    4 bytes were taken as the CRC: the complete record they end dropped as cut short (or, cut
+    1-3 bytes into the next record, the one before it). Every complete record is kept, and the
+    log is said to be cut, not to have a CRC that does not match (``usddeck.c``)."""
+    records, intact, data = _cut_log(version, case)
+    path = tmp_path / "log"
+    path.write_bytes(data)
+    log = read_usd(path, allow_damaged=True)
+    _assert_as_reference(intact, log)  # every record written, none more
+    assert sum(len(e.timestamps_s) for e in log.events.values()) == len(records)
+    assert log.crc_ok == (case == "intact") and log.has_crc == (case in ("intact", "bad-crc"))
+    if case == "intact":
+        assert log.problems == [] and read_usd(path).problems == []
+        return
+    where = "after a complete record" if case == "no-trailer" else "inside a record"
+    cut = f"no CRC trailer: the file ends {where}, cut before the deck wrote its CRC"
+    with pytest.raises(UsdFormatError, match="CRC mismatch" if case == "bad-crc" else
+                       f"{cut} .*--allow-damaged"):
+        read_usd(path)
+    expected = {"bad-crc": ["CRC mismatch (stored "], "no-trailer": [cut]}.get(case, [
+        cut, f"last record truncated at byte {len(intact) - 4}; dropped, the records before "
+        "it kept"])
+    assert [p[:len(e)] for p, e in zip(log.problems, expected, strict=True)] == expected
