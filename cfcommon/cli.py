@@ -391,7 +391,9 @@ class OneLineErrorGroup(click.Group):
             if isinstance(exc, click.exceptions.NoArgsIsHelpError):
                 return None
             where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
-            return f"{exc.format_message()} (see '{where} -h')"
+            # click puts a required choice's values on lines of their own ("Missing option
+            # '--format'. Choose from:\n\tjson,\n\tmat"): one line, as every error here
+            return f"{' '.join(exc.format_message().split())} (see '{where} -h')"
         if isinstance(exc, self.user_errors):
             return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, FileNotFoundError | PermissionError | IsADirectoryError):

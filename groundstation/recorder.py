@@ -84,6 +84,11 @@ def check_folder(out: str | Path) -> Path:
                            "output; give a folder (its full path for one named '-')")
     if folder.exists() and not folder.is_dir():
         raise SessionError(f"{folder}: is a file, not a folder; choose another --out folder")
+    if not folder.exists() and folder.suffix.lower() in (".h5", ".hdf5"):  # as sysid's --out
+        parent = folder.parent if folder.parent != Path() else Path("sessions")
+        raise SessionError(f"--out {folder}: names a session file, but --out is the folder the "
+                           f"session files go in (named for you); give a folder, e.g. "
+                           f"--out {parent}")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -34,6 +34,7 @@ from sysid.cli_options import (
     FORCE_OPTION,
     METHOD_OPTION,
     STABILITY_OPTION,
+    OneInt,
     method_chosen,
     method_options,
     model_options,
@@ -131,9 +132,9 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
 @main.command()
 @click.argument("session", type=click.Path(path_type=Path))
 @METHOD_OPTION
-@click.option("--past", type=click.IntRange(min=1),
+@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
               help="Past horizon, samples (default: the largest of the scaled default grid).")
-@click.option("--future", type=click.IntRange(min=2),
+@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
               help="Future horizon, samples (default: as --past).")
 @click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
               help="How many singular values to list.")
@@ -235,9 +236,12 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
 @click.option("--group-by", type=click.Choice(GROUP_BY), default="session", show_default=True,
               help="One model per session, vehicle (uri), UTC day, plan name, or of all.")
 @METHOD_OPTION
-@click.option("--order", type=click.IntRange(min=1), help="Fix the order (default: chosen).")
-@click.option("--past", type=click.IntRange(min=1), help="Fix the past horizon, samples.")
-@click.option("--future", type=click.IntRange(min=2), help="Fix the future horizon, samples.")
+@click.option("--order", type=OneInt(min=1, sweep_option="--orders"),
+              help="Fix the order (default: chosen).")
+@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
+              help="Fix the past horizon, samples.")
+@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
+              help="Fix the future horizon, samples.")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes for each group's choice of horizons and order.")
 @SCHEDULER_OPTION
@@ -266,6 +270,10 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
       sysid batch logs/*.h5 --out models --group-by vehicle
       sysid batch logs/*.h5 --out models --scheduler tcp://10.0.0.5:8786
     """
+    if not out_dir.exists() and out_dir.suffix.lower() in (".h5", ".hdf5", ".json", ".mat"):
+        raise ParameterError(f"--out {out_dir}: names a model file, but batch writes one model "
+                             "per group (and its summary) into a folder; give a folder, e.g. "
+                             f"--out {out_dir.with_suffix('')}")
     summary = out_dir / "summary.json"
     if summary.exists() and not force:
         raise ParameterError(f"--out {out_dir}: holds a batch summary already; "

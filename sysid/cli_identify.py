@@ -18,6 +18,7 @@ from cfcommon.cli import check_output
 from sysid.cli_compare import check_fit_samples
 from sysid.cli_options import (
     METHOD_OPTION,
+    OneInt,
     method_chosen,
     method_options,
     model_options,
@@ -71,11 +72,11 @@ def samples_line(flights: Sequence[IOData], *, dt: float,
 @click.command("identify")
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
 @METHOD_OPTION
-@click.option("--order", type=click.IntRange(min=1),
+@click.option("--order", type=OneInt(min=1, sweep_option="--orders"),
               help="Model order (default: chosen by validation).")
-@click.option("--past", type=click.IntRange(min=1),
+@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
               help="Past horizon, samples (default: chosen by validation).")
-@click.option("--future", type=click.IntRange(min=2),
+@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
               help="Future horizon, samples (default: chosen by validation).")
 @click.option("--feedthrough/--no-feedthrough", default=None,
               help="Estimate D (default: no for iem, yes for po-moesp and parsim-k; when the "

@@ -4,6 +4,7 @@ with its options as given (:func:`method_options`)."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,28 @@ from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.stability import STABILITY_MODES
 
 __all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
-           "method_chosen", "method_options", "model_options"]
+           "OneInt", "method_chosen", "method_options", "model_options"]
+
+
+class OneInt(click.IntRange):
+    """``--order``, ``--past``, ``--future`` of ``identify``, ``order`` and ``batch``: one
+    integer. click's own type called ``--order 1:10`` (MATLAB's ``n4sid(data, 1:10)``) "not a
+    valid integer range", as if it took ranges written otherwise; several values are
+    ``sysid sweep``'s (``sweep_option``, e.g. ``--orders``)."""
+
+    name = "integer"
+
+    def __init__(self, *, sweep_option: str, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.sweep_option = sweep_option
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        if isinstance(value, str) and re.fullmatch(r"\s*\d+\s*([:,]\s*\d+\s*)+", value):
+            self.fail(f"{value!r}: one value here; to try several, leave the option out (chosen "
+                      f"by validation) or use `sysid sweep SESSION {self.sweep_option} {value}`",
+                      param, ctx)
+        return super().convert(value, param, ctx)
 
 
 class MethodChoice(click.Choice):

@@ -221,6 +221,11 @@ def _checked(d: object, *, path: Path) -> dict[str, Any]:
     from sysid.model import FORMAT, FORMAT_VERSION
 
     fmt = _scalar(d.get("format")) if isinstance(d, dict) else None
+    if (not isinstance(d, dict) or not isinstance(fmt, str) or fmt != FORMAT) and (
+            _holds_a_session(path)):  # the arguments swapped: `sysid compare SESSION MODEL`
+        raise ModelFileError(f"{str(path)!r} is a flight session, not a sysid model file: make "
+                             f"a model from it with `sysid identify {path} --out model.h5` and "
+                             "pass that")
     if not isinstance(d, dict) or not isinstance(fmt, str) or fmt != FORMAT:
         raise ModelFileError(f"{str(path)!r} is not a sysid model file; pass a file written by "
                              "`sysid identify --out` or model.save" +

@@ -222,6 +222,10 @@ _UPSAMPLE_WARN = 5.0
 #: Refuse a grid this many times finer than the slowest logged stream (a typo of dt: 1e-7 s on
 #: a 50 Hz log asked for 61 GiB).
 _UPSAMPLE_MAX = 1000.0
+#: Refuse a grid this many times coarser than the slowest logged stream: it keeps under 1 % of
+#: the logged band, and is a unit slip (``--dt 20`` meant 20 ms: 6 samples of a 102 s flight,
+#: refused downstream as "too few samples ... looks transposed").
+_DOWNSAMPLE_MAX = 100.0
 #: Refuse a grid of more values (samples times channels) than this: 2 GiB of float64.
 _MAX_GRID_VALUES = 2**28
 #: A stream is low-passed before the hold when the grid is this much coarser than its period.
@@ -320,6 +324,11 @@ def load_experiments(
     if common < dt:  # before the anti-alias filter, whose design fails on such a step
         raise DataError(f"{session.path}: dt={dt:g} s is longer than the {common:.3g} s where "
                         "every channel has data; pass a smaller dt")
+    if slowest > 0 and dt > slowest * _DOWNSAMPLE_MAX:
+        raise ParameterError(f"dt={dt:g} s is {dt / slowest:.0f}x the logged period {slowest:g} s "
+                             f"({1 / slowest:g} Hz); dt is in seconds: pass dt <= "
+                             f"{slowest * _DOWNSAMPLE_MAX:g} (at most {_DOWNSAMPLE_MAX:g}x "
+                             "coarser), or leave it out for the logged period")
     fast = sorted({c.stream for c in chans if 0 < periods[c.stream] * _DECIMATE_FROM < dt})
     if fast:
         log.warning("%s: %s logged at %s Hz, decimated to the %g Hz grid with an anti-alias "
@@ -345,9 +354,10 @@ def load_experiments(
                 stop = min(last, host[1] - offset - 1e-6)
         if stop < start + dt:
             span = ("all samples" if host is None else
-                    f"window {label} (host [{host[0]:.3f}, {host[1]:.3f}) s)")
+                    f"window {label} ([{host[0]:.3f}, {host[1]:.3f}) session s)")
             raise DataError(f"{session.path}: {span} holds less than one {dt:g} s step where "
-                            "every channel has data; pick another window")
+                            f"every channel has data (session seconds {first + offset:.1f} to "
+                            f"{last + offset:.1f}); pick a window within them")
         data = iodata_from_streams(
             streams=streams, inputs=[c.label for c in ins], outputs=[c.label for c in outs],
             dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, slowest))

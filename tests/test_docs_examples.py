@@ -137,6 +137,25 @@ def test_a_pattern_in_an_example_still_runs_when_it_matches_several_files(where,
     _parse(several)
 
 
+def test_a_uri_with_a_query_is_quoted_in_the_docs():
+    """zsh (macOS's login shell) takes an unquoted `?` for a file pattern: `--uri
+    sim://0?speed=20 --live-id` (docs/live-id.md) ended in "zsh: no matches found" before the
+    command ran; the README and docs/flying.md quote it."""
+    bare = []
+    for doc in DOCS:
+        lang = None
+        for line in doc.read_text().splitlines():
+            m = _FENCE.match(line.strip())
+            if m:
+                lang = None if lang is not None else m.group(1)
+                continue
+            if lang in ("", "sh", "bash", "shell", "console") and \
+                    line.strip().split(" ", 1)[0] in MAINS:
+                bare += [(doc.name, w) for w in line.split()
+                         if "://" in w and "?" in w and w[0] not in "'\""]
+    assert not bare, bare
+
+
 def test_the_docs_say_what_ctrl_c_does():
     """Ctrl-C prints `error: interrupted (Ctrl-C)` and exits 130 on both CLIs
     (cfcommon.cli.OneLineErrorGroup); docs/sysid.md said a sweep printed click's `Aborted!`

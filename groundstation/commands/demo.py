@@ -168,7 +168,8 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
     for w in chosen.warnings:
         console.print(f"[yellow]warning: {w}[/]")
     console.print(f"IEM: order {order}, past {past}, future {future}, "
-                  f"{ident.n_samples} samples, {seconds:.2f} s; stable: {model.is_stable}, "
+                  f"{ident.n_samples} samples ({ident.n_samples * ident.dt:.1f} s of flight), "
+                  f"identified in {seconds:.2f} s; stable: {model.is_stable}, "
                   f"predictor stable: {model.predictor_is_stable}")
     console.print(poles_rich_table(model, title="IEM model poles", console=console))
     model_path = folder / "iem-model.h5"

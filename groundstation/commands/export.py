@@ -283,6 +283,11 @@ def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
     folder = out or session.with_name(f"{session.stem}-{to}")
     if folder.exists() and not folder.is_dir():
         raise click.BadParameter(f"{str(folder)!r} is a file; give a folder", param_hint="--out")
+    if not folder.exists() and folder.suffix.lower() in (".csv", ".parquet", ".mat", ".h5"):
+        raise click.BadParameter(f"{str(folder)!r} names a file, but --to {to} writes one file "
+                                 f"per stream into a folder; give a folder (e.g. "
+                                 f"{str(folder.with_suffix(''))!r}), or --to mat for one file",
+                                 param_hint="--out")
     if folder.is_dir() and any(folder.iterdir()) and not force:
         raise click.BadParameter(f"{str(folder)!r} is not empty; pass --force to write "
                                  "over the files of the same names, or choose another "

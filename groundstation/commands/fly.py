@@ -340,6 +340,14 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
     convergence = Convergence(tolerance=d.tolerance if converged_tol is None else converged_tol,
                               duration_s=d.duration_s if converged_for is None else converged_for)
     loaded = load_plan(plan)
+    if converged_for is not None:  # --converged-for 3000 (ms): the whole excitation, no cut
+        spans = [(p.start, p.start + p.duration) for p in loaded.compile().phases
+                 if p.kind == "excitation"]
+        if spans and converged_for >= spans[-1][1] - spans[0][0]:
+            raise click.BadParameter(
+                f"{converged_for:g} s is not shorter than the plan's excitation "
+                f"({spans[-1][1] - spans[0][0]:.1f} s), so it could never end it early; it is "
+                f"in seconds of flight (default {d.duration_s:g})", param_hint="--converged-for")
     if advance is not None:
         loaded = advance_prbs(loaded, chips=advance)
     elif seed is not None:

@@ -200,6 +200,14 @@ def load_plan(path: str | Path) -> Plan:
                 else "not UTF-8 text")
         raise PlanError(f"{path}: not a TOML flight plan ({what}); give a plan file (.toml) or "
                         "a shipped plan's name, e.g. prbs-3axis")
+    if path.suffix.lower() != ".toml":  # a CSV or JSON given as the plan: not "fix the syntax"
+        try:
+            tomllib.loads(text or "")
+        except tomllib.TOMLDecodeError as exc:
+            raise PlanError(f"{path}: not a TOML flight plan (a {path.suffix or 'suffix-less'} "
+                            f"file that does not read as TOML: {str(exc).splitlines()[0]}); "
+                            "give a plan file (.toml) or a shipped plan's name, e.g. "
+                            "prbs-3axis") from None
     return parse_plan(text=text or "", source=str(path), name=path.stem)
 
 

@@ -35,6 +35,11 @@ def test_demo_flies_identifies_and_validates(tmp_path):
     n = summary["order"]  # chosen by validation on the last 30 % of flight 1
     assert model.A.shape == (n, n) and model.B.shape == (n, 4) and model.C.shape == (6, n)
     assert "chosen:" in res.output
+    # "5116 samples, 16.86 s" read as 5116 samples lasting 16.86 s (they last 102.3 s; 16.86 s
+    # was the identification's run time)
+    assert re.search(rf"IEM: order {n}, past \d+, future \d+, {summary['samples']} samples "
+                     rf"\({summary['samples'] * model.dt:.1f} s of flight\), identified in "
+                     r"\d+\.\d\d s; stable", res.output), res.output
     for row in pole_cells(pole_rows(model.poles(), dt=model.dt)):  # the one pole formatter
         assert re.search(r"\s+".join(map(re.escape, row)), res.output), row
     # the default model is stable by default (issue 10): rate dynamics integrate, so poles sit

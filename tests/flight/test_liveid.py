@@ -379,6 +379,18 @@ def test_fly_options_and_bad_live_id_settings_are_one_line(tmp_path, sim_uri):
     assert not out.exists() or not any(out.iterdir())  # nothing flown, nothing recorded
 
 
+def test_a_converged_for_as_long_as_the_excitation_is_refused_before_flying(tmp_path, sim_uri):
+    """`--converged-for 3000` (meant: ms) flew the whole 102 s excitation and never said that
+    the poles could not stay settled that long."""
+    out = tmp_path / "out"
+    res = CliRunner().invoke(main, ["fly", "prbs-3axis", "--uri", sim_uri(), "--out", str(out),
+                                    "--until-converged", "--converged-for", "3000"])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert ("3000 s is not shorter than the plan's excitation (102.3 s), so it could never end "
+            "it early; it is in seconds of flight (default 3)") in res.output
+    assert not out.exists()  # checked before the folder is made or anything connects
+
+
 def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim_uri, tmp_path):
     plan = _plan(30.0, SMALL)
     lid = live_id_listener(plan)

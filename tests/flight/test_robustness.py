@@ -136,6 +136,19 @@ def test_fly_out_is_a_file_fails_before_connecting(sim_uri, tmp_path):
     assert never_connected(uri) and out.read_text() == "keep me"
 
 
+def test_fly_out_naming_a_session_file_fails_before_connecting(sim_uri, tmp_path):
+    """`--out flight.h5` (as `sysid identify --out model.h5`) made a folder named flight.h5
+    holding hover-check-TIME.h5, which `groundstation info flight.h5` then refused as a
+    folder; demo and import share the check."""
+    uri, out = sim_uri(), tmp_path / "sub" / "flight.h5"
+    res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", str(out)])
+    line = one_line_error(res)
+    assert f"--out {out}: names a session file" in line and f"--out {out.parent}" in line
+    assert never_connected(uri) and not (tmp_path / "sub").exists()
+    (tmp_path / "kept.h5").mkdir()  # a folder of that name that exists is a folder
+    assert recorder_mod.check_folder(tmp_path / "kept.h5") == tmp_path / "kept.h5"
+
+
 def test_fly_out_that_cannot_be_created_fails_before_connecting(sim_uri, tmp_path):
     uri = sim_uri()
     res = CliRunner().invoke(main, ["fly", "hover-check", "--uri", uri, "--out", "/proc/gs-x"])

@@ -40,6 +40,24 @@ def test_other_binary_is_not_utf8_text(tmp_path):
         load_plan(blob)
 
 
+def test_a_csv_or_json_file_is_not_a_flight_plan(tmp_path):
+    """A CSV log or a model's JSON given as the plan got "x.csv:1: invalid TOML: ...; fix the
+    syntax on that line", as if it were a plan with a typo; a .toml file keeps that line."""
+    for name, suffix, text in (("log.csv", "csv", "t,gyro.x\n0,1\n"),
+                               ("model.json", "json", '{"A": [[1]]}\n')):
+        path = tmp_path / name
+        path.write_text(text)
+        with pytest.raises(PlanError, match=rf"{name}: not a TOML flight plan \(a \.{suffix} "
+                                            r"file that does not read as TOML: .*\); give a plan "
+                                            r"file \(\.toml\)") as err:
+            load_plan(path)
+        assert "fix the syntax" not in str(err.value)
+    typo = tmp_path / "typo.toml"
+    typo.write_text("name = \n")
+    with pytest.raises(PlanError, match=r"typo\.toml:1: invalid TOML: .*fix the syntax"):
+        load_plan(typo)
+
+
 def test_a_text_plan_still_loads(tmp_path):
     assert load_plan("hover-check").name == "hover-check"
 

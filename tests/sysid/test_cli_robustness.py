@@ -158,6 +158,43 @@ def test_model_that_is_a_folder_or_no_model(files, tmp_path) -> None:
                    "not a sysid model file")
 
 
+@pytest.mark.parametrize(("command", "option", "value", "sweep"), [
+    ("identify", "--order", "1:10", "--orders 1:10"),
+    ("identify", "--past", "20,40", "--pasts 20,40"),
+    ("order", "--future", "5:25:4", "--futures 5:25:4"),
+    ("batch", "--order", "6,8", "--orders 6,8"),
+])
+def test_several_orders_or_horizons_point_to_sweep(files, tmp_path, command, option, value,
+                                                    sweep) -> None:
+    """`--order 1:10` (MATLAB's n4sid(data, 1:10)) was "'1:10' is not a valid integer range",
+    as if ranges were taken in another spelling; the help's metavar said INTEGER RANGE too."""
+    extra = ["--out", tmp_path / "b"] if command == "batch" else []
+    one_line_error(run(command, files["session"], option, value, *extra),
+                   f"'{value}': one value here", f"`sysid sweep SESSION {sweep}`")
+    assert not (tmp_path / "b").exists()
+    one_line_error(run("identify", files["session"], "--order", "best"),
+                   "'best' is not a valid integer.")
+    assert "--order INTEGER " in run("identify", "--help").output
+
+
+def test_batch_out_naming_a_model_file_is_refused(files, tmp_path) -> None:
+    """`sysid batch ... --out models.h5` (as identify's --out) made a folder named models.h5."""
+    out = tmp_path / "models.h5"
+    one_line_error(run("batch", files["session"], "--out", out, *FAST),
+                   f"--out {out}: names a model file", f"--out {tmp_path / 'models'}")
+    assert not out.exists()
+
+
+def test_a_session_given_as_the_model_is_named_a_session(files) -> None:
+    """`sysid compare A.h5 B.h5` (two sessions) said only "not a sysid model file; pass a file
+    written by `sysid identify --out` or model.save", where the reverse mistake names the model."""
+    session = str(files["session"])
+    for cmd in (["compare", session, session], ["export", session, "--format", "mat"],
+                ["resid", session, session]):
+        one_line_error(run(*cmd), f"'{session}' is a flight session, not a sysid model file",
+                       f"`sysid identify {session} --out model.h5`")
+
+
 def test_fine_dt_warns_about_upsampling(files, caplog) -> None:
     with caplog.at_level(logging.WARNING, logger="sysid.session_io"):
         res = run("order", files["session"], "--past", "10", "--future", "5", "--dt", "0.002",

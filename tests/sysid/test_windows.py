@@ -110,6 +110,23 @@ def test_a_grid_of_gigabytes_is_refused_before_it_is_built(files, monkeypatch) -
     assert load_experiments(files["recorded"], dt=0.02)  # the logged rate: far below the cap
 
 
+def test_a_grid_period_given_in_milliseconds_is_refused_as_such(files) -> None:
+    """`--dt 20` (meant: 20 ms) on a 50 Hz log left 6 samples of a 102 s flight, refused
+    downstream as too few for the horizons ("... looks transposed") or for choosing them
+    ("give horizons ..."): the cause, dt in seconds, went unsaid."""
+    with pytest.raises(ParameterError, match=r"dt=20 s is 1000x the logged period 0\.02 s "
+                                             r"\(50 Hz\); dt is in seconds: pass dt <= 2 "):
+        load_experiments(files["recorded"], dt=20.0)
+    assert load_experiments(files["recorded"], dt=2.0)[0].n_samples == 20  # 100x: still taken
+
+
+def test_a_window_outside_the_data_says_where_the_data_are(files) -> None:
+    """A T0:T1 past the log's end (or given in ms) said only "pick another window"."""
+    with pytest.raises(DataError, match=r"window 500:600 .* every channel has data \(session "
+                                        r"seconds 0\.5 to 50\.5\); pick a window within them"):
+        load_experiments(files["recorded"], window=(500.0, 600.0))
+
+
 def test_phase_relative_and_per_session_windows(files) -> None:
     rel = load_session(files["imported"], window=PhaseRelative("airborne-2", 2.0, 12.0))
     absolute = load_session(files["imported"], window=(28.0, 38.0))
