@@ -29,8 +29,10 @@ BACKENDS = ("sim", "sitl", "radio")
 SITL_COST = ("real-time firmware: a whole plan costs its length (42-112 s); SITL flies hover-check "
              "and every safety path here, and the thesis experiment is docs/sitl.md's")
 SITL_HOST_SIDE = ("the ground station's own path, nothing in it the firmware does otherwise; SITL "
-                  "flies the abort paths that end in the firmware (a signal, a runner error, a "
-                  "rate limit, the stop policy, a low battery) and a whole flight")
+                  "flies the abort paths that end in the firmware (a signal, a rate limit, the "
+                  "stop policy, a low battery) and a whole flight")
+SITL_AS_SIGNAL = ("the firmware gets the same descent, stop and stop feed as after a signal, "
+                  "which SITL flies (test_safety_signals); the cause is the ground station's")
 SIM_HOOK = "the test drives the vehicle through the sim:// registry (groundstation.sim.instance)"
 _counter = itertools.count(500)
 

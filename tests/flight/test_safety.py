@@ -27,6 +27,7 @@ from .checks import (
 )
 from .conftest import (
     SIM_HOOK,
+    SITL_AS_SIGNAL,
     SITL_HOST_SIDE,
     backends,
     one_variant_on_sitl,
@@ -57,6 +58,7 @@ def test_link_cut_records_the_loss_and_the_watchdog_stops_the_motors(flight_uri,
     assert 40 <= s["setpoints"].data["tick"].max() < len(plan.compile()) - 1
 
 
+@backends(sitl=SITL_AS_SIGNAL)
 def test_exception_in_the_runner_aborts_safely(flight_uri, tmp_path):
     plan, uri = load_plan("hover-check"), flight_uri()
 
