@@ -333,17 +333,24 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
 
 @main.command()
 @click.argument("model_path", metavar="MODEL", type=click.Path(path_type=Path))
-@click.option("--format", "fmt", required=True, type=click.Choice(["json", "mat"]))
+@click.option("--format", "fmt", type=click.Choice(["json", "mat"]),
+              help="Output format (default: the suffix of --out).")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Output file (default: MODEL with the format's suffix).")
 @FORCE_OPTION
-def export(model_path: Path, fmt: str, out: Path | None, force: bool) -> None:
+def export(model_path: Path, fmt: str | None, out: Path | None, force: bool) -> None:
     """Write a model file as JSON or MATLAB .mat (A, B, C, D, K, Ts, names, units).
 
     \b
-    Example:
-      sysid export model.h5 --format mat --out model.mat
+    Examples:
+      sysid export model.h5 --out model.mat     (the format from the suffix)
+      sysid export model.h5 --format json       (writes model.json)
     """
+    if fmt is None:
+        fmt = out.suffix.lower().lstrip(".") if out is not None else ""
+        if fmt not in ("json", "mat"):
+            raise click.UsageError("give --format json or mat, or an --out file ending in "
+                                   ".json or .mat", ctx=click.get_current_context())
     model = load_model(model_path)
     target = out or model_path.with_suffix(f".{fmt}")
     check_output(target, option="--out", suffixes=(f".{fmt}",), inputs=(model_path,),

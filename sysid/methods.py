@@ -197,11 +197,12 @@ METHODS: dict[str, Method] = {
 
 
 def get_method(name: str | Method) -> Method:
-    """The registered method ``name`` (``"po_moesp"`` as in the function's name works too);
-    an unknown name is a one-line :class:`ParameterError` listing the registered names."""
+    """The registered method ``name``, in any case (``"PO-MOESP"`` as the literature writes it,
+    ``"po_moesp"`` as the function is named); an unknown name is a one-line
+    :class:`ParameterError` listing the registered names."""
     if isinstance(name, Method):
         return name
-    key = str(name).replace("_", "-")
+    key = str(name).replace("_", "-").lower()
     if key not in METHODS:
         raise ParameterError(f"method {name!r} is unknown; use one of {sorted(METHODS)}")
     return METHODS[key]

@@ -40,7 +40,8 @@ def test_sysid_subcommand_help_has_an_example(name):
     (gs_main, ["nope"], "groundstation -h"),
     (sysid_main, ["identify", "--bogus"], "sysid identify -h"),
     # a required choice left out: click listed the choices on lines of their own
-    (sysid_main, ["export", "model.h5"], "sysid export -h"),
+    (gs_main, ["export", "s.h5"], "groundstation export -h"),
+    (sysid_main, ["export", "model.h5"], "sysid export -h"),  # no --format, no --out to tell
 ])
 def test_usage_errors_are_one_line_exit_2_on_both_clis(main, args, where):
     res = CliRunner().invoke(main, args, prog_name=where.split()[0])

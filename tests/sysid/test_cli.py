@@ -257,6 +257,19 @@ def test_export_round_trip(flights, tmp_path) -> None:
         assert back.output_names == flights[0].system.output_names
     again = run("export", src, "--format", "json")
     assert again.exit_code == 2 and "already exists" in again.stderr
+    # the format from --out's suffix (it was required even for an --out ending in .mat)
+    res = run("export", src, "--out", tmp_path / "as.MAT")
+    assert res.exit_code == 0, res.output
+    np.testing.assert_allclose(sysid.load_model(tmp_path / "as.MAT").A, flights[0].system.A)
+
+
+def test_method_names_are_taken_in_any_case() -> None:
+    """``--method IEM`` or ``PO-MOESP``, as papers write them, was "unknown"."""
+    from sysid.methods import get_method
+
+    assert get_method("PO-MOESP").name == "po-moesp"
+    assert get_method("IEM").name == get_method("iem").name
+    assert run("identify", "--method", "IEM", "--help").exit_code == 0
 
 
 def test_parse_grid() -> None:
