@@ -229,3 +229,6 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                             names=model.output_names, rows=[(k, r.fit) for k, r in checks]))
     if out is not None:
         con.print(saved_line(out, model))
+    else:  # a long identification shown and then lost is a surprise: say it
+        con.print("model not saved: --out FILE.h5 saves it (sysid compare, export and the "
+                  "Python API read it)")

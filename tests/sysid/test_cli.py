@@ -190,8 +190,10 @@ def test_identify_with_every_setting_given_saves_without_a_selection(flights, tm
     out = tmp_path / "m.h5"
     res = run("identify", flights[0].path, *FAST, "--out", out)
     assert res.exit_code == 0, res.output
-    assert f"model saved to {out}\n" in res.stdout
+    assert f"model saved to {out}\n" in res.stdout and "not saved" not in res.stdout
     assert "selection" not in sysid.load_model(out).provenance
+    res = run("identify", flights[0].path, *FAST)  # shown, then gone: it says so
+    assert res.exit_code == 0 and "model not saved: --out FILE.h5 saves it" in res.stdout
 
 
 def test_sweep_and_identify_choose_alike_with_no_knobs(flights, tmp_path) -> None:
