@@ -247,7 +247,10 @@ class LiveIdListener:
             "span_s": None if f is None else round(f.span_s, 3),
             "fit_pct": None if f is None else round(f.fit_pct, 2),
             "max_pole": None if f is None else round(float(np.abs(f.poles).max()), 6),
-            "converged_at_s": self.converged_at, "model_file": model_file, "error": self.error}}
+            "converged_at_s": self.converged_at, "model_file": model_file, "error": self.error,
+            "convergence": None if self.convergence is None else {
+                "tolerance": self.convergence.tolerance,
+                "duration_s": self.convergence.duration_s}}}
 
     def end(self, *, summary: Mapping[str, Any]) -> None:
         self._stop.set()

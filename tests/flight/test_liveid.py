@@ -276,6 +276,20 @@ def test_the_summary_prints_the_flight_time_saved(sim_uri, tmp_path, cli_in_step
     assert "| live id" in res.stderr  # the plain progress line carries the status
 
 
+def test_a_flight_that_never_converges_says_so(sim_uri, tmp_path, cli_in_step):
+    """``--until-converged`` with a tolerance the poles never meet flew the whole plan and the
+    summary said nothing of it: an engineer waiting for the cut could not tell."""
+    plan = tmp_path / "p.toml"
+    plan.write_text(_plan(12.0, SMALL).text, encoding="utf-8")
+    res = CliRunner().invoke(main, ["fly", str(plan), "--uri", sim_uri(), "--out",
+                                    str(tmp_path), "--until-converged", "--converged-tol",
+                                    "1e-9", "--converged-for", "2"])
+    assert res.exit_code == 0, res.output
+    assert ("not converged: the poles never stayed within 1e-09 for 2 s, so the whole "
+            "excitation was flown") in res.stdout
+    assert "s of flight saved" not in res.stdout
+
+
 def test_a_flat_out_simulator_keeps_the_live_identification_in_step(sim_uri, tmp_path):
     """``fly --uri 'sim://0?speed=inf' --until-converged`` (no test hook): the simulation
     waits for each update, so every due update is computed and the excitation is cut on
