@@ -34,7 +34,7 @@ from sysid.cli_options import (
     FORCE_OPTION,
     METHOD_OPTION,
     STABILITY_OPTION,
-    OneInt,
+    fixed_option,
     method_chosen,
     method_options,
     model_options,
@@ -132,9 +132,9 @@ def scheduler_client(address: str | None) -> Iterator[Any]:
 @main.command()
 @click.argument("session", type=click.Path(path_type=Path))
 @METHOD_OPTION
-@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
+@fixed_option("past",
               help="Past horizon, samples (default: the largest of the scaled default grid).")
-@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
+@fixed_option("future",
               help="Future horizon, samples (default: as --past).")
 @click.option("--show", default=20, show_default=True, type=click.IntRange(min=2),
               help="How many singular values to list.")
@@ -236,11 +236,11 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
 @click.option("--group-by", type=click.Choice(GROUP_BY), default="session", show_default=True,
               help="One model per session, vehicle (uri), UTC day, plan name, or of all.")
 @METHOD_OPTION
-@click.option("--order", type=OneInt(min=1, sweep_option="--orders"),
+@fixed_option("order",
               help="Fix the order (default: chosen).")
-@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
+@fixed_option("past",
               help="Fix the past horizon, samples.")
-@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
+@fixed_option("future",
               help="Fix the future horizon, samples.")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes for each group's choice of horizons and order.")

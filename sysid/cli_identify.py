@@ -18,7 +18,7 @@ from cfcommon.cli import check_output
 from sysid.cli_compare import check_fit_samples
 from sysid.cli_options import (
     METHOD_OPTION,
-    OneInt,
+    fixed_option,
     method_chosen,
     method_options,
     model_options,
@@ -72,11 +72,11 @@ def samples_line(flights: Sequence[IOData], *, dt: float,
 @click.command("identify")
 @click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
 @METHOD_OPTION
-@click.option("--order", type=OneInt(min=1, sweep_option="--orders"),
+@fixed_option("order",
               help="Model order (default: chosen by validation).")
-@click.option("--past", type=OneInt(min=1, sweep_option="--pasts"),
+@fixed_option("past",
               help="Past horizon, samples (default: chosen by validation).")
-@click.option("--future", type=OneInt(min=2, sweep_option="--futures"),
+@fixed_option("future",
               help="Future horizon, samples (default: chosen by validation).")
 @click.option("--feedthrough/--no-feedthrough", default=None,
               help="Estimate D (default: no for iem, yes for po-moesp and parsim-k; when the "

@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import click
 
@@ -18,7 +18,7 @@ from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
 from sysid.stability import STABILITY_MODES
 
 __all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
-           "OneInt", "method_chosen", "method_options", "model_options"]
+           "OneInt", "fixed_option", "method_chosen", "method_options", "model_options"]
 
 
 class OneInt(click.IntRange):
@@ -40,6 +40,17 @@ class OneInt(click.IntRange):
                       f"by validation) or use `sysid sweep SESSION {self.sweep_option} {value}`",
                       param, ctx)
         return super().convert(value, param, ctx)
+
+
+#: The least value and ``sysid sweep``'s option of each setting :func:`fixed_option` makes.
+_FIXED = {"order": (1, "--orders"), "past": (1, "--pasts"), "future": (2, "--futures")}
+
+
+def fixed_option(name: Literal["order", "past", "future"], *, help: str) -> Any:
+    """``--order``, ``--past`` or ``--future`` fixed to one value (:class:`OneInt`), with the
+    command's own ``help``: one rule for their least values and the sweep options they name."""
+    least, sweep = _FIXED[name]
+    return click.option(f"--{name}", type=OneInt(min=least, sweep_option=sweep), help=help)
 
 
 class MethodChoice(click.Choice):

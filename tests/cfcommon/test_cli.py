@@ -312,6 +312,21 @@ def test_a_log_record_stays_one_line_whatever_its_exception_says() -> None:
     assert fmt.format(bare) == "ERROR x: no exception"
 
 
+def _raising(exc: BaseException) -> object:
+    """A ``OneLineErrorGroup`` whose command ``read`` raises ``exc``; the result of running it."""
+    from cfcommon.cli import OneLineErrorGroup
+
+    @click.group(cls=OneLineErrorGroup)
+    def group() -> None:
+        pass
+
+    @group.command()
+    def read() -> None:
+        raise exc
+
+    return CliRunner().invoke(group, ["read"])
+
+
 @pytest.mark.parametrize(("exc", "line"), [
     (OSError(5, "Input/output error", "/media/sd/log00"),
      "error: Input/output error (OSError): /media/sd/log00"),
@@ -324,32 +339,12 @@ def test_the_systems_refusal_is_one_line_and_exit_2(exc, line) -> None:
     """An ``OSError`` with an error number (a failing card, a read-only file system, a refused
     connection) is the system's answer, not a defect: it escaped as a traceback unless it was
     one of the few kinds named."""
-    from cfcommon.cli import OneLineErrorGroup
-
-    @click.group(cls=OneLineErrorGroup)
-    def group() -> None:
-        pass
-
-    @group.command()
-    def read() -> None:
-        raise exc
-
-    res = CliRunner().invoke(group, ["read"])
+    res = _raising(exc)
     assert res.exit_code == 2 and res.output.splitlines() == [line]
 
 
 def test_an_oserror_without_an_error_number_is_no_user_error() -> None:
     """One without (a library's own ``OSError("...")``) says nothing the system refused: it is
     left to the command's own handling, or shows as the defect it is."""
-    from cfcommon.cli import OneLineErrorGroup
-
-    @click.group(cls=OneLineErrorGroup)
-    def group() -> None:
-        pass
-
-    @group.command()
-    def read() -> None:
-        raise OSError("Unable to synchronously open file (file signature not found)")
-
-    res = CliRunner().invoke(group, ["read"])
+    res = _raising(OSError("Unable to synchronously open file (file signature not found)"))
     assert res.exit_code == 1 and isinstance(res.exception, OSError)
