@@ -71,6 +71,14 @@ _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never w
 #: What a write gets when the disk, a quota or ``ulimit -f`` has no room for it (also standard
 #: output redirected to a full disk or ``/dev/full``).
 NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+#: Error numbers by which the system refuses what a command asked (a failing card, a read-only
+#: file system, a path through a file, too many open files, a device gone, a peer that refuses
+#: or drops a connection): one line each (:meth:`OneLineErrorGroup.user_error_message`).
+REFUSALS = frozenset({
+    errno.EIO, errno.EROFS, errno.ENOTDIR, errno.ELOOP, errno.EMFILE, errno.ENFILE,
+    errno.EBUSY, errno.ETXTBSY, errno.ENODEV, errno.ENXIO, errno.EEXIST, errno.ENOTEMPTY,
+    errno.ECONNREFUSED, errno.ECONNRESET, errno.ECONNABORTED, errno.ETIMEDOUT,
+    errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EADDRINUSE, errno.EADDRNOTAVAIL})
 
 
 #: The exit status of a command whose output pipe's reader quit (``| head``): 128 + SIGPIPE,
@@ -402,9 +410,9 @@ class OneLineErrorGroup(click.Group):
             name = str(exc.filename or "")
             shown = name if len(name) <= 80 else f"{name[:60]}...{name[-12:]}"
             return f"{exc.strerror} ({len(name)} characters): {shown}"
-        if isinstance(exc, OSError) and exc.errno is not None and exc.errno not in NO_ROOM:
-            # the system's refusal (an I/O error, a read-only file system, too many open
-            # files, a connection refused): no defect of the command; -vv shows where
+        if isinstance(exc, OSError) and exc.errno in REFUSALS:
+            # the system's refusal, no defect of the command (EBADF, EINVAL ... would be one
+            # and stay a traceback); -vv shows where
             logging.getLogger(__name__).debug("%s", exc, exc_info=exc)
             where = f": {exc.filename}" if exc.filename else ""
             return f"{exc.strerror or os.strerror(exc.errno)} ({type(exc).__name__}){where}"

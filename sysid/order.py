@@ -14,6 +14,7 @@ from sysid.data import IOData, as_flights
 from sysid.errors import OrderError, ParameterError, SysIdError, first_line
 from sysid.factor import build_products
 from sysid.finish import check_flags
+from sysid.innovation_cov import without_own_noise_cov
 from sysid.kalman import error_covariance, one_step_errors
 from sysid.methods import DEFAULT_METHOD, Method, get_method
 from sysid.sweep import quiet_models
@@ -139,7 +140,8 @@ def _log_det(meth: Method, flights: Sequence[IOData], *, order: int, past: int, 
              options: Any, products: Any) -> float:
     """``log det`` of the one-step error covariance of the order-``order`` model (``inf``
     when it is not positive definite or not finite)."""
-    with quiet_models():  # a warning per order would flood the log
+    # a warning per order would flood the log; the covariance is computed here (below), once
+    with quiet_models(), without_own_noise_cov():
         model = meth.identify(flights, order=order, past=past, future=future, options=options,
                               products=products)
     errs, _ = one_step_errors(model, flights=flights)  # a Kalman gain if A - K C is unstable

@@ -246,8 +246,7 @@ def residuals(model: StateSpaceModel, data: IOData | Sequence[IOData], *, max_la
         e0, u0 = e0 / np.where(e_top > 0, e_top, 1.0), u0 / np.where(u_top > 0, u_top, 1.0)
         ee += _lag_sums(e0, e0, max_lag)
         eu += _lag_sums(e0, u0, max_lag)
-        uu += np.stack([_lag_sums(u0[:, [i]], u0[:, [i]], 2 * max_lag)[:, 0, 0]
-                        for i in range(m)], axis=1)
+        uu += np.diagonal(_lag_sums(u0, u0, 2 * max_lag), axis1=1, axis2=2)
     var_e = np.diag(ee[max_lag])
     var_u = uu[2 * max_lag]
     if np.any(var_e <= 0) or np.any(var_u <= 0):

@@ -248,7 +248,9 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
                      f"{cut['skipped_s']:.1f} s of flight saved ({planned - cut['skipped_s']:.1f}"
                      f" s instead of {planned:.1f} s planned)")
     conv = lid.get("convergence")
-    if conv and lid.get("converged_at_s") is None and not cut:  # asked for, never reached
+    # asked for, never reached, the excitation flown to its end (no abort, no failed engine)
+    if (conv and lid.get("converged_at_s") is None and not cut and not summary.get("aborted")
+            and not lid.get("error")):
         lines.append(f"    not converged: the poles never stayed within {conv['tolerance']:g} "
                      f"for {conv['duration_s']:g} s, so the whole excitation was flown (a "
                      "larger --converged-tol or a longer excitation; docs/live-id.md)")

@@ -343,8 +343,13 @@ def test_the_systems_refusal_is_one_line_and_exit_2(exc, line) -> None:
     assert res.exit_code == 2 and res.output.splitlines() == [line]
 
 
-def test_an_oserror_without_an_error_number_is_no_user_error() -> None:
-    """One without (a library's own ``OSError("...")``) says nothing the system refused: it is
-    left to the command's own handling, or shows as the defect it is."""
-    res = _raising(OSError("Unable to synchronously open file (file signature not found)"))
+@pytest.mark.parametrize("exc", [
+    OSError("Unable to synchronously open file (file signature not found)"),
+    OSError(9, "Bad file descriptor"),
+])
+def test_an_oserror_the_system_did_not_refuse_is_no_user_error(exc) -> None:
+    """One without an error number (a library's own ``OSError("...")``) or with one that says
+    the command misused a call (EBADF, EINVAL) is no refusal of the system: it is left to the
+    command's own handling, or shows as the defect it is."""
+    res = _raising(exc)
     assert res.exit_code == 1 and isinstance(res.exception, OSError)

@@ -290,6 +290,21 @@ def test_a_flight_that_never_converges_says_so(sim_uri, tmp_path, cli_in_step):
     assert "s of flight saved" not in res.stdout
 
 
+def test_an_aborted_or_failed_live_id_flight_is_not_called_not_converged():
+    """The excitation was not flown to its end (an abort) or the identification failed: "so
+    the whole excitation was flown" would be false there."""
+    from groundstation.commands.fly import _live_id_lines
+
+    lid = {"updates": 3, "skipped": 0, "failed": 0, "order": 4, "past": 15, "future": 8,
+           "converged_at_s": None, "error": None,
+           "convergence": {"tolerance": 0.01, "duration_s": 3.0}}
+    said = "not converged: the poles never stayed within 0.01 for 3 s"
+    assert any(said in line for line in _live_id_lines({"live_id": lid}))
+    for summary in ({"live_id": lid, "aborted": True},
+                    {"live_id": {**lid, "error": "update failed (LinAlgError)"}}):
+        assert not any(said in line for line in _live_id_lines(summary))
+
+
 def test_a_flat_out_simulator_keeps_the_live_identification_in_step(sim_uri, tmp_path):
     """``fly --uri 'sim://0?speed=inf' --until-converged`` (no test hook): the simulation
     waits for each update, so every due update is computed and the excitation is cut on
