@@ -54,6 +54,7 @@ from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "FiniteFloat",
            "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
+           "names_a_file",
            "output_console", "output_gone", "output_table", "reader_gone", "setup_logging",
            "whole_file", "writing_stdout"]
 
@@ -356,6 +357,21 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
         raise click.BadParameter(f"{str(path)!r} already exists; {how}choose another name",
                                  param_hint=option)
     return path
+
+
+#: Endings of the files the two command lines read and write: a folder option (``--out`` of
+#: ``fly``, ``import``, ``demo``, ``export --to csv|parquet``, ``sysid batch``) given a name
+#: with one of them names a file where a folder is meant (:func:`names_a_file`).
+FILE_SUFFIXES = (".h5", ".hdf5", ".json", ".mat", ".csv", ".parquet", ".rrd", ".toml", ".txt",
+                 ".bin")
+
+
+def names_a_file(folder: Path) -> bool:
+    """True when ``folder``, which a command would create as a folder, does not exist and
+    ends in one of :data:`FILE_SUFFIXES` (``--out model.h5`` where models go into a folder):
+    made, it would be a folder named like a file, which the next command then refuses."""
+    folder = Path(folder)
+    return not folder.exists() and folder.suffix.lower() in FILE_SUFFIXES
 
 
 @contextlib.contextmanager

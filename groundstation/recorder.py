@@ -78,13 +78,15 @@ def _claim(path: Path, *, unique: bool) -> Path:
 def check_folder(out: str | Path) -> Path:
     """Create the session folder ``out`` if missing and check that files can be created in
     it; one-line :class:`SessionError` otherwise."""
+    from cfcommon.cli import names_a_file  # the command lines' rule (flying loads no click)
+
     folder = Path(out)
     if str(out) == "-":  # the usual name for standard output: not a folder anyone means
         raise SessionError("--out -: sessions are files in a folder, not a stream on standard "
                            "output; give a folder (its full path for one named '-')")
     if folder.exists() and not folder.is_dir():
         raise SessionError(f"{folder}: is a file, not a folder; choose another --out folder")
-    if not folder.exists() and folder.suffix.lower() in (".h5", ".hdf5"):  # as sysid's --out
+    if names_a_file(folder):
         parent = folder.parent if folder.parent != Path() else Path("sessions")
         raise SessionError(f"--out {folder}: names a session file, but --out is the folder the "
                            f"session files go in (named for you); give a folder, e.g. "

@@ -18,7 +18,13 @@ from typing import Any
 
 import click
 
-from cfcommon.cli import FiniteFloat, check_output, output_table, setup_logging
+from cfcommon.cli import (
+    FiniteFloat,
+    check_output,
+    names_a_file,
+    output_table,
+    setup_logging,
+)
 from sysid.batch import (
     GROUP_BY,
     GroupBy,
@@ -270,7 +276,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
       sysid batch logs/*.h5 --out models --group-by vehicle
       sysid batch logs/*.h5 --out models --scheduler tcp://10.0.0.5:8786
     """
-    if not out_dir.exists() and out_dir.suffix.lower() in (".h5", ".hdf5", ".json", ".mat"):
+    if names_a_file(out_dir):
         raise ParameterError(f"--out {out_dir}: names a model file, but batch writes one model "
                              "per group (and its summary) into a folder; give a folder, e.g. "
                              f"--out {out_dir.with_suffix('')}")

@@ -270,7 +270,7 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
 
 def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
     """The output (a .mat file or a folder), checked before any work."""
-    from cfcommon.cli import check_output
+    from cfcommon.cli import check_output, names_a_file
 
     if to == "mat":
         path = out or session.with_suffix(".mat")
@@ -283,7 +283,7 @@ def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
     folder = out or session.with_name(f"{session.stem}-{to}")
     if folder.exists() and not folder.is_dir():
         raise click.BadParameter(f"{str(folder)!r} is a file; give a folder", param_hint="--out")
-    if not folder.exists() and folder.suffix.lower() in (".csv", ".parquet", ".mat", ".h5"):
+    if names_a_file(folder):
         raise click.BadParameter(f"{str(folder)!r} names a file, but --to {to} writes one file "
                                  f"per stream into a folder; give a folder (e.g. "
                                  f"{str(folder.with_suffix(''))!r}), or --to mat for one file",

@@ -171,9 +171,11 @@ def test_a_full_disk_leaves_no_file_cut_short_and_names_the_file(session, tmp_pa
     assert not [n for n in left if n.endswith(".part") or n == stopped.name], left
 
 
-@pytest.mark.parametrize(("to", "out"), [("csv", "flight.csv"), ("parquet", "flight.parquet")])
+@pytest.mark.parametrize(("to", "out"), [("csv", "flight.csv"), ("parquet", "flight.parquet"),
+                                         ("csv", "flight.json"), ("parquet", "flight.rrd")])
 def test_a_file_name_for_a_folder_export_is_one_line(session, tmp_path, to, out):
-    """`--to csv --out flight.csv` made a folder named flight.csv of eleven CSV files."""
+    """`--to csv --out flight.csv` made a folder named flight.csv of eleven CSV files (and
+    `--out flight.json`, whose suffix the check did not know, still does)."""
     line = _one_line(_run(session, "--to", to, "--out", tmp_path / out))
     assert (f"{str(tmp_path / out)!r} names a file, but --to {to} writes one file per stream "
             f"into a folder; give a folder (e.g. {str(tmp_path / 'flight')!r})") in line
