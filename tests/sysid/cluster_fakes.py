@@ -1,4 +1,4 @@
-"""Stand-ins for the Dask fault tests (``test_cluster_faults.py``).
+"""Stand-ins for the Dask fault tests (``tests/sysid/cluster_faults/``).
 
 - :func:`fake_identify` replaces :func:`sysid.batch.identify_group`: it takes as long as its
   session's name says (``a_0.5.h5``: 0.5 s; ``b_block.h5``: until :data:`GATE` opens, at most
