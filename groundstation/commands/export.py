@@ -217,6 +217,7 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
                     left_out)
     streams: dict[str, dict[str, Any]] = {}
     units: dict[str, dict[str, str]] = {}
+    names: dict[str, dict[str, Any]] = {}  # MATLAB's names back to the session's
     stream_ids = _identifiers(session.streams)
     for name, stream in session.streams.items():
         cols = _columns(session, name)
@@ -226,6 +227,8 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
                            np.asarray(c, dtype=float).reshape(-1, 1))
             for f, c in cols.items()}
         units[stream_ids[name]] = {field_ids[f]: stream.units.get(f, "") for f in cols}
+        names[stream_ids[name]] = {"stream": name,
+                                   "fields": {field_ids[f]: f for f in cols}}
     metadata = _metadata(session)
     meta_ids = _identifiers(metadata)
     meta = {meta_ids[k]: json.dumps(v) if not isinstance(v, str) else v
@@ -237,7 +240,8 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
         "OutputUnit": _cell(data.output_units),
         "Window": "all" if window is None else str(window)}
     with whole_file(path) as part:
-        savemat(part, {**content, "streams": streams, "units": units, "metadata": meta},
+        savemat(part, {**content, "streams": streams, "units": units, "names": names,
+                       "metadata": meta},
                 long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
     return left_out
 

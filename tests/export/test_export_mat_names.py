@@ -60,3 +60,10 @@ def test_names_made_alike_or_non_ascii_are_each_kept(tmp_path):
     assert (units["acc_motor_2"]["a_b"], units["acc_motor_2"]["a_b_2"]) == ("u1", "u0")
     np.testing.assert_array_equal(st["bl_"]["f__"], [20, 21, 22])
     assert units["bl_"]["f__"] == "u0"
+    # and the way back: each MATLAB name to the session's (csv and parquet: stream_files)
+    names = m["names"]
+    assert {k: v["stream"] for k, v in names.items()} == {
+        "acc_motor": "acc_motor", "acc_motor_2": "acc+motor", "bl_": "blä"}
+    assert names["acc_motor_2"]["fields"] == {"host_time": "host_time", "a_b": "a_b",
+                                              "a_b_2": "a.b"}
+    assert names["bl_"]["fields"]["f__"] == "é"
