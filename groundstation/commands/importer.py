@@ -43,6 +43,14 @@ def _kind(path: Path) -> Kind | None:
     return None
 
 
+def _is_hdf5(path: Path) -> bool:
+    """The file starts with HDF5's signature (a session or a model file, not a log)."""
+    from cfsession.guard import HDF5_SIGNATURE
+
+    with open(path, "rb") as fh:
+        return fh.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE
+
+
 def _entries(folder: Path) -> list[Path]:
     """The folder's entries, sorted, hidden ones (``.name``) left out."""
     try:
@@ -107,6 +115,11 @@ def plan_imports(paths: list[Path]) -> tuple[list[ImportJob], list[Path]]:
             raise SessionError(f"{p}: not a regular file (a device, FIFO or socket); pass "
                                "uSD-card deck logs, cfclient CSVs or folders of them")
         kind = _kind(p)
+        if kind is None and _is_hdf5(p):
+            raise SessionError(
+                f"{p}: an HDF5 file (a session or a model: groundstation info reads a session "
+                "as it is), not a log to import; import takes uSD-card deck logs and cfclient "
+                "CSVs")
         if kind is None:
             raise SessionError(
                 f"{p}: neither a uSD-card deck log (0xBC first byte) nor a cfclient CSV "

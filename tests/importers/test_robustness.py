@@ -204,3 +204,15 @@ def test_a_folder_of_sessions_is_named_as_one(tmp_path):
                                   str(tmp_path / "out")])
     assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
     assert "its 1 .h5 file(s) are sessions already" in res.output
+
+
+def test_a_session_file_given_to_import_is_named_as_one(tmp_path):
+    """`import flight.h5` said "neither a uSD-card deck log nor a cfclient CSV", as for any
+    unknown file (first-day review)."""
+    from tests.viz.sessions import write_session
+
+    session = write_session(tmp_path / "f.h5")
+    res = CliRunner().invoke(gs, ["import", str(session), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert f"{session}: an HDF5 file (a session or a model" in res.output
+    assert "groundstation info reads a session as it is" in res.output
