@@ -122,6 +122,9 @@ class SweepResult:
     method: str
     horizon: int | None
     window: float | None
+    #: Seconds of the longest validation record (a window at least that long simulates each
+    #: record whole); None when not known.
+    record_s: float | None = None
 
     def best(self, *, tol: float | None = None, require_stable: bool = True) -> SweepRow:
         """The parsimonious best row (module docstring): the smallest order within one standard
@@ -158,7 +161,7 @@ class SweepResult:
         2 s windows"`` or ``"simulation of each whole record"``."""
         if self.horizon is not None:
             return f"{self.horizon}-step prediction"
-        if self.window is not None:
+        if self.window is not None and (self.record_s is None or self.window < self.record_s):
             return f"simulation over {self.window:.3g} s windows"
         return "simulation of each whole record"
 
@@ -359,7 +362,8 @@ def sweep(
     n_failed = sum(r.error is not None for r in rows)
     log.info("sweep of %d models (%d failed) in %.1f s", len(rows), n_failed,
              time.perf_counter() - t0)
-    return SweepResult(rows=rows, method=meth.name, horizon=horizon, window=window)
+    return SweepResult(rows=rows, method=meth.name, horizon=horizon, window=window,
+                       record_s=max(d.n_samples * d.dt for d in val))
 
 
 def _ignore_sigint() -> None:

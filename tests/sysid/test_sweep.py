@@ -70,6 +70,19 @@ def test_horizon_sweep_rejects_too_short_past(pbsid_data: tuple[IOData, IOData])
     assert result.scoring == "1-step prediction"
 
 
+def test_a_window_longer_than_the_records_is_called_whole_record_simulation(
+    pbsid_data: tuple[IOData, IOData],
+) -> None:
+    """`sysid sweep --window-s 2000` on records of a few hundred seconds titled its table
+    "simulation over 2e+03 s windows"; each record was simulated whole."""
+    ident, val = pbsid_data
+    span = val.n_samples * val.dt
+    kw = {"pasts": [10], "futures": [10], "orders": [4], "validation": val}
+    assert sweep(ident, window=2 * span, **kw).scoring == "simulation of each whole record"
+    assert (sweep(ident, window=span / 4, **kw).scoring
+            == f"simulation over {span / 4:.3g} s windows")
+
+
 def test_parallel_sweep_equals_serial_and_failures_are_rows(
     pbsid_data: tuple[IOData, IOData],
 ) -> None:
