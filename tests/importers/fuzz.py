@@ -13,7 +13,6 @@ import struct
 import sys
 import tempfile
 import time
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from click.testing import CliRunner
 
 from cfsession import open_session
 from groundstation.cli import main as gs
+from tests.importers.usd_logs import build_usd, with_crc
 
 TOKENS = [b",", b"\n", b"nan", b"inf", b"1e309", b"-", b".", b"g.", b"a.x", b"b.x", b"a_x",
           b"g.host_time", b"fw_time_ms", b"\x00", "é".encode(), b"\xff\xfe", b"x" * 300, b"",
@@ -55,21 +55,16 @@ def valid_usd(rng: random.Random) -> bytes:
                  f"{rng.choice(['x', 'z', 'm1', 'a_x', 'host_time'])}{j}"
                  for j in range(len(kinds))]
         events.append((eid, f"ev{eid}" if eid > 1 else "fixedFrequency", names, kinds))
-    head = bytearray(b"\xbc" + struct.pack("<HH", version, len(events)))
-    for eid, name, names, kinds in events:
-        head += struct.pack("<H", eid) + name.encode() + b"\0" + struct.pack("<H", len(names))
-        head += b"".join(f"{n}({k})".encode() + b"\0" for n, k in zip(names, kinds, strict=True))
     t = rng.randint(0, 10**6)
+    records = []
     for _ in range(rng.randint(0, 60)):
         eid, _name, _names, kinds = rng.choice(events)
         t += rng.randint(0, 20_000)
-        head += struct.pack("<HI" if version == 1 else "<HQ", eid, t)
-        head += bytes(rng.getrandbits(8) for _ in range(struct.calcsize("<" + "".join(kinds))))
-    return _with_crc(bytes(head))
-
-
-def _with_crc(body: bytes) -> bytes:
-    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+        records.append((eid, t, bytes(rng.getrandbits(8)
+                                      for _ in range(struct.calcsize("<" + "".join(kinds))))))
+    return build_usd(version=version, records=records,
+                     events=[(eid, name, list(zip(names, kinds, strict=True)))
+                             for eid, name, names, kinds in events])
 
 
 def mutate(data: bytes, rng: random.Random, *, usd: bool) -> bytes:
@@ -101,7 +96,7 @@ def mutate(data: bytes, rng: random.Random, *, usd: bool) -> bytes:
             b[j:j + 2] = struct.pack("<H", rng.choice([0, 1, 2, 513, 65535, rng.getrandbits(16)]))
     if not usd:
         return bytes(b)
-    return _with_crc(bytes(b)) if rng.random() < 0.5 else bytes(b) + data[-4:]
+    return with_crc(bytes(b)) if rng.random() < 0.5 else bytes(b) + data[-4:]
 
 
 @dataclass(frozen=True)

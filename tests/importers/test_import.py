@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import struct
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +14,7 @@ from groundstation.cli import main as gs
 from groundstation.importers import CsvFormatError, read_cfclient_csv
 from sysid.cli import main as sysid_cli
 from sysid.session_io import load_session
+from tests.importers.usd_logs import build_usd
 from tests.paths import CRAZYPAD, needs_crazypad
 
 
@@ -83,14 +82,12 @@ def test_csv_damage(tmp_path) -> None:
 
 
 def usd_bytes(*, stamps_us: np.ndarray, a: np.ndarray, b: np.ndarray) -> bytes:
-    """A format-2 uSD log: event 1 'fixedFrequency' (acc.x float, motor.m1 uint16) + CRC."""
-    head = bytearray(b"\xbc" + struct.pack("<HH", 2, 2))
-    head += struct.pack("<H", 1) + b"fixedFrequency\0" + struct.pack("<H", 2)
-    head += b"acc.x(f)\0motor.m1(H)\0"
-    head += struct.pack("<H", 7) + b"empty\0" + struct.pack("<H", 1) + b"mode(B)\0"
-    for t, x, m in zip(stamps_us, a, b, strict=True):
-        head += struct.pack("<HQfH", 1, int(t), float(x), int(m))
-    return bytes(head) + struct.pack("<I", zlib.crc32(bytes(head)) & 0xFFFFFFFF)
+    """A format-2 uSD log: event 1 'fixedFrequency' (acc.x float, motor.m1 uint16), event 7
+    'empty' declared without records, and the CRC."""
+    return build_usd(version=2, events=[(1, "fixedFrequency", [("acc.x", "f"), ("motor.m1", "H")]),
+                                        (7, "empty", [("mode", "B")])],
+                     records=[(1, int(t), (float(x), int(m)))
+                              for t, x, m in zip(stamps_us, a, b, strict=True)])
 
 
 def test_usd_round_trip(tmp_path) -> None:

@@ -3,9 +3,6 @@ traceback, nothing written; the damaged-log hint names the command-line flag."""
 
 from __future__ import annotations
 
-import struct
-import zlib
-
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -13,6 +10,7 @@ from click.testing import CliRunner
 from cfsession import SessionWriter, open_session
 from groundstation.cli import main as gs
 from tests.importers.test_import import usd_bytes, write_csv
+from tests.importers.usd_logs import build_usd
 
 
 def _one_line_error(res) -> str:
@@ -117,12 +115,9 @@ def test_512_variables_of_64_characters_fit(tmp_path):
 
 def usd_with_variables(entries: list[bytes]) -> bytes:
     """A format-2 uSD log with one event (id 1) of uint8 variables and two records."""
-    head = bytearray(b"\xbc" + struct.pack("<HH", 2, 1))
-    head += struct.pack("<H", 1) + b"fixedFrequency\0" + struct.pack("<H", len(entries))
-    head += b"".join(e + b"(B)\0" for e in entries)
-    for k in range(2):
-        head += struct.pack("<HQ", 1, 1000 * k) + bytes((k + j) % 256 for j in range(len(entries)))
-    return bytes(head) + struct.pack("<I", zlib.crc32(bytes(head)) & 0xFFFFFFFF)
+    return build_usd(version=2, events=[(1, "fixedFrequency", [(e, "B") for e in entries])],
+                     records=[(1, 1000 * k, bytes((k + j) % 256 for j in range(len(entries))))
+                              for k in range(2)])
 
 
 def test_usd_names_are_mangled_like_csv_names(tmp_path):

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = ["ALL_TYPES", "Layout", "build_usd", "reference_read", "same_values", "synthetic_usd",
-           "usd_header"]
+           "usd_header", "with_crc"]
 
 Layout = tuple[int, str, Sequence[tuple[str, str]]]
 
@@ -35,16 +35,19 @@ _LE = {"B": "u1", "b": "i1", "H": "<u2", "h": "<i2", "I": "<u4", "i": "<i4", "f"
 
 
 def usd_header(*, version: int, events: Sequence[Layout]) -> bytes:
-    """The header: 0xBC, version, the event types and their variables."""
+    """The header: 0xBC, version, the event types and their variables (a variable's name as
+    text, or as bytes for names no firmware would write)."""
     out = bytearray(b"\xbc" + struct.pack("<HH", version, len(events)))
     for event_id, name, variables in events:
         out += struct.pack("<H", event_id) + name.encode() + b"\0"
         out += struct.pack("<H", len(variables))
-        out += b"".join(f"{v}({t})".encode() + b"\0" for v, t in variables)
+        out += b"".join((v if isinstance(v, bytes) else v.encode()) + f"({t})".encode() + b"\0"
+                        for v, t in variables)
     return bytes(out)
 
 
-def _with_crc(body: bytes) -> bytes:
+def with_crc(body: bytes) -> bytes:
+    """``body`` and its CRC-32, as the deck ends a log when logging is switched off."""
     return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
 
 
@@ -57,7 +60,7 @@ def build_usd(*, version: int, events: Sequence[Layout],
     for event_id, t, values in records:
         body += struct.pack(stamp, event_id, t)
         body += values if isinstance(values, bytes) else struct.pack(fmts[event_id], *values)
-    return _with_crc(bytes(body)) if crc else bytes(body)
+    return with_crc(bytes(body)) if crc else bytes(body)
 
 
 def _record_dtype(version: int, variables: Sequence[tuple[str, str]]) -> np.dtype:
@@ -107,7 +110,7 @@ def synthetic_usd(*, version: int = 2, seconds: float, rate_hz: float = 1000.0,
         at = offsets[which == k]
         for a in range(0, len(p), 1 << 16):
             out[at[a:a + (1 << 16), None] + np.arange(p.dtype.itemsize)] = raw[a:a + (1 << 16)]
-    return _with_crc(usd_header(version=version, events=layouts) + out.tobytes())
+    return with_crc(usd_header(version=version, events=layouts) + out.tobytes())
 
 
 def reference_read(data: bytes) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:

@@ -9,20 +9,16 @@ import numpy as np
 import pytest
 
 from groundstation.importers import UsdFormatError, read_usd
+from tests.importers.usd_logs import build_usd
 from tests.paths import CRAZYPAD, needs_crazypad
 
 
 def _write(path, *, version: int, records: list[tuple[int, int, tuple]], crc_fix: int = 0):
-    """A uSD log with event 7 'fixedFrequency' (a: float, b: uint16, c: int8) and event 9 'ev'."""
-    head = bytes([0xBC]) + struct.pack("<HH", version, 2)
-    head += struct.pack("<H", 7) + b"fixedFrequency\0" + struct.pack("<H", 3)
-    head += b"g.a(f)\0g.b(H)\0g.c(b)\0"
-    head += struct.pack("<H", 9) + b"ev\0" + struct.pack("<H", 1) + b"x(e)\0"
-    stamp = "<HI" if version == 1 else "<HQ"
-    body = head
-    for event_id, t, vals in records:
-        fmt = "<fHb" if event_id == 7 else "<e"
-        body += struct.pack(stamp, event_id, t) + struct.pack(fmt, *vals)
+    """A uSD log with event 7 'fixedFrequency' (a: float, b: uint16, c: int8) and event 9 'ev';
+    ``crc_fix`` added to its CRC (a damaged log)."""
+    body = build_usd(version=version, records=records, crc=False,
+                     events=[(7, "fixedFrequency", [("g.a", "f"), ("g.b", "H"), ("g.c", "b")]),
+                             (9, "ev", [("x", "e")])])
     path.write_bytes(body + struct.pack("<I", (zlib.crc32(body) + crc_fix) & 0xFFFFFFFF))
     return path
 
