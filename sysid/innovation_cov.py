@@ -88,4 +88,6 @@ def own_noise_cov(model: StateSpaceModel, *, flights: Sequence[IOData]) -> State
         if np.isfinite(cov).all():
             return model.replace(noise_cov=cov, provenance={**prov, "noise_cov_source": OWN})
         source = "the method's estimate: the one-step errors overflow"
+    if given is None:  # "the method's estimate" would name one that is not there
+        source = source.replace("the method's estimate", "none (the method gave none)", 1)
     return model.replace(provenance={**prov, "noise_cov_source": source})

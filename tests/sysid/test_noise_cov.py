@@ -125,6 +125,12 @@ def test_unstable_predictor_keeps_the_methods_estimate(pbsid):
     kept = own_noise_cov(bad, flights=[pbsid])
     np.testing.assert_array_equal(kept.noise_cov, np.diag([2.0, 3.0]))
     assert "unstable" in kept.provenance["noise_cov_source"]
+    # a method that gave no estimate (PO-MOESP's thesis variant with an unstable A): not
+    # called "the method's estimate"
+    none = own_noise_cov(bad.replace(noise_cov=None), flights=[pbsid])
+    assert none.noise_cov is None
+    assert none.provenance["noise_cov_source"] == ("none (the method gave none): the predictor "
+                                                   "A - K C is unstable")
 
 
 def test_a_sweeps_dropped_models_skip_it(pbsid):
