@@ -110,10 +110,25 @@ def _caseless(name: str) -> str:
     return unicodedata.normalize("NFD", unicodedata.normalize("NFD", name).casefold())
 
 
+_WINDOWS_DEVICES = re.compile(r"(CON|PRN|AUX|NUL|COM[0-9]|LPT[0-9])(\..*)?", re.IGNORECASE)
+
+
+def _file_stem(name: str) -> str:
+    """A file name every system takes for stream ``name`` (a session from elsewhere may name a
+    stream anything HDF5 allows): ``< > : " / \\ | ? *`` and control characters as ``_``
+    (Windows, a FAT card), no leading ``.`` (hidden), no trailing dot or space, not a Windows
+    device name (``NUL`` -> ``NUL_``); at most 200 bytes (UTF-8; a file name has 255)."""
+    stem = re.sub(r'[<>:"/\\|?*\x00-\x1f\x7f]', "_", name)
+    stem = stem.encode()[:200].decode(errors="ignore").rstrip(". ")
+    stem = "_" + stem[1:] if stem.startswith(".") else stem
+    return f"{stem}_" if _WINDOWS_DEVICES.fullmatch(stem) else stem or "stream"
+
+
 def _file_names(streams: Any, suffix: str) -> dict[str, str]:
-    """``{stream: file name}``, distinct however a file system compares case (``Motors``,
-    ``motors`` -> ``Motors.csv``, ``motors_2.csv``; :func:`_distinct`)."""
-    stems = _distinct(streams, made=str, key=_caseless)
+    """``{stream: file name}``, names every file system takes (:func:`_file_stem`), distinct
+    however it compares case (``Motors``, ``motors`` -> ``Motors.csv``, ``motors_2.csv``;
+    :func:`_distinct`)."""
+    stems = _distinct(streams, made=_file_stem, key=_caseless)
     return {name: f"{stem}{suffix}" for name, stem in stems.items()}
 
 

@@ -66,3 +66,34 @@ def test_streams_differing_in_case_get_files_of_their_own(session, tmp_path, to)
             table = pq.read_table(out / files[name])
             assert table.schema.metadata[b"stream"].decode() == name
             assert table.column("v").to_pylist() == [10 * k, 10 * k + 1, 10 * k + 2]
+
+
+FOREIGN = ["a:b", "q?", "NUL", "con.x", ".hidden", "end. ", "tab\there", "é" * 150, "a_b"]
+"""Stream names HDF5 takes that Windows or a FAT card refuse as file names (or hide)."""
+
+
+def test_stream_names_no_file_system_takes_are_made_safe(tmp_path):
+    """A session from elsewhere may name a stream ``a:b`` or ``NUL``: on Windows or a FAT card
+    the export failed on it (or wrote an alternate data stream of ``a``)."""
+    path = tmp_path / "s.h5"
+    specs = [StreamSpec(name=n, kind="log", period_s=0.01, description="",
+                        fields=(Field("host_time", "<f8", "s", ""), Field("v", "<f8", "", "v")))
+             for n in FOREIGN]
+    with SessionWriter(path, streams=specs, metadata={"uri": "x"}) as w:
+        for k, n in enumerate(FOREIGN):
+            w.extend(n, [(0.0, float(k))])
+    out = tmp_path / "csv"
+    res = CliRunner().invoke(main, ["export", str(path), "--to", "csv", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    files = json.loads((out / "metadata.json").read_text())["stream_files"]
+    assert files["a_b"] == "a_b.csv"  # a safe name keeps it; "a:b" then gets a suffix
+    assert (files["a:b"], files["q?"], files["NUL"], files["con.x"]) == (
+        "a_b_2.csv", "q_.csv", "NUL_.csv", "con.x_.csv")
+    assert (files[".hidden"], files["end. "], files["tab\there"]) == (
+        "_hidden.csv", "end.csv", "tab_here.csv")
+    assert len(files["é" * 150].encode()) <= 210
+    for name in files.values():
+        assert not set('<>:"/\\|?*') & set(name) and not name.startswith(".")
+    for k, n in enumerate(FOREIGN):  # each file holds its stream
+        with open(out / files[n], newline="", encoding="utf-8") as fh:
+            assert float(list(csv.reader(fh))[1][1]) == k
