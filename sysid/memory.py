@@ -26,6 +26,11 @@ One QR factor of ``[regressors | outputs]`` ordered by lag gives every :math:`\h
 (the rows below column ``q`` of the outputs' block). Channels are scaled to unit variance
 first (the criterion does not change; the factor is better conditioned), one scale for all
 flights; each flight's mean is removed (an offset would otherwise be explained by long lags).
+Directions of :math:`\hat\Sigma_L` below the factor's numerical precision (outputs that the
+regressors explain exactly) count at that precision, so :math:`\log\det` stays finite and
+the search goes on while other directions still gain; it stops when every output is
+explained exactly (noise-free data: the observability index, one lag more for the means
+removed in place of an intercept).
 """
 
 from __future__ import annotations
@@ -46,6 +51,9 @@ MAX_LAG = 50
 ROWS_PER_REGRESSOR = 5
 #: Rows stacked per QR step (bounds the memory used on long records).
 _CHUNK = 20_000
+#: Residual singular values below this times the factor's size and norm count as zero
+#: (machine precision with numpy's ``matrix_rank`` margin): explained exactly.
+_EXACT_TOL = np.finfo(float).eps
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,14 +131,19 @@ def predictor_memory(flights: Sequence[IOData], *, max_lag: int = MAX_LAG) -> Me
     width = r.shape[1]
     if r.shape[0] < width:
         r = np.vstack([r, np.zeros((width - r.shape[0], width))])
+    # residual directions below the factor's numerical rank tolerance are explained exactly:
+    # each counts at that floor, so the determinant stays finite and keeps falling while
+    # other directions still gain from longer lags (noise-free data of more states than
+    # outputs, an output that is an exact filter of the inputs beside noisy ones)
+    floor = (_EXACT_TOL * width * float(np.linalg.norm(r, 2))) ** 2 / n_rows
     for lag in range(top + 1):
         q = m + lag * (m + ell)
         if n_rows - q - ell - 1 <= 0:
             break
-        e = r[q:, width - ell:]
-        sign, logdet = np.linalg.slogdet(e.T @ e / n_rows)
-        if sign <= 0:  # an output the regressors explain exactly: no memory beyond this lag
-            aicc[lag] = -np.inf
-            break
+        var = scipy.linalg.svdvals(r[q:, width - ell:], check_finite=False) ** 2 / n_rows
+        var = np.concatenate([var, np.zeros(ell - var.size)])
+        logdet = float(np.sum(np.log(np.maximum(var, floor))))
         aicc[lag] = n_rows * logdet + n_rows * ell * (n_rows + q) / (n_rows - q - ell - 1)
+        if np.all(var <= floor):  # every output explained exactly: no memory beyond this lag
+            break
     return Memory(lag=int(np.argmin(aicc)), aicc=aicc, max_lag=top, n_rows=n_rows)
