@@ -53,6 +53,7 @@ from sysid.holdout import (
     max_blocks,
     memory_future,
     plan,
+    unexcited_warning,
 )
 from sysid.iem import without_input_warning
 from sysid.methods import Method, Options, get_method
@@ -130,8 +131,9 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
              sorted({r.order for r in close_to_best(ranked)}))
     warnings = edge_warnings(best, ranked, p.grid, capped=p.capped,
                              n_outputs=p.ident[0].n_outputs)
-    unresolved = ranking_warning(ranked, n_samples=sum(d.n_samples for d in p.val),
-                                 validation_given=p.given_validation)
+    # held-out inputs that do not move rank nothing: that is the warning, whatever the scores
+    unresolved = unexcited_warning(p) or ranking_warning(
+        ranked, n_samples=sum(d.n_samples for d in p.val), validation_given=p.given_validation)
     if unresolved is not None:
         warnings.append(unresolved)
     model = final_model(p, best, warnings, method=method, options=options)

@@ -36,7 +36,8 @@ order-3 and -4 systems 63-65 % (mean of 6 seeds; order 2: 99 %), against 92-99 %
 future 3, order 3 on all 38 samples of the order-3 ones, which the refusal's
 --past/--future/--order give.
 
-:func:`plan` makes the :class:`Plan` that :func:`sysid.auto.select_plan` sweeps.
+:func:`plan` makes the :class:`Plan` that :func:`sysid.auto.select_plan` sweeps;
+:func:`unexcited_warning` says when its held-out inputs do not move (nothing to rank by).
 """
 
 from __future__ import annotations
@@ -55,9 +56,9 @@ from sysid.memory import predictor_memory
 from sysid.validate import min_fit_samples, simulation_window
 
 __all__ = ["COLUMNS_PER_ROW", "FUTURE_X", "GIVE_HORIZONS", "HOLDOUT_FRACTION",
-           "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "SCORE_WINDOW_X", "VALIDATE_WITH", "Plan",
-           "default_grid",
-           "holdout", "max_blocks", "memory_future", "plan", "short_record_future"]
+           "MIN_COLUMNS_PER_ROW", "ORDERS", "PAST_X", "QUIET_INPUT", "SCORE_WINDOW_X",
+           "VALIDATE_WITH", "Plan", "default_grid", "holdout", "max_blocks", "memory_future",
+           "plan", "short_record_future", "unexcited_warning"]
 
 log = logging.getLogger(__name__)
 
@@ -344,3 +345,35 @@ def plan(groups: Sequence[Sequence[IOData]], *, pasts: Sequence[int] | None = No
                 memory=None if pasts and futures else memory,
                 fixed=tuple(k for k, v in (("pasts", pasts), ("futures", futures),
                                            ("orders", orders)) if v), room=room)
+
+
+#: Held-out inputs whose rms (about each record's mean) is under this share of the
+#: identification inputs' do not move: the held-out score then measures free responses only.
+QUIET_INPUT = 0.01
+
+
+def _input_rms(flights: Sequence[IOData]) -> np.ndarray:
+    """``(m,)`` rms of each input about each record's mean, over the records' samples."""
+    sq = sum(((d.u - d.u.mean(axis=0)) ** 2).sum(axis=0) for d in flights)
+    return np.sqrt(sq / max(1, sum(d.n_samples for d in flights)))
+
+
+def unexcited_warning(p: Plan) -> str | None:
+    """A warning when no input moves on the held-out data (every input's rms under
+    :data:`QUIET_INPUT` of its rms on the identification data: a step experiment whose last
+    third holds the input, a flight that hovers after its excitation): the scores then say
+    how fast each model's free response dies out, not how it follows the inputs, so the
+    ranking says nothing of the dynamics. None otherwise."""
+    ident, val = _input_rms(p.ident), _input_rms(p.val)
+    moving = ident > 0
+    if not moving.any() or (val[moving] >= QUIET_INPUT * ident[moving]).any():
+        return None
+    j = int(np.argmax(np.where(moving, val / np.where(moving, ident, 1.0), -1.0)))
+    name = p.ident[0].input_names[j]
+    where = "the validation flights given" if p.given_validation else "the held-out part"
+    return (f"the inputs hardly move on {where} ({name}: rms {val[j]:.3g} against "
+            f"{ident[j]:.3g} on the identification data, the most of any input): its scores "
+            "measure how fast each model's free response dies out, not how it follows the "
+            "inputs, so the choice of horizons and order is not a measurement; validate on "
+            "data with excitation (sysid sweep --validate FLIGHT) or give --past/--future/"
+            "--order")

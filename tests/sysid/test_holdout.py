@@ -89,3 +89,26 @@ def test_records_too_short_for_past_2_future_2_are_still_refused() -> None:
         plan([[data]], validate_with="a validation session (--validate)")
     with pytest.raises(sysid.DataError, match=r"give horizons \(--past/--future\), longer"):
         default_grid([ident], give="horizons (--past/--future)")
+
+
+def _step_experiment(*, held: bool, seed: int = 1) -> sysid.IOData:
+    """A PRBS for 1000 samples, then 500 more with the input held (``held``) or still moving."""
+    rng = np.random.default_rng(seed)
+    system = random_stable_system(n_states=3, n_inputs=1, n_outputs=2, rng=rng, dt=1.0)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=(150, 1)), 10, axis=0)
+    if held:
+        u[1000:] = u[999]
+    y = system.simulate(u) + 0.05 * rng.standard_normal((1500, 2))
+    return sysid.IOData(u=u, y=y, dt=0.1, input_names=["cmd"])
+
+
+def test_held_out_inputs_that_do_not_move_are_the_warning() -> None:
+    """The last 30 % held the input: the held-out scores measured free responses only, and the
+    warning blamed "the inputs explain little of the outputs" (or none came)."""
+    sel = sysid.identify(_step_experiment(held=True))
+    [warning] = [w for w in sel.warnings if "hardly move" in w]
+    assert warning.startswith("the inputs hardly move on the held-out part (cmd: rms 0 against ")
+    assert "not a measurement" in warning and "--validate" in warning
+    assert not any("explain little" in w for w in sel.warnings)
+    moving = sysid.identify(_step_experiment(held=False))
+    assert not any("hardly move" in w for w in moving.warnings)
