@@ -14,8 +14,8 @@ Each name selects, trying in this order:
 
 A variable logged in several streams must be named as ``stream.field``. A channel's label is its
 firmware variable (``motor.m1``) when exactly one stream logs it, else ``stream.field``. A name
-that selects nothing, a variable logged in several streams, no names at all, or a label
-selected twice is a one-line :class:`~cfsession.errors.ChannelError`.
+that selects nothing, a variable logged in several streams, no names at all, a label
+selected twice, or a field that holds text is a one-line :class:`~cfsession.errors.ChannelError`.
 
 >>> from cfsession.schema import log_block_spec
 >>> motors = log_block_spec(name="motors", period_s=0.02,
@@ -29,6 +29,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
+
+import numpy as np
 
 from cfsession.errors import ChannelError, did_you_mean
 from cfsession.reader import Session, StreamData
@@ -112,6 +114,13 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
     if not out:
         raise ChannelError(f"no {role} channels selected; name at least one", problem="empty",
                            role=role, logged=tuple(sorted(fields)))
+    text = [c for c in out if np.dtype(fields[c.stream][c.field].dtype).kind not in "biuf"]
+    if text:  # a session field may hold text; a channel is numbers
+        c = text[0]
+        raise ChannelError(f"{role} {c.label!r} (field {c.field!r} of log stream {c.stream!r}) "
+                           f"holds text ({np.dtype(fields[c.stream][c.field].dtype)}), not "
+                           "numbers; a channel must hold numbers", problem="text", role=role,
+                           name=c.label, logged=tuple(sorted(fields)))
     labels = [c.label for c in out]
     dup = sorted({x for x in labels if labels.count(x) > 1})
     if dup:

@@ -15,7 +15,7 @@ from typing import Literal
 
 __all__ = ["ChannelError", "ChannelProblem", "SessionError", "did_you_mean"]
 
-ChannelProblem = Literal["unknown", "ambiguous", "duplicate", "empty"]
+ChannelProblem = Literal["unknown", "ambiguous", "duplicate", "empty", "text"]
 
 
 class SessionError(ValueError):
@@ -24,10 +24,11 @@ class SessionError(ValueError):
 
 class ChannelError(SessionError):
     """Channel names (:func:`cfsession.channels.resolve_channels`) that select no log variable,
-    a variable logged in several streams, one twice, or nothing at all.
+    a variable logged in several streams, one twice, nothing at all, or a field of text.
 
     Attributes:
-        problem: which of those (``unknown``, ``ambiguous``, ``duplicate``, ``empty``).
+        problem: which of those (``unknown``, ``ambiguous``, ``duplicate``, ``empty``,
+            ``text``).
         role: the role the names were given for (``input``, ``output``).
         name: the offending name ('' for ``empty``; the labels for ``duplicate``).
         logged: the log streams the names were resolved against, sorted.

@@ -42,9 +42,14 @@ log = logging.getLogger(__name__)
 
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 _LEVEL_NAMES = {1: "debug", 2: "info", 3: "warning", 4: "error", 5: "critical"}
-_REQUIRED = {spec.name: tuple(f.name for f in spec.fields)
+_REQUIRED = {spec.name: {f.name: np.dtype(f.dtype).kind for f in spec.fields}
              for spec in (events_spec(), phases_spec(), setpoints_spec(), link_spec())}
-"""The fields the reader's own methods use in the standard streams."""
+"""The fields the reader's own methods use in the standard streams, with their numpy kinds."""
+_KIND_OK = {"S": ("S", "text"), "u": ("biu", "integers"), "i": ("biu", "integers"),
+            "f": ("biuf", "numbers")}
+"""For a field's kind in the schema: the kinds a file may store it as, and their name (an
+integer field stored as floats holds NaN, which ``int()`` refuses; a text field stored as
+numbers has no text)."""
 
 
 @dataclass(frozen=True)
@@ -294,15 +299,28 @@ def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
         raise SessionError(f"{p}: written with session schema {version}, this groundstation "
                            f"reads up to {SCHEMA_VERSION}; upgrade groundstation")
     meta["schema_version"] = version
-    for key, kinds in (("closed_cleanly", (int, float)), ("duration_s", (int, float)),
-                       ("start_time_ns", (int,)), ("summary", (str,))):
+    for key, kinds in (*((k, (int, float)) for k in _NUMBER_ATTRS), ("start_time_ns", (int,)),
+                       ("protocol_version", (int,)), *((k, (str,)) for k in _TEXT_ATTRS)):
         if key in meta and (not isinstance(meta[key], kinds) or isinstance(meta[key], bool)):
             problems.append(f"attribute {key!r} has the wrong type; ignored")
             del meta[key]
+    for key, value in meta.items():  # other writers' keys: plain values, as JSON has them
+        if isinstance(value, np.ndarray):
+            meta[key] = value.tolist()
     if isinstance(meta.get("summary"), str):
         meta["summary"] = meta["summary"].rstrip()
     problems.extend(_source_problems(meta))
 
+
+_MIN_PERIOD_S = 1e-7
+"""Shortest ``period_s`` read: what an importer writes is rounded to 0.1 µs (a period of
+1e-300 s made ``info`` expect a 300-digit number of rows, and sysid refuse the grid)."""
+_NUMBER_ATTRS = ("closed_cleanly", "duration_s", "setpoint_rate_hz")
+_TEXT_ATTRS = ("summary", "uri", "firmware", "plan_name", "plan_text", "software_version",
+               "start_time_iso", "tag", "params", "phase_table", "rate_limits", "time_base",
+               "plan_parameters", "source_format", "source_files", "source_mtime_iso")
+"""Root attributes of the schema (docs/session-format.md) that are numbers or text: one of
+another type (an array where ``uri`` is text) is dropped and listed in problems, not shown."""
 
 _MAX_SOURCE_PROBLEMS = 20
 """At most this many of an imported log's problems are listed (the rest counted)."""
@@ -340,10 +358,16 @@ def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
         return None
     check_dataset(ds, where=where, file_size=size)
     names = list(ds.dtype.names or ())
-    required = _REQUIRED.get(name, ())
-    missing = [f for f in required if f not in names]
+    required = {**_REQUIRED.get(name, {}), "fw_time_ms": "u"}
+    missing = [f for f in required if f not in names and f != "fw_time_ms"]
     if missing:
         raise SessionError(f"{where}: lacks field(s) {missing}; not a session stream")
+    for fname, kind in required.items():
+        stored = ds.dtype.fields[fname][0] if fname in names else None
+        ok, what = _KIND_OK[kind]
+        if stored is not None and stored.kind not in ok:
+            raise SessionError(f"{where}: field {fname!r} has type {stored}, where a session "
+                               f"stream holds {what}; not a session stream")
     dattrs = read_attrs(ds, where=where, problems=problems)
     gattrs = {k: _decode(v) for k, v in read_attrs(group, where=where, problems=problems).items()}
 
@@ -354,7 +378,7 @@ def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
 
     period = gattrs.get("period_s")
     if period is not None and not (isinstance(period, int | float) and not isinstance(period, bool)
-                                   and 0 < period < 1e6):
+                                   and _MIN_PERIOD_S <= period < 1e6):
         problems.append(f"stream {name!r}: period_s {period!r} ignored")
         period = None
     kind = gattrs.get("kind", "")

@@ -239,7 +239,7 @@ def _x0_given_obs(*, obs: np.ndarray, A: np.ndarray, C: np.ndarray, residual: np
         size = np.maximum(obs.max(axis=(1, 2), initial=0.0), -obs.min(axis=(1, 2), initial=0.0))
     usable = np.isfinite(size) & (size <= _MAX_GROWTH * max(np.abs(C).max(initial=0.0), 1.0))
     usable &= np.isfinite(r).all(axis=(0, 2))
-    if not usable.any():
+    if not usable.any() or A.shape[0] == 0:  # no state (a static model): nothing to fit
         return np.zeros((w, A.shape[0]))
     scale = np.ones(C.shape[0]) if weights is None else np.asarray(weights, dtype=float)
     if scale.shape != (C.shape[0],):

@@ -68,3 +68,39 @@ def test_a_model_file_is_named_as_one(tmp_path):
     res = CliRunner().invoke(gs, ["info", str(path)])
     assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
     assert res.output.rstrip().endswith("a model file (sysid compare, sysid export read it)")
+
+
+def test_the_files_own_text_is_shown_as_text_not_markup(tmp_path):
+    """Text from the file ("[/x]" in a phase kind, a stream kind, the uri, an event, a problem)
+    raised rich's MarkupError, a traceback, in `info` and `info --events`."""
+    path = tmp_path / "s.h5"
+    spec = log_block_spec(name="gyro", variables=[("gyro.x", "float")], period_s=0.02)
+    with SessionWriter(path, streams=[spec, *standard_streams()],
+                       metadata={"uri": "radio://[/u]", "plan_name": "[/p]"}) as w:
+        w.phase(t=0.0, phase_id=0, name="[/n]", kind="[/k]")
+        w.event(t=0.0, text="console: [/e] done")
+        w.extend("gyro", [(0.02 * k, 20 * k, 1.0) for k in range(10)])
+    import h5py
+
+    with h5py.File(path, "a") as f:
+        f["gyro"].attrs["kind"] = "[/s]"
+        f["gyro"].attrs["period_s"] = "[/q]"  # listed as a problem, its value quoted
+    res = CliRunner().invoke(gs, ["info", "--events", str(path)])
+    assert res.exit_code == 0, res.output
+    for text in ("radio://[/u]", "[/p]", "[/n]", "[/k]", "[/e] done", "[/s]", "'[/q]'"):
+        assert text in res.output, text
+
+
+def test_the_phase_table_lists_at_most_max_phase_rows(tmp_path, monkeypatch):
+    """A file of 200 000 phase rows (2 MB) kept `info` laying out its table for minutes."""
+    from groundstation.commands import info
+
+    monkeypatch.setattr(info, "MAX_PHASE_ROWS", 3)
+    path = tmp_path / "s.h5"
+    with SessionWriter(path, streams=standard_streams()) as w:
+        for k in range(5):
+            w.phase(t=float(k), phase_id=k, name=f"hover-{k}", kind="hover")
+    res = CliRunner().invoke(gs, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "hover-2" in res.output and "hover-3" not in res.output
+    assert "... 2 more phases (--json lists them)" in res.output

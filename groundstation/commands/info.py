@@ -18,6 +18,9 @@ from cfsession import Session, open_session
 
 __all__ = ["command", "describe", "live_id"]
 
+MAX_PHASE_ROWS = 200
+"""Phases listed in the text table (a file of 200 000 phase rows took minutes to lay out);
+``--json`` lists them all."""
 _FIELDS_MIN_WIDTH = 24
 """Columns the "fields [unit]" column needs to be readable beside the others."""
 
@@ -205,16 +208,16 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
     state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
     if isinstance(d.get("summary"), dict) and d["summary"].get("aborted"):
         state += ", flight ABORTED (its cause is under the flight summary)"
-    out.print(f"[bold]{d['path']}[/] schema {d['schema_version']}, {state}")
+    out.print(f"[bold]{escape(d['path'])}[/] schema {d['schema_version']}, {state}")
     t0, t1 = d["time_s"]
     span = (f"data {t0:.2f} to {t1:.2f} s of firmware time ({d['duration_s']:.2f} s)"
             if d["imported"] else f"duration {d['duration_s']:.2f} s")
-    out.print(
+    out.print(escape(  # the file's own text: "[/x]" in it is no markup
         f"start {d['start']}  {span}  uri {d['uri'] or '-'}  "
         f"plan {d['plan'] or '-'}{'  tag ' + d['tag'] if d['tag'] else ''}  "
         f"firmware {d['firmware'] or '-'}"
-    )
-    rows = [[escape(name), e["kind"], str(e["rows"]), _fmt(e.get("rate_hz"), ".1f"),
+    ))
+    rows = [[escape(name), escape(e["kind"]), str(e["rows"]), _fmt(e.get("rate_hz"), ".1f"),
              str(e.get("expected", "-")), str(e.get("dropped", "-"))]
             for name, e in d["streams"].items()]
     fields = [escape(_fields_text(e["fields"]) if e["kind"] != "events" else
@@ -242,17 +245,20 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
         _keep_names_whole(grid, [row[0] + ":" for row in rows], out.width)
         out.print(grid)
     if d["phases"]:
+        shown = d["phases"][:MAX_PHASE_ROWS]
         phases = output_table("phase", "kind", "start s", "end s", "length s", console=out)
-        _keep_names_whole(phases, [escape(p["name"]) for p in d["phases"]], out.width)
-        for p in d["phases"]:
+        _keep_names_whole(phases, [escape(p["name"]) for p in shown], out.width)
+        for p in shown:
             phases.add_row(
                 escape(p["name"]),
-                p["kind"],
+                escape(p["kind"]),
                 _fmt(p["start_s"]),
                 _fmt(p["end_s"]),
                 _fmt(p["end_s"] - p["start_s"]),
             )
         out.print(phases)
+        if len(d["phases"]) > len(shown):
+            out.print(f"... {len(d['phases']) - len(shown)} more phases (--json lists them)")
     if d.get("summary") and not d["imported"]:  # a flight's (an import's is not in fly's words)
         out.print("flight summary, stored when the flight ended (counts to its end: a stream "
                   "silent after a link loss counts as dropped there):")
@@ -265,9 +271,9 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
         for line in _live_id_text(d["live_id"]):
             out.print(escape(line))
     for problem in d["problems"]:
-        out.print(f"[yellow]problem:[/] {problem}")
+        out.print(f"[yellow]problem:[/] {escape(problem)}")
     if show_events:
         for e in s.events():
-            out.print(f"{e.t:9.3f} {e.level:8s} {e.source:8s} {e.text}")
+            out.print(escape(f"{e.t:9.3f} {e.level:8s} {e.source:8s} {e.text}"))
     else:
         out.print(f"{d['events']} events (--events lists them)")

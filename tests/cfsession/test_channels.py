@@ -5,6 +5,8 @@ flight writes and on the session read back."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from cfsession import (
@@ -130,3 +132,20 @@ def test_a_session_read_back_resolves_as_the_specs_it_was_written_with(tmp_path)
                 == resolve_channels(names, streams=SPECS, role="input")), names
     with pytest.raises(ChannelError, match=r"'baro\.asl'"):  # no rows: nothing to select
         resolve_channels(["baro.asl"], streams=specs, role="input")
+
+
+@pytest.mark.parametrize("names", [["gyro.y"], ["gyro"], ["motor.m1", "gyro"]])
+def test_a_field_of_text_is_no_channel(names):
+    """A session file may hold a text field in a log stream (the reader takes numbers and
+    fixed-length text); selected as a channel it made sysid raise ValueError (could not
+    convert string to float) with a traceback."""
+    gyro = log_block_spec(name="gyro", variables=[("gyro.x", "float"), ("gyro.y", "float")],
+                          period_s=PERIOD)
+    fields = tuple(dataclasses.replace(f, dtype="S4") if f.name == "y" else f
+                   for f in gyro.fields)
+    streams = [SPECS[0], dataclasses.replace(gyro, fields=fields)]
+    with pytest.raises(ChannelError, match=r"output 'gyro\.y' \(field 'y' of log stream "
+                                           r"'gyro'\) holds text \(\|S4\), not numbers") as err:
+        resolve_channels(names, streams=streams, role="output")
+    assert err.value.problem == "text" and "\n" not in str(err.value)
+    assert labels(["gyro.x"], streams=streams) == ["gyro.x"]  # its numbers still select

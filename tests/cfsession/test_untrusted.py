@@ -317,3 +317,65 @@ def test_every_attribute_the_writer_writes_is_read(tmp_path, variant):
     assert s["gyro"].sources == dict(zip(["host_time", "fw_time_ms", "x"],
                                          want["gyro/data"]["sources"], strict=True))
     w.close()
+
+
+def _retyped(data, field, dtype, values):
+    out = np.zeros(data.shape, dtype=[(n, dtype if n == field else data.dtype.fields[n][0])
+                                      for n in data.dtype.names])
+    for n in data.dtype.names:
+        out[n] = values if n == field else data[n]
+    return out
+
+
+@pytest.mark.parametrize(("stream", "field", "dtype", "value", "holds"), [
+    ("phases", "phase_id", "f8", np.nan, "integers"),  # int(NaN): ValueError in info, sysid
+    ("phases", "name", "i4", 7, "text"),  # a number where text is: TypeError in info
+    ("events", "level", "f8", np.nan, "integers"),
+    ("events", "text", "f8", 1.0, "text"),
+    ("setpoints", "roll", "S3", b"x", "numbers"),
+    ("gyro", "fw_time_ms", "f8", np.nan, "integers"),  # NaN ms: garbage firmware times
+])
+def test_a_standard_field_of_the_wrong_type_is_refused(session, stream, field, dtype, value,
+                                                       holds):
+    with h5py.File(session, "a") as f:
+        if stream == "phases":
+            f["phases/data"].resize((2,))
+            f["phases/data"][:] = np.array([(0.0, 0, b"a", b"hover"), (1.0, 1, b"b", b"hover")],
+                                           dtype=f["phases/data"].dtype)
+        if stream == "setpoints":
+            f["setpoints/data"].resize((1,))
+            f["setpoints/data"][0] = (0.0, 0.0, 0.0, 0.0, 0, 0, 0)
+        data = _retyped(f[f"{stream}/data"][()], field, dtype, value)
+        del f[f"{stream}/data"]
+        f[stream].create_dataset("data", data=data)
+    msg = _refused(session, f"stream {stream!r}: field {field!r} has type")
+    assert f"where a session stream holds {holds}" in msg
+
+
+def test_root_attributes_of_the_wrong_type_are_dropped_and_listed(session):
+    """An array where the uri is text crashed `info` (truth value of an array) and
+    `info --json` (ndarray not JSON serializable); unknown keys' arrays read as lists."""
+    with h5py.File(session, "a") as f:
+        f.attrs["uri"] = np.arange(3)
+        f.attrs["plan_name"] = np.array([b"a", b"b"])
+        f.attrs["setpoint_rate_hz"] = "ten"
+        f.attrs["someone_elses"] = np.zeros((2, 2))
+    s = open_session(session)
+    assert "uri" not in s.meta and "plan_name" not in s.meta and "setpoint_rate_hz" not in s.meta
+    assert s.meta["someone_elses"] == [[0.0, 0.0], [0.0, 0.0]]
+    for key in ("uri", "plan_name", "setpoint_rate_hz"):
+        assert f"attribute {key!r} has the wrong type; ignored" in s.problems
+    for args in (["info"], ["info", "--json"]):
+        result = CliRunner().invoke(main, [*args, str(session)])
+        assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["uri"] == ""
+
+
+def test_a_period_too_short_to_be_a_log_rate_is_ignored(session):
+    """period_s = 1e-300 made `info` expect a 300-digit number of rows."""
+    with h5py.File(session, "a") as f:
+        f["gyro"].attrs["period_s"] = 1e-300
+    s = open_session(session)
+    assert s["gyro"].period_s is None and "stream 'gyro': period_s 1e-300 ignored" in s.problems
+    result = CliRunner().invoke(main, ["info", "--json", str(session)])
+    assert result.exit_code == 0 and "expected" not in json.loads(result.output)["streams"]["gyro"]

@@ -115,8 +115,9 @@ def test_a_grid_far_finer_than_the_log_is_one_line_not_an_allocation(session, tm
     """``--dt 0.0000001`` on a 50 Hz log asked numpy for 61 GiB and ended in a traceback."""
     line = _one_line(_run(session, "--to", "mat", "--window", "all", "--dt", "1e-7",
                           "--out", tmp_path / "tiny.mat"))
-    assert line == ("error: the iddata part (u, y) cannot be built: dt=1e-07 s is 100000x finer "
-                    "than the logged period 0.01 s; pass dt >= 1e-05 (at most 1000x finer)")
+    assert line == (f"error: the iddata part (u, y) cannot be built: {session}: dt=1e-07 s is "
+                    "100000x finer than the logged period 0.01 s; pass dt >= 1e-05 (at most "
+                    "1000x finer)")
     assert not (tmp_path / "tiny.mat").exists()
 
 

@@ -296,3 +296,15 @@ def test_windowed_simulation_equals_its_parts_bit_for_bit() -> None:
             np.testing.assert_array_equal(y_sim[slices[i]], forced[j] + free[j])
     one = estimate_x0(A=system.A, C=system.C, residual=(y - system.simulate(u))[:100])
     assert one.shape == (6,)
+
+
+def test_a_model_without_states_compares_in_windows() -> None:
+    """A model file of order 0 (A 0 x 0: a static gain, which load reads) made `sysid compare`
+    raise ValueError (cannot reshape array of size 0) fitting each window's initial state."""
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((400, 2))
+    model = StateSpaceModel(A=np.zeros((0, 0)), B=np.zeros((0, 2)), C=np.zeros((1, 0)),
+                            D=np.array([[2.0, -1.0]]), K=np.zeros((0, 1)), dt=0.02)
+    data = IOData(u=u, y=u @ model.D.T, dt=0.02)
+    for window in (1.0, None):
+        assert compare(model, data, window=window, warn=False).fit[0] > 99.9

@@ -286,3 +286,93 @@ def test_two_windows_for_one_session_by_path_and_by_name_are_refused(tmp_path) -
                                              r"its path, one for its name 'x\.h5'"):
         load_sessions([str(path)], inputs=["motor.m1"], outputs=["gyro.x"],
                       windows={str(path): "excitation", "x.h5": None})
+
+
+def _edited(src, dst, stream, field, change):
+    import shutil
+
+    import h5py
+
+    shutil.copy(src, dst)
+    with h5py.File(dst, "a") as f:
+        data = f[f"{stream}/data"][()]
+        data[field] = change(data[field])
+        f[f"{stream}/data"][...] = data
+    return dst
+
+
+def test_firmware_times_that_do_not_advance_are_called_damaged(files, tmp_path) -> None:
+    """All of gyro's fw_time_ms equal: the message was "dt=0.02 s is longer than the -0.02 s
+    where every channel has data; pass a smaller dt", which no dt answers."""
+    path = _edited(files["recorded"], tmp_path / "still.h5", "gyro", "fw_time_ms",
+                   lambda v: np.full_like(v, 1234))
+    with pytest.raises(DataError, match=r"still\.h5: the firmware time \(fw_time_ms\) of log "
+                                        r"stream\(s\) \['gyro'\] does not advance over its "
+                                        r"rows; the file's time stamps are damaged"):
+        load_experiments(path)
+
+
+def test_a_damaged_host_time_does_not_size_the_grid(files, tmp_path) -> None:
+    """One host_time of 1.7e308 (the grid is on firmware time) refused the session with
+    "puts inf samples ... pass dt >= inf" and four RuntimeWarnings."""
+    path = _edited(files["recorded"], tmp_path / "far.h5", "acc", "host_time",
+                   lambda v: np.where(np.arange(len(v)) == len(v) - 1, 1.7e308, v))
+    assert load_experiments(path)[0].n_samples == load_experiments(files["recorded"])[0].n_samples
+
+
+def test_a_logged_period_the_grid_cannot_take_names_the_file(files, tmp_path) -> None:
+    """compare/resid pass the model's dt: the refusal named no file (which of the sessions?)."""
+    import shutil
+
+    import h5py
+
+    path = tmp_path / "slow.h5"
+    shutil.copy(files["recorded"], path)
+    with h5py.File(path, "a") as f:
+        for s in ("motors", "acc", "gyro"):
+            f[s].attrs["period_s"] = 9e5
+    with pytest.raises(ParameterError, match=r"slow\.h5: dt=0\.02 s is 4\.5e\+07x finer than "
+                                             r"the logged period 900000 s"):
+        load_experiments(path, dt=0.02)
+
+
+def test_many_phases_of_one_name_are_labelled_in_linear_time() -> None:
+    """40 000 excitation phases named `prbs` (a 2 MB file) hung every sysid command: each label
+    searched prbs-2, prbs-3, ... from the start."""
+    from sysid.session_io import unique_name
+
+    class Counted(set):
+        lookups = 0
+
+        def __contains__(self, item) -> bool:
+            Counted.lookups += 1
+            return super().__contains__(item)
+
+    taken, tried = Counted(), {}
+    for _ in range(2000):
+        taken.add(unique_name("prbs", taken, tried=tried))
+    assert sorted(taken) == sorted(["prbs", *(f"prbs-{k}" for k in range(2, 2001))])
+    assert Counted.lookups < 3 * 2000  # was 2 million
+    assert unique_name("hover", {"hover", "hover-2"}) == "hover-3"  # without tried, as before
+
+
+def test_a_log_stream_without_firmware_time_is_one_line(files, tmp_path) -> None:
+    """sysid places samples at their firmware time: a log stream without `fw_time_ms` (which
+    the session format allows, and `info` and `export` read) was a TypeError traceback."""
+    import shutil
+
+    import h5py
+
+    path = tmp_path / "untimed.h5"
+    shutil.copy(files["recorded"], path)
+    with h5py.File(path, "a") as f:
+        data = f["gyro/data"][()]
+        keep = [n for n in data.dtype.names if n != "fw_time_ms"]
+        del f["gyro/data"]
+        f["gyro"].create_dataset("data", data=np.array(data[keep].tolist(), dtype=[
+            (n, data.dtype.fields[n][0]) for n in keep]))
+    res = CliRunner().invoke(main, ["identify", str(path), "--order", "2", "--past", "5",
+                                    "--future", "5"])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert ("untimed.h5: log stream(s) ['gyro'] have no firmware time (field 'fw_time_ms')"
+            in res.output)
