@@ -217,6 +217,14 @@ _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 """The first bytes of an HDF5 file (session and model files)."""
 
 
+#: Most parts of a dotted key or table header read (a plan's have 1-4): tomllib takes time
+#: growing with the square of their number (a 100 kB key of 50 000 parts: minutes).
+MAX_KEY_PARTS = 64
+_KEY_PART = r"""(?:[A-Za-z0-9_-]+|"[^"\n]*"|'[^'\n]*')"""
+_DEEP_KEY = re.compile(rf"(?:^|[{{,])[ \t]*\[{{0,2}}[ \t]*(?:{_KEY_PART}[ \t]*\.[ \t]*)"
+                       rf"{{{MAX_KEY_PARTS},}}{_KEY_PART}[ \t]*[=\]]", re.MULTILINE)
+
+
 def _plan_name(top: TomlTable, *, default: str) -> str:
     """``name`` (or ``default``, the file name) checked against :data:`_NAME`."""
     value = top.get("name", str, default=default)
@@ -237,6 +245,11 @@ def _plan_name(top: TomlTable, *, default: str) -> str:
 
 def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan:
     """Validate TOML ``text``; ``source`` prefixes errors, ``name`` is the default plan name."""
+    deep = _DEEP_KEY.search(text)
+    if deep is not None:  # tomllib's time grows with the square of a dotted key's parts
+        line = text.count("\n", 0, deep.start()) + 1
+        raise PlanError(f"{source}:{line}: invalid TOML: a dotted key or table header of more "
+                        f"than {MAX_KEY_PARTS} parts; a plan's keys have a few")
     try:
         data = tomllib.loads(text)
     except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits

@@ -39,6 +39,20 @@ def test_deep_nesting_is_refused_not_a_recursion_error(value):
     assert "nested too deeply" in msg
 
 
+@pytest.mark.parametrize("key", ["a" + ".a" * 50_000 + " = 1",
+                                 "[" + ".".join(["t"] * 50_000) + "]",
+                                 "x = { " + ".".join(['"q"'] * 70) + " = 1 }"],
+                         ids=["dotted-key", "table-header", "inline-table-key"])
+def test_a_key_of_thousands_of_parts_is_refused_before_tomllib_spends_minutes(key):
+    """A 100 kB dotted key kept `plan check` for minutes (tomllib's time grows with the square
+    of the parts: 10 000 parts 4 s); 64 parts still read, and dotted text in a string is text."""
+    msg = _refused(BASE + "\n" + key + "\n")
+    assert msg.startswith(f"p.toml:{BASE.count(chr(10)) + 2}: invalid TOML: a dotted key or table")
+    assert "more than 64 parts" in msg
+    for fine in ("a" + ".a" * 63 + " = 1", 'note = "' + "a." * 1000 + 'a"'):
+        assert "64 parts" not in _refused(BASE + "\n" + fine + "\n")  # refused for its key
+
+
 def test_integer_of_thousands_of_digits_is_invalid_toml_not_a_value_error():
     msg = _refused(BASE.replace("hover_thrust = 39000", "hover_thrust = 1" + "0" * 5000))
     line = BASE[:BASE.index("hover_thrust = 39000")].count("\n") + 1
