@@ -32,7 +32,7 @@ from typing import Literal
 
 import numpy as np
 
-from cfsession.errors import ChannelError, did_you_mean
+from cfsession.errors import ChannelError, did_you_mean, shown_name
 from cfsession.reader import Session, StreamData
 from cfsession.schema import Field, StreamSpec
 
@@ -100,15 +100,17 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
             out += [channel(*sf) for sf in group]
         elif by_source.get(name):
             where = [f"{s}.{f}" for s, f in by_source[name]]
-            raise ChannelError(f"{role} {name!r} is logged in several streams ({where}); name "
-                               "one of those", problem="ambiguous", role=role, name=name,
+            raise ChannelError(f"{role} {shown_name(name)} is logged in several streams "
+                               f"({where}); name one of those", problem="ambiguous", role=role,
+                               name=name,
                                logged=tuple(sorted(fields)))
         else:
             known = [*fields, *(f"{sn}.{fn}" for sn, fs in fields.items() for fn in fs),
                      *by_source]
-            raise ChannelError(f"no log stream or variable {name!r} for the {role}s"
+            raise ChannelError(f"no log stream or variable {shown_name(name)} for the {role}s"
                                f"{did_you_mean(name, known)}; log streams are "
-                               f"{sorted(fields)} (use STREAM or STREAM.FIELD or "
+                               f"[{', '.join(shown_name(n) for n in sorted(fields))}] (use "
+                               "STREAM or STREAM.FIELD or "
                                "group.variable)", problem="unknown", role=role, name=name,
                                logged=tuple(sorted(fields)))
     if not out:
@@ -117,7 +119,8 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
     text = [c for c in out if np.dtype(fields[c.stream][c.field].dtype).kind not in "biuf"]
     if text:  # a session field may hold text; a channel is numbers
         c = text[0]
-        raise ChannelError(f"{role} {c.label!r} (field {c.field!r} of log stream {c.stream!r}) "
+        raise ChannelError(f"{role} {shown_name(c.label)} (field {shown_name(c.field)} of log "
+                           f"stream {shown_name(c.stream)}) "
                            f"holds text ({np.dtype(fields[c.stream][c.field].dtype)}), not "
                            "numbers; a channel must hold numbers", problem="text", role=role,
                            name=c.label, logged=tuple(sorted(fields)))

@@ -13,7 +13,11 @@ import difflib
 from collections.abc import Sequence
 from typing import Literal
 
-__all__ = ["ChannelError", "ChannelProblem", "SessionError", "did_you_mean"]
+__all__ = ["MAX_SHOWN_NAME", "ChannelError", "ChannelProblem", "SessionError", "did_you_mean",
+           "shown_name"]
+
+MAX_SHOWN_NAME = 60
+"""Characters of a name a message quotes (:func:`shown_name`); a channel name is a few dozen."""
 
 ChannelProblem = Literal["unknown", "ambiguous", "duplicate", "empty", "text"]
 
@@ -46,4 +50,10 @@ def did_you_mean(name: str, known: Sequence[str]) -> str:
     lower = {k.lower(): k for k in known}
     close = [name.lower()] if name.lower() in lower else difflib.get_close_matches(
         name.lower(), list(lower), n=3, cutoff=0.75)
-    return f" (did you mean {' or '.join(repr(lower[c]) for c in close)}?)" if close else ""
+    return f" (did you mean {' or '.join(shown_name(lower[c]) for c in close)}?)" if close else ""
+
+
+def shown_name(name: str, *, limit: int = MAX_SHOWN_NAME) -> str:
+    """``name`` quoted for a message; one longer than ``limit`` characters (a file's name of
+    150 000) cut to its first ``limit`` and its length: ``'xxx...'... (150000 characters)``."""
+    return repr(name) if len(name) <= limit else f"{name[:limit]!r}... ({len(name)} characters)"

@@ -79,6 +79,22 @@ _KIND_FIELDS = {"events": ("level", "source", "text", "cont"),
                 "phases": ("phase_id", "name", "kind"), "live_id": ("order",)}
 #: Largest time Rerun's int64-nanosecond time columns hold, with margin (s).
 MAX_TIME_S = 9e9
+
+
+def _timed(t: np.ndarray) -> np.ndarray:
+    """Which of the times ``t`` (s) a Rerun time column takes: finite and within
+    :data:`MAX_TIME_S` (one that is not made Rerun drop the whole block, with its own
+    warning)."""
+    return np.isfinite(t) & (np.abs(t) < MAX_TIME_S)
+
+
+def _warn_untimed(timed: np.ndarray, name: str) -> bool:
+    """True when every row is ``timed``; else a warning that the others are not shown."""
+    if timed.all():
+        return True
+    log.warning("%d row(s) of %s have no usable time (not finite, or beyond %g s): not shown",
+                int((~timed).sum()), name, MAX_TIME_S)
+    return False
 _PALETTE = ((228, 26, 28), (77, 175, 74), (55, 126, 184), (255, 127, 0), (152, 78, 163),
             (0, 190, 190))
 _SETPOINT_COLORS = {"roll": (251, 154, 153), "pitch": (178, 223, 138),
@@ -246,13 +262,12 @@ class RerunView:
 
     def _send_numeric(self, ch: _Channels, times: list[tuple[str, np.ndarray]],
                       data: np.ndarray) -> None:
-        timed = np.ones(len(data), dtype=bool)  # Rerun's times are int64 nanoseconds
+        timed = np.ones(len(data), dtype=bool)
         for _, a in times:
-            timed &= np.isfinite(a) & (np.abs(a) < MAX_TIME_S)
-        if not timed.all():  # a file from elsewhere: one bad time dropped the whole stream
-            log.warning("%d row(s) of %s have no usable time (not finite, or beyond %g s): "
-                        "not shown", int((~timed).sum()), ch.spec.name, MAX_TIME_S)
-        full = [rr.TimeColumn(name, duration=v) for name, v in times]
+            timed &= _timed(a)
+        _warn_untimed(timed, ch.spec.name)
+        # the whole block's times only when all usable (Rerun warns converting an inf)
+        full = [rr.TimeColumn(name, duration=v) for name, v in times] if timed.all() else []
         for field, entity in ch.channels:
             v = data[field].astype(np.float64)
             ok = np.isfinite(v) & timed
@@ -298,6 +313,9 @@ class RerunView:
                 self._last_event = None
 
     def _log_events(self, events: list[tuple[float, str, str, bytes]]) -> None:
+        timed = _timed(np.array([e[0] for e in events], dtype=float))
+        if not _warn_untimed(timed, "events"):  # one bad time lost every event
+            events = [e for e, ok in zip(events, timed, strict=True) if ok]
         if not events:
             return
         texts = [f"[{e[2]}] {e[3].decode('utf-8', errors='replace')}" for e in events]
@@ -306,6 +324,9 @@ class RerunView:
             columns=rr.TextLog.columns(text=texts, level=[e[1] for e in events]))
 
     def _send_phases(self, t: np.ndarray, data: np.ndarray) -> None:
+        timed = _timed(t)
+        if not _warn_untimed(timed, "phases"):  # one bad time lost every phase
+            t, data = t[timed], data[timed]
         names = [bytes(v).decode("utf-8", errors="replace") for v in data["name"]]
         kinds = [bytes(v).decode("utf-8", errors="replace") for v in data["kind"]]
         ids = data["phase_id"].astype(int)

@@ -35,6 +35,7 @@ from sysid.cli_support import (
 from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel, load_model
+from sysid.pole_format import pole_number
 from sysid.residuals import residuals
 from sysid.validate import MIN_WINDOW_SAMPLES, SAMPLES_PER_STATE, compare, min_fit_samples
 
@@ -98,7 +99,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
             poles = model.poles()
             pole = complex(poles[int(np.argmax(np.abs(poles)))])
             output_console(stderr=True).print(
-                f"model has a pole at |z| = {abs(pole):.4f} ({pole_kind(pole)}): "
+                f"model has a pole at |z| = {pole_number(abs(pole))} ({pole_kind(pole)}): "
                 f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
                 "another mode", style="dim")
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]

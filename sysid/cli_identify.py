@@ -41,6 +41,7 @@ from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel
 from sysid.model_io import check_not_a_session
+from sysid.pole_format import pole_number
 from sysid.quirks import frozen_warnings
 from sysid.refit import PROVENANCE_KEY
 from sysid.validate import compare, min_fit_samples, simulation_window
@@ -207,7 +208,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         print_selection(con, selection)
     con.print(poles_rich_table(
         model, title=f"{method} order {order}, past {past}, future {future}: poles", console=con))
-    con.print(f"stable: {model.is_stable} (max |pole| {np.abs(model.poles()).max():.4f}); "
+    con.print(f"stable: {model.is_stable} (max |pole| {pole_number(np.abs(model.poles()).max())}); "
               f"predictor A - KC stable: {model.predictor_is_stable}")
     report = model.provenance.get("stability")
     if isinstance(report, dict) and report.get("moved"):

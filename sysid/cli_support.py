@@ -28,6 +28,7 @@ from cfcommon.cli import (
     output_console,
     output_table,
 )
+from cfsession.errors import MAX_SHOWN_NAME, shown_name
 from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import DataError, MissingDependencyError, ParameterError, SysIdError
@@ -199,12 +200,17 @@ def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
         role = f"{channel.role}s"
         if (role == "inputs" and inputs) or (role == "outputs" and outputs):
             # the model's channels (compare, resid): no option chooses them
-            raise DataError(f"{exc.path}: the model's {channel.role} {channel.name!r} is not "
-                            f"logged in this session (its log streams: "
-                            f"{', '.join(channel.logged) or 'none'}); {verb.split()[0]} the "
-                            "model on sessions that log the channels it was identified "
-                            "with") from None
+            logged = ", ".join(map(_stream_name, channel.logged)) or "none"
+            raise DataError(f"{exc.path}: the model's {channel.role} {shown_name(channel.name)} "
+                            f"is not logged in this session (its log streams: {logged}); "
+                            f"{verb.split()[0]} the model on sessions that log the channels it "
+                            "was identified with") from None
         raise DataError(f"{exc}; choose the {role} with --{role}") from None
+
+
+def _stream_name(name: str) -> str:
+    """A stream's name for a list in a message: as it is, or cut when long (:func:`shown_name`)."""
+    return name if len(name) <= MAX_SHOWN_NAME else shown_name(name)
 
 
 def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],

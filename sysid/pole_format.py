@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["POLE_COLUMNS", "pole_cells", "pole_rows", "sorted_poles"]
+__all__ = ["POLE_COLUMNS", "pole_cells", "pole_number", "pole_rows", "sorted_poles"]
 
 POLE_COLUMNS = ("#", "pole", "|z|", "angle [deg]", "f_n [Hz]", "damping", "tau [s]")
 """Column titles of :func:`pole_cells`."""
@@ -55,13 +55,20 @@ def pole_rows(poles: Sequence[complex] | np.ndarray, *, dt: float) -> list[dict[
     return rows
 
 
+def pole_number(x: float, spec: str = ".4f") -> str:
+    """A pole's modulus or part as text: ``spec`` (four decimals) up to a million, then four
+    significant digits (a model file's pole at 8e302 is no 300-digit number)."""
+    return format(x, spec if abs(x) < 1e6 else ".4g")
+
+
 def pole_cells(rows: Sequence[dict[str, float]]) -> list[tuple[str, ...]]:
     """The rows of :func:`pole_rows` as text cells under :data:`POLE_COLUMNS`."""
     cells = []
     for i, r in enumerate(rows):
         tau = "unstable" if r["tau_s"] is None and r["abs"] >= 1 else \
             "-" if r["tau_s"] is None else f"{r['tau_s']:.3g}"
-        cells.append((str(i + 1), f"{r['re']:.4f}{r['im']:+.4f}j", f"{r['abs']:.4f}",
+        cells.append((str(i + 1), f"{pole_number(r['re'])}{pole_number(r['im'], '+.4f')}j",
+                      pole_number(r["abs"]),
                       f"{r['angle_deg']:.1f}",
                       "-" if r["freq_hz"] is None else f"{r['freq_hz']:.2f}", f"{r['damping']:.3f}",
                       tau))

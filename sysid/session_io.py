@@ -122,7 +122,10 @@ def _stream(session: Session, ch: Channel) -> Stream:
                     session.path, ch.stream)
         order = np.argsort(t, kind="stable")
         t, v = t[order], v[order]
-    return Stream(name=ch.label, t=t, values=v, unit=ch.unit)
+    try:
+        return Stream(name=ch.label, t=t, values=v, unit=ch.unit)
+    except DataError as exc:  # a NaN logged: which of the sessions holds it
+        raise DataError(f"{session.path}: {exc}") from None
 
 
 def parse_window(text: str) -> Window:

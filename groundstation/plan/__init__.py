@@ -192,7 +192,8 @@ def load_plan(path: str | Path) -> Plan:
         raise PlanError(f"{path}: larger than {MAX_PLAN_BYTES // 1024} KiB, so not a flight "
                         "plan (a plan is a few KiB of TOML)")
     try:
-        text = raw.decode("utf-8") if raw else None
+        # an editor's UTF-8 byte order mark (Notepad's) is no text: skipped, as TOML tools do
+        text = raw.decode("utf-8-sig") if raw else None
     except UnicodeDecodeError:
         text = None
     if text is None and head:  # binary: say so, not which byte the UTF-8 decoder choked on
@@ -244,7 +245,9 @@ def _plan_name(top: TomlTable, *, default: str) -> str:
 
 
 def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan:
-    """Validate TOML ``text``; ``source`` prefixes errors, ``name`` is the default plan name."""
+    """Validate TOML ``text``; ``source`` prefixes errors, ``name`` is the default plan name.
+    A leading UTF-8 byte order mark is skipped (tomllib reads it as an invalid statement)."""
+    text = text.removeprefix("\ufeff")
     deep = _DEEP_KEY.search(text)
     if deep is not None:  # tomllib's time grows with the square of a dotted key's parts
         line = text.count("\n", 0, deep.start()) + 1

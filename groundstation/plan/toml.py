@@ -332,4 +332,11 @@ class TomlTable:
                 f"({1 / rate_hz:g} s at {rate_hz:g} Hz); use "
                 f"{math.floor(exact) / rate_hz:g} or {math.ceil(exact) / rate_hz:g} s",
             )
+        if lo_open and ticks <= lo * rate_hz:  # 5e-324 s: within 1e-6 of 0 ticks, no phase
+            least = (math.floor(lo * rate_hz) + 1) / rate_hz
+            raise self.src.error(
+                (*self.path, key),
+                f"{seconds:g} s rounds to {ticks} setpoint periods ({1 / rate_hz:g} s at "
+                f"{rate_hz:g} Hz each); use {least:g} s or more",
+            )
         return ticks

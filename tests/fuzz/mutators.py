@@ -38,12 +38,16 @@ def mutate(rng: random.Random, data: bytes) -> bytes:
 def crafted_session(rng: random.Random, work: Path, path: Path, clean: bytes) -> None:
     """A structurally valid file crafted to read elsewhere, exhaust memory or confuse types:
     ``clean`` (the session :mod:`tests.fuzz.targets` writes as ``work/base-clean.h5``, which
-    some crafted files point back at) edited in place at ``path``."""
+    some crafted files point back at) edited in place at ``path``; a quarter of them are
+    :func:`_crafted_text_and_types` (fields and attributes retyped, markup in the text)."""
     import h5py
     import numpy as np
 
     path.write_bytes(clean)
-    how = rng.randrange(9)
+    how = rng.randrange(12)
+    if how >= 9:
+        _crafted_text_and_types(rng, path, how - 9)
+        return
     with h5py.File(path, "a") as f:
         if how == 0:  # external storage: another file's bytes as data
             secret = work / "secret.bin"
@@ -80,6 +84,109 @@ def crafted_session(rng: random.Random, work: Path, path: Path, clean: bytes) ->
             f.attrs["closed_cleanly"] = np.array([1, 2])
             f["gyro"].attrs["period_s"] = rng.choice(["fast", -1.0, 0.0])
             f["gyro/data"].attrs["units"] = 7
+
+
+MARKUP = ("[/x]", "[/]", "[bold]", "[link=file:///etc/passwd]x[/link]", "[red", "\\[/x]")
+"""Text that rich reads as markup (a closing tag with nothing open raises MarkupError)."""
+
+
+def _retyped(data, field: str, dtype, values):
+    """Structured ``data`` with ``field`` of ``dtype``, holding ``values`` (the rest kept)."""
+    import numpy as np
+
+    out = np.zeros(data.shape, dtype=[(n, dtype if n == field else data.dtype.fields[n][0])
+                                      for n in data.dtype.names])
+    for n in data.dtype.names:
+        out[n] = values if n == field else data[n]
+    return out
+
+
+def _renamed(data, field: str, name: str):
+    """Structured ``data`` with ``field`` called ``name``."""
+    return data.astype([(name if n == field else n, data.dtype.fields[n][0])
+                        for n in data.dtype.names])
+
+
+def _set(data, values: dict):
+    """A copy of structured ``data`` with the fields of ``values`` set."""
+    data = data.copy()
+    for name, value in values.items():
+        data[name] = value
+    return data
+
+
+def _rewrite(f, stream: str, fn, *args) -> None:
+    """``stream``'s data replaced by ``fn(data, *args)``, its attributes kept."""
+    old = f[stream]["data"]
+    data, attrs = fn(old[()], *args), dict(old.attrs)
+    del f[stream]["data"]
+    new = f[stream].create_dataset("data", data=data, chunks=True, maxshape=(None,))
+    for k, v in attrs.items():
+        new.attrs[k] = v
+
+
+def _crafted_text_and_types(rng: random.Random, path: Path, how: int) -> None:
+    """The crafted files of review C: a standard stream's field of another type (a phase id of
+    float NaN, a phase name of integers, an event level of floats, a setpoint of bytes),
+    markup in the file's text (stream kinds, phase names and kinds, event text, uri, plan name),
+    root attributes of arrays; often two at once."""
+    import contextlib
+
+    import h5py
+
+    with h5py.File(path, "a") as f:
+        for _ in range(rng.choice([1, 1, 2])):
+            # a second edit that the first made moot (a phase name retyped, then marked up)
+            with contextlib.suppress(ValueError, TypeError):
+                _craft(rng, f, how)
+            how = rng.randrange(3)
+
+
+def _craft(rng: random.Random, f, how: int) -> None:
+    """One edit of :func:`_crafted_text_and_types` on the open file ``f``."""
+    import h5py
+    import numpy as np
+
+    if how == 0:  # a standard field retyped
+        n_phases, n_events = len(f["phases/data"]), len(f["events/data"])
+        stream, field, dtype, values = rng.choice([
+            ("phases", "phase_id", "f8", np.full(n_phases, np.nan)),
+            ("phases", "phase_id", "f8", np.full(n_phases, 1e300)),
+            ("phases", "name", "i4", np.arange(n_phases)),
+            ("phases", "kind", "f4", np.full(n_phases, np.inf)),
+            ("events", "level", "f8", np.full(n_events, rng.choice([np.nan, 2.5]))),
+            ("events", "text", "f8", np.full(n_events, np.nan)),
+            ("events", "cont", "S2", np.full(n_events, b"1")),
+            ("setpoints", rng.choice(["roll", "thrust", "phase_id", "tick"]), "S4",
+             np.full(len(f["setpoints/data"]), b"x")),
+            ("setpoints", "host_time", "i8", np.arange(len(f["setpoints/data"]))),
+            ("gyro", "fw_time_ms", "f8",
+             np.where(np.arange(len(f["gyro/data"])) % 50 == 0, np.nan, 1.0)),
+            ("link", "quality", "S3", np.full(len(f["link/data"]), b"x"))])
+        _rewrite(f, stream, _retyped, field, dtype, values)
+    elif how == 1:  # markup where the file's text is shown
+        text = rng.choice(MARKUP)
+        where = rng.choice(["kind", "phase", "event", "uri", "plan", "field", "units"])
+        if where == "kind":
+            f[rng.choice(["gyro", "events", "phases", "link"])].attrs["kind"] = text
+        elif where == "phase":
+            _rewrite(f, "phases", _set, {rng.choice(["name", "kind"]): text.encode()})
+        elif where == "event":
+            _rewrite(f, "events", _set, {"text": text.encode(), "source": text.encode()})
+        elif where == "field":
+            _rewrite(f, "acc", _renamed, "y", text)
+        elif where == "units":
+            f["gyro/data"].attrs["units"] = [text] * 5
+        else:
+            f.attrs["uri" if where == "uri" else "plan_name"] = text
+    else:  # root attributes of arrays
+        for key in rng.sample(["uri", "plan_name", "start_time_iso", "start_time_ns",
+                               "duration_s", "closed_cleanly", "summary", "params",
+                               "phase_table", "firmware", "tag", "plan_text"],
+                              rng.choice([1, 2, 4])):
+            f.attrs[key] = rng.choice([np.arange(3), np.array([1.5, np.nan]),
+                                       np.array(["a", "[/x]"], dtype=h5py.string_dtype()),
+                                       np.zeros((2, 2)), np.array([], dtype="f8")])
 
 
 def datagram(rng: random.Random) -> bytes:

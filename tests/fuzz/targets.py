@@ -70,9 +70,27 @@ def _session_bases(work: Path) -> tuple[bytes, ...]:
     return clean.read_bytes(), data
 
 
-def _exercise(path: Path) -> str:
+def _info_cli(path: Path, args: list[str]) -> None:
+    """``groundstation info`` on ``path`` as a user runs it (the text tables through rich, or
+    ``--json``): exit 0, or exit 2 with one ``error:`` line; anything else raises."""
+    from click.testing import CliRunner
+
+    from groundstation.cli import main
+
+    result = CliRunner().invoke(main, ["info", *args, str(path)])
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    assert "Traceback" not in result.output, result.output[-2000:]
+    if result.exit_code:
+        assert result.exit_code == 2 and result.stderr.count("\n") == 1, result.output[-1000:]
+        assert result.stderr.startswith("error: "), result.stderr[:500]
+        one_line(ValueError(result.stderr.rstrip("\n")))
+
+
+def _exercise(path: Path, *, info: list[str] | None = None) -> str:
     """Open ``path`` and use what the tools use: info's description, events, phases, sysid's
-    loader. Returns ``ok``/``flagged``/``refused``; raises on anything that is not a user error."""
+    loader; with ``info`` (its options), ``groundstation info`` itself. Returns
+    ``ok``/``flagged``/``refused``; raises on anything that is not a user error."""
     from cfsession import open_session
     from cfsession.errors import SessionError
     from groundstation.commands.info import describe
@@ -80,6 +98,8 @@ def _exercise(path: Path) -> str:
     from sysid.errors import SysIdError
     from sysid.session_io import load_session
 
+    if info is not None:
+        _info_cli(path, info)
     try:
         s = open_session(path)
     except (SessionError, GroundStationError) as exc:
@@ -98,13 +118,15 @@ def _exercise(path: Path) -> str:
 
 
 def session_reader(rng: random.Random, work: Path) -> str:
-    """A damaged (flipped, overwritten, truncated) or crafted session file."""
+    """A damaged (flipped, overwritten, truncated) or crafted session file; a crafted one also
+    through ``groundstation info`` (text with ``--events``, or ``--json``), which shows the
+    file's own text and attributes."""
     clean, crashed = _session_bases(work)
     path = work / "case.h5"
     if rng.random() < 0.2:
         crafted_session(rng, work, path, clean)
-    else:
-        path.write_bytes(mutate(rng, rng.choice([clean, crashed])))
+        return _exercise(path, info=rng.choice([["--events"], ["--json", "--events"]]))
+    path.write_bytes(mutate(rng, rng.choice([clean, crashed])))
     return _exercise(path)
 
 

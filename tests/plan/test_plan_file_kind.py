@@ -58,6 +58,23 @@ def test_a_csv_or_json_file_is_not_a_flight_plan(tmp_path):
         load_plan(typo)
 
 
+def test_a_byte_order_mark_is_skipped_as_toml_tools_do(tmp_path):
+    """A plan saved by Notepad starts with a UTF-8 BOM: "invalid TOML: Invalid statement (line 1,
+    column 1)", not naming it (review D). It reads as the plan without it, in a file (also with
+    another suffix) and as a session's plan text; the plan's text keeps no BOM."""
+    from groundstation.plan import SHIPPED_PLANS_DIR, parse_plan
+
+    text = (SHIPPED_PLANS_DIR / "hover-check.toml").read_text()
+    for name in ("notepad.toml", "notepad.txt"):
+        path = tmp_path / name
+        path.write_bytes(b"\xef\xbb\xbf" + text.encode())
+        plan = load_plan(path)
+        assert plan.name == "hover-check" and plan.text == text
+    assert parse_plan(text="\ufeff" + text).text == text
+    res = CliRunner().invoke(main, ["plan", "check", str(tmp_path / "notepad.toml")])
+    assert res.exit_code == 0, res.output
+
+
 def test_a_text_plan_still_loads(tmp_path):
     assert load_plan("hover-check").name == "hover-check"
 

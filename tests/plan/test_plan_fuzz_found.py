@@ -114,6 +114,17 @@ def test_thousands_of_long_phases_are_refused_not_gigabytes_of_setpoints():
     assert "more than a plan may fly (3600 s" in msg
 
 
+@pytest.mark.parametrize("value", ["5e-324", "1e-9"])
+def test_a_duration_of_no_setpoint_period_is_refused_when_the_plan_loads(value):
+    """duration = 5e-324 s is > 0 and within 1e-6 of a whole number of periods (0): it loaded,
+    and ``plan check`` then said "schedule phase 'up' does not follow on at tick 0", no key, no
+    line (review D)."""
+    msg = _refused(BASE.replace('kind = "takeoff"\nduration = 1.0',
+                                f'kind = "takeoff"\nduration = {value}'))
+    assert re.match(r"p\.toml:21: phase\[0\]\.duration: \S+ s rounds to 0 setpoint periods "
+                    r"\(0\.1 s at 10 Hz each\); use 0\.1 s or more$", msg), msg
+
+
 def test_a_plan_of_exactly_an_hour_loads():
     text = BASE.replace("duration = 3.1", "duration = 3597.1")  # 1 + 3597.1 + 1 s
     assert parse_plan(text=text).duration == pytest.approx(3599.1)

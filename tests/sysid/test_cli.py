@@ -509,3 +509,24 @@ def test_compare_on_a_session_without_the_models_channels_names_the_model(flight
             "this session (its log streams: acc, gyro, motors); "
             f"{'compare' if command == 'compare' else 'analyse'} the model on sessions that "
             "log the channels it was identified with")
+
+
+def test_a_long_channel_name_is_cut_in_the_message(flights, tmp_path):
+    """A model file whose output is named by 150 000 characters had the name echoed whole in
+    the "not logged" line (review D); so did --outputs in "no log stream or variable"."""
+    long = "x" * 150_000
+    model = sysid.StateSpaceModel(A=np.eye(1) * 0.5, B=np.ones((1, 4)), C=np.ones((1, 1)),
+                                  dt=0.02, input_names=[f"motor.m{i}" for i in range(1, 5)],
+                                  output_names=[long])
+    path = model.save(tmp_path / "m.json")
+    res = run("compare", path, flights[0].path)
+    assert res.exit_code == 2, res.output
+    cut = f"'{'x' * 60}'... (150000 characters)"
+    assert res.stderr.strip() == (
+        f"error: {flights[0].path}: the model's output {cut} is not logged in this session "
+        "(its log streams: acc, gyro, motors); compare the model on sessions that log the "
+        "channels it was identified with")
+    res = run("order", flights[0].path, "--outputs", long)
+    assert res.exit_code == 2, res.output
+    assert f"no log stream or variable {cut} for the outputs" in res.stderr
+    assert len(res.stderr) < 500, res.stderr

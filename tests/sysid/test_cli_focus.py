@@ -90,6 +90,18 @@ def test_compare_words_the_pole_that_chose_windows(flight, tmp_path, pole, kind)
         " ".join(res.stderr.split())), res.stderr
 
 
+def test_compare_words_a_huge_pole_in_a_few_digits(flight, tmp_path) -> None:
+    """A model file's pole at |z| = 8e302 was printed with 300 digits in the note (review D)."""
+    base = sysid.load_model(_identified(flight, tmp_path))
+    path = tmp_path / "huge.h5"
+    base.replace(A=_with_pole(base.A, 8e302)).save(path)
+    res = run("compare", path, flight.path)
+    note = " ".join(res.stderr.split())
+    assert re.search(r"model has a pole at \|z\| = 8(\.\d+)?e\+302 \(unstable\): simulation",
+                     note), res.stderr
+    assert not re.search(r"\d{20}", res.stderr), res.stderr
+
+
 @pytest.fixture(scope="module")
 def integrating(flight, tmp_path_factory):
     """The identified 4-state model with an integrator (compare's default: windows)."""

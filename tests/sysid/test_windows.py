@@ -312,6 +312,16 @@ def test_firmware_times_that_do_not_advance_are_called_damaged(files, tmp_path) 
         load_experiments(path)
 
 
+def test_a_value_that_is_no_number_names_the_file(files, tmp_path) -> None:
+    """A NaN in gyro.x: "stream 'gyro.x': non-finite value at sample 0" named no file (which of
+    the sessions given to sweep or identify?) (review D)."""
+    path = _edited(files["recorded"], tmp_path / "nan.h5", "gyro", "x",
+                   lambda v: np.where(np.arange(len(v)) == 3, np.nan, v))
+    with pytest.raises(DataError, match=r"nan\.h5: stream 'gyro\.x': non-finite value at "
+                                        r"sample 3; remove or repair it"):
+        load_experiments(path, outputs=["gyro.x"])
+
+
 def test_a_damaged_host_time_does_not_size_the_grid(files, tmp_path) -> None:
     """One host_time of 1.7e308 (the grid is on firmware time) refused the session with
     "puts inf samples ... pass dt >= inf" and four RuntimeWarnings."""

@@ -90,3 +90,43 @@ def test_a_row_with_no_usable_time_is_left_out_not_its_stream(tmp_path, caplog):
     shown = [e for p, e in load(tmp_path / "o.rrd").items() if p.startswith("/gyro/")]
     assert shown and all(len(e.times["host_time"]) == 48 for e in shown)
     assert any("2 row(s) of gyro have no usable time" in r.getMessage() for r in caplog.records)
+
+
+PHASES = [HOST, ("phase_id", "<i2"), ("name", "S32"), ("kind", "S16")]
+EVENTS = [HOST, ("level", "u1"), ("source", "S16"), ("text", "S20"), ("cont", "u1")]
+
+
+@pytest.mark.parametrize("case", ["phases", "events", "log"])
+def test_a_phase_or_event_with_no_usable_time_is_left_out_not_the_others(tmp_path, caplog,
+                                                                          case):
+    """One phase at -inf s made Rerun drop every phase ("malformed chunk", a RerunWarning, exit
+    0); an event likewise; a log block whose every time was 1e300 gave numpy's overflow warning
+    (review D). The others are shown, the bad rows named in one warning."""
+    import warnings
+
+    from groundstation.live_layout import EVENTS as EVENTS_PATH
+    from groundstation.live_layout import PHASE
+    from tests.viz.rrd import load
+
+    rows = {"phases": ("phases", "phases", PHASES, [(0.1, 0, b"a", b"hover"),
+                                                     (-np.inf, 1, b"b", b"hover"),
+                                                     (0.5, 2, b"c", b"landing")]),
+            "events": ("events", "events", EVENTS, [(0.1, 2, b"runner", b"one", 0),
+                                                     (np.inf, 2, b"runner", b"two", 0),
+                                                     (0.5, 2, b"runner", b"three", 0)]),
+            "log": ("acc", "log", LOG, [(1e300, 1000, 0.5), (2e300, 1020, 0.6)])}[case]
+    session = _craft(tmp_path / "s.h5", extra=rows)
+    with caplog.at_level("WARNING", logger="groundstation.live"), \
+            warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd",
+                                           str(tmp_path / "o.rrd")])
+    assert res.exit_code == 0, res.output
+    assert not [w for w in caught if "Warning" in w.category.__name__], [
+        str(w.message)[:200] for w in caught]
+    n_bad = 2 if case == "log" else 1
+    assert any(f"{n_bad} row(s) of {'acc' if case == 'log' else case} have no usable time"
+               in r.getMessage() for r in caplog.records)
+    if case != "log":
+        entity = load(tmp_path / "o.rrd")[PHASE if case == "phases" else EVENTS_PATH]
+        assert list(entity.times["host_time"]) == [0.1, 0.5]
