@@ -28,13 +28,20 @@ from cfcommon.cli import (
     output_console,
     output_table,
 )
-from cfsession.errors import MAX_SHOWN_NAME, shown_name
 from sysid.comparison import CompareResult
 from sysid.data import IOData
 from sysid.errors import DataError, MissingDependencyError, ParameterError, SysIdError
 from sysid.model import StateSpaceModel
 from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
-from sysid.session_io import AUTO, SessionFileError, Window, load_sessions, parse_window
+from sysid.session_io import (
+    AUTO,
+    MAX_SHOWN_NAME,
+    SessionFileError,
+    Window,
+    load_sessions,
+    parse_window,
+    shown_name,
+)
 from sysid.stability import NEAR_BAND
 from sysid.validate import simulation_window
 

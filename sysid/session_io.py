@@ -57,14 +57,14 @@ import numpy as np
 from cfsession import Session, open_session, warn_problems
 from cfsession.channels import Channel, session_specs
 from cfsession.channels import resolve_channels as _resolve
-from cfsession.errors import ChannelError, SessionError
+from cfsession.errors import MAX_SHOWN_NAME, ChannelError, SessionError, shown_name
 from sysid.data import IOData
 from sysid.errors import DataError, ParameterError
 from sysid.preprocess import Stream, detrend_data, iodata_from_streams
 
-__all__ = ["AUTO", "Channel", "PhaseRelative", "SessionFileError", "Window", "clock_offset",
-           "load_experiments", "load_session", "load_sessions", "parse_window",
-           "read_metadata", "resolve_channels", "unique_name"]
+__all__ = ["AUTO", "MAX_SHOWN_NAME", "Channel", "PhaseRelative", "SessionFileError", "Window",
+           "clock_offset", "load_experiments", "load_session", "load_sessions", "parse_window",
+           "read_metadata", "resolve_channels", "shown_name", "unique_name"]
 
 log = logging.getLogger(__name__)
 
