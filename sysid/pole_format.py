@@ -57,8 +57,9 @@ def pole_rows(poles: Sequence[complex] | np.ndarray, *, dt: float) -> list[dict[
 
 def pole_number(x: float, spec: str = ".4f") -> str:
     """A pole's modulus or part as text: ``spec`` (four decimals) up to a million, then four
-    significant digits (a model file's pole at 8e302 is no 300-digit number)."""
-    return format(x, spec if abs(x) < 1e6 else ".4g")
+    significant digits (a model file's pole at 8e302 is no 300-digit number), the sign as
+    ``spec`` asks (``"+.4f"``: an imaginary part after the real one)."""
+    return format(x, spec if abs(x) < 1e6 else ("+" if spec.startswith("+") else "") + ".4g")
 
 
 def pole_cells(rows: Sequence[dict[str, float]]) -> list[tuple[str, ...]]:

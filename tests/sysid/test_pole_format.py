@@ -74,3 +74,15 @@ def test_a_pair_stays_adjacent_beside_a_real_pole_of_the_same_modulus_and_zero_i
     assert rows[-1]["freq_hz"] is None and "Infinity" not in json.dumps(rows)
     cells = pole_cells(rows)
     assert not any(c[1].startswith("-0.0000") for c in cells), cells
+
+
+def test_huge_parts_keep_the_imaginary_sign() -> None:
+    """A pole of a model file from elsewhere at 1 +- 8e302j: four significant digits, and the
+    imaginary part still signed after the real one (not "1.00008e+302j")."""
+    from sysid.pole_format import pole_cells, pole_number
+
+    assert pole_number(8e302) == "8e+302" and pole_number(-8e302, "+.4f") == "-8e+302"
+    assert pole_number(8e302, "+.4f") == "+8e+302" and pole_number(0.5, "+.4f") == "+0.5000"
+    cells = pole_cells([{"re": 1.0, "im": 8e302, "abs": 8e302, "angle_deg": 90.0,
+                         "freq_hz": None, "damping": 0.0, "tau_s": None}])
+    assert cells[0][1:3] == ("1.0000+8e+302j", "8e+302")
