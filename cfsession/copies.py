@@ -20,6 +20,7 @@ import tempfile
 from pathlib import Path
 
 import h5py
+import numpy as np
 
 from cfsession.diskfile import OPEN_FLAGS, read_all, write_all
 from cfsession.errors import SessionError
@@ -48,7 +49,7 @@ def compressed_image(image: bytes) -> bytes:
     """A closed session's bytes rewritten with gzip-compressed chunks, in memory."""
     out = io.BytesIO()
     with h5py.File(io.BytesIO(image), "r") as src, \
-            h5py.File(out, "w", libver="latest") as dst:
+            h5py.File(out, "w", libver="latest", rdcc_nbytes=0) as dst:  # rows in write order
         _copy_compressed(src, dst)
     return out.getvalue()
 
@@ -224,21 +225,31 @@ def repack(path: Path) -> str:
 
 
 def _copy_compressed(src: h5py.File, dst: h5py.File) -> None:
-    """Every stream of ``src`` into ``dst`` with gzip-compressed chunks, attributes kept."""
+    """Every stream of ``src`` into ``dst`` with gzip-compressed chunks, attributes kept.
+
+    Laid out for a copy cut short (``docs/session-format.md``, "Damaged files"): every group,
+    attribute and dataset is created before any row is written, each non-empty dataset with its
+    final size (so its chunk index is a fixed array, allocated at once), so the metadata lies at
+    the start and the rows after it: a file losing its last 1 % loses about that share of rows,
+    where links and chunk indices written last lost every stream."""
     for key, value in src.attrs.items():
         dst.attrs[key] = value
     if isinstance(value := src.attrs.get("summary"), str):
         dst.attrs["summary"] = value.rstrip()
+    pending = []
     for name, group in src.items():
         out = dst.create_group(name)
         for key, value in group.attrs.items():
             out.attrs[key] = value
         data = group["data"]
+        n = data.shape[0]
+        chunk = (data.chunks or (max(n, 1),))[0]
         ds = out.create_dataset(
             "data",
-            data=data[()],
-            maxshape=(None,),
-            chunks=data.chunks,
+            shape=data.shape,
+            dtype=data.dtype,
+            maxshape=data.shape if n else (None,),
+            chunks=(min(chunk, n) if n else chunk,),
             compression="gzip",
             compression_opts=4,
             shuffle=True,
@@ -246,3 +257,13 @@ def _copy_compressed(src: h5py.File, dst: h5py.File) -> None:
         )
         for key, value in data.attrs.items():
             ds.attrs[key] = value
+        if n:
+            pending.append((ds, data))
+    dst.flush()
+    pieces = []
+    for ds, data in pending:
+        rows, chunk = data[()], ds.chunks[0]
+        pieces += [(float(np.nan_to_num(rows["host_time"][at], nan=np.inf)), at, ds, rows)
+                   for at in range(0, len(rows), chunk)]
+    for _, at, ds, rows in sorted(pieces, key=lambda p: p[:2]):
+        ds[at:at + ds.chunks[0]] = rows[at:at + ds.chunks[0]]

@@ -14,7 +14,17 @@ byte hangs every tool. Instead, :func:`open_untrusted` reads the superblock itse
 flags are set is read into memory (at most :data:`MAX_UNCLEAN_BYTES`), the flags are cleared in
 that private copy (its checksum recomputed) and the copy is opened read-only in the ordinary
 mode, where a checksum failure is an immediate error. No SWMR read, so nothing to time out;
-the file on disk is never changed. A stored end of file beyond the real size is "truncated".
+the file on disk is never changed.
+
+**Files cut short.** A file shorter than the end of file its superblock stores (a copy
+interrupted, a card pulled) is read the same way by :func:`open_cut` (the session reader; model
+files stay refused by :func:`open_untrusted`): its bytes, zero-padded up to the stored end, are
+the private copy, provided that end is at most :data:`MAX_UNCLEAN_BYTES` and at most
+:data:`MAX_CUT_RATIO` times the real size plus :data:`CUT_SLACK_BYTES` (a file holding its first
+1.5 % still reads; a superblock claiming gigabytes for a few kilobytes does not), and the
+superblock's checksum holds. HDF5 finds every piece of metadata beyond the cut by its checksum,
+an immediate error; data chunks have none, so the reader (:func:`lost_chunks`) treats every chunk
+lying even partly beyond the cut as lost rather than reading its zeros.
 
 **What is refused** (before any data is read): a path that is not a regular file; soft and
 external links; datasets with external storage (they read other files: ``/etc/passwd``, a FIFO
@@ -33,9 +43,9 @@ from __future__ import annotations
 import io
 import os
 import weakref
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
@@ -43,13 +53,19 @@ import numpy as np
 from cfsession.errors import SessionError
 from cfsession.vlen_text import FileBytes, Texts, declared_text_bytes, is_vlen_text, text_problem
 
-__all__ = ["HDF5_SIGNATURE", "MAX_ATTR_BYTES", "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES",
-           "check_dataset", "check_storage", "file_size", "hard_links", "open_untrusted",
-           "read_attrs", "short_error"]
+__all__ = ["CUT_SLACK_BYTES", "HDF5_SIGNATURE", "MAX_ATTR_BYTES", "MAX_CUT_RATIO", "MAX_EXPANSION",
+           "MAX_OBJECTS", "MAX_UNCLEAN_BYTES", "Cut", "check_dataset", "check_storage",
+           "file_size", "hard_links", "lost_chunks", "open_cut", "open_untrusted", "read_attrs",
+           "short_error"]
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 MAX_UNCLEAN_BYTES = 1 << 30
-"""Largest file not closed cleanly that is read (into memory, see the module docstring)."""
+"""Largest file not closed cleanly, or stored end of a file cut short, that is read (into
+memory, see the module docstring)."""
+MAX_CUT_RATIO = 64
+CUT_SLACK_BYTES = 1 << 20
+"""A file cut short is read when its stored end of file is at most ``MAX_CUT_RATIO`` times its
+real size plus ``CUT_SLACK_BYTES`` (and at most :data:`MAX_UNCLEAN_BYTES`)."""
 MAX_EXPANSION = 1000
 """Rows may declare at most this many times the file's size in bytes (gzip's best ratio)."""
 MAX_OBJECTS = 1024
@@ -116,17 +132,62 @@ def _superblock(head: bytes) -> tuple[int, int, int] | None:
     return head[11], int.from_bytes(head[28:36], "little"), 44
 
 
-def _cleared_copy(path: Path, size: int) -> _Image:
-    """The file's bytes with the superblock's status flags cleared (checksum recomputed)."""
-    if size > MAX_UNCLEAN_BYTES:
-        raise SessionError(f"{path}: not closed cleanly and {size / 2**20:.0f} MiB, more than "
-                           f"the {MAX_UNCLEAN_BYTES >> 20} MiB read to recover such a file")
-    data = bytearray(path.read_bytes())
+class Cut(NamedTuple):
+    """A file cut short: ``size`` bytes of the ``stored_eof`` its superblock says it has."""
+
+    size: int
+    stored_eof: int
+
+    def __str__(self) -> str:
+        return f"truncated at {self.size} of {self.stored_eof} bytes"
+
+
+def _private_copy(path: Path, size: int, stored_eof: int) -> tuple[_Image, Cut | None]:
+    """The file's bytes, zero-padded up to ``stored_eof`` when shorter (then also the
+    :class:`Cut`), with the superblock's status flags cleared (checksum recomputed): one piece
+    of code for files not closed cleanly and files cut short."""
+    if max(size, stored_eof) > MAX_UNCLEAN_BYTES:
+        what = "cut short" if stored_eof > size else "not closed cleanly"
+        raise SessionError(f"{path}: {what} and {max(size, stored_eof) / 2**20:.0f} MiB, more "
+                           f"than the {MAX_UNCLEAN_BYTES >> 20} MiB read to recover such a file")
+    data = bytearray(path.read_bytes()[:MAX_UNCLEAN_BYTES])
+    cut = None
+    if len(data) < stored_eof:  # cut short (by the time it was read, too)
+        cut = Cut(len(data), stored_eof)
+        data.extend(bytes(stored_eof - len(data)))
+        _seal_heaps(data, cut.size)
     data[11] = 0
     data[44:48] = lookup3(bytes(data[:44])).to_bytes(4, "little")
     copy = _Image(bytes(data))
     _IMAGES[repr(copy)] = copy  # h5py names a file object by its repr
-    return copy
+    return copy, cut
+
+
+_GCOL_MIN = 4096  # HDF5's smallest global heap collection (H5HG_MINSIZE)
+
+
+def _seal_heaps(data: bytearray, cut: int) -> None:
+    """Make each text heap (global heap collection) that runs past ``cut`` end there: its
+    objects lying wholly before the cut are kept, the rest of it becomes free space (HDF5
+    would walk zero padding for ever: an empty free-space object does not advance its parser),
+    so a text beyond the cut is not found rather than read as zeros. Only in the private copy."""
+    at = data.find(b"GCOL", 0, cut)
+    while at >= 0:
+        size = int.from_bytes(data[at + 8:at + 16], "little")
+        end = at + size
+        if (data[at + 4] == 1 and not any(data[at + 5:at + 8]) and size >= _GCOL_MIN
+                and at + 16 <= cut < end <= len(data)):
+            p = at + 16
+            while p + 16 <= cut:
+                idx = int.from_bytes(data[p:p + 2], "little")
+                obj = int.from_bytes(data[p + 8:p + 16], "little")
+                need = obj if idx == 0 else 16 + (obj + 7) // 8 * 8
+                if idx == 0 or need == 0 or p + need > cut:
+                    break
+                p += need
+            if p + 16 <= end:
+                data[p:p + 16] = bytes(8) + (end - p).to_bytes(8, "little")
+        at = data.find(b"GCOL", at + 4, cut)
 
 
 class _Image(io.BytesIO):
@@ -166,7 +227,19 @@ def _heap_loop(raw: FileBytes) -> int | None:
 def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, bool]:
     """Open ``path`` read-only without SWMR; returns the file and whether its superblock says
     it was closed cleanly. One-line :class:`SessionError` when it cannot be opened (``kind``:
-    what the file should be, for the message)."""
+    what the file should be, for the message), or is cut short (:func:`open_cut` reads that)."""
+    f, clean, _cut = _open(path, kind=kind, cut_ok=False)
+    return f, clean
+
+
+def open_cut(path: Path, *, kind: str = "session") -> tuple[h5py.File, bool, Cut | None]:
+    """:func:`open_untrusted`, but a file cut short (see the module docstring) is opened from
+    its zero-padded copy; the :class:`Cut` then says where (``None`` for a whole file). Whoever
+    reads it must not believe a byte beyond ``cut.size``: :func:`lost_chunks`."""
+    return _open(path, kind=kind, cut_ok=True)
+
+
+def _open(path: Path, *, kind: str, cut_ok: bool) -> tuple[h5py.File, bool, Cut | None]:
     try:
         st = path.stat()
         if path.is_dir():
@@ -180,12 +253,28 @@ def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, boo
         raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if head[:8] != HDF5_SIGNATURE:
         raise SessionError(f"{path}: not an HDF5 file, so not a {kind} file")
+    if len(head) < 48:
+        raise SessionError(f"{path}: damaged beyond repair (truncated at {len(head)} bytes, "
+                           "inside its superblock)")
     sb = _superblock(head)
+    cut: Cut | None = None
     if sb is not None and sb[1] > st.st_size:
-        raise SessionError(f"{path}: damaged beyond repair (truncated at {st.st_size} of "
-                           f"{sb[1]} bytes)")
+        cut = Cut(st.st_size, sb[1])
+        if not cut_ok:
+            raise SessionError(f"{path}: damaged beyond repair ({cut})")
+        if lookup3(head[:sb[2]]) != int.from_bytes(head[sb[2]:sb[2] + 4], "little"):
+            raise SessionError(f"{path}: damaged beyond repair ({cut}, and its superblock's "
+                               "checksum does not match)")
+        if sb[1] > MAX_CUT_RATIO * st.st_size + CUT_SLACK_BYTES:
+            raise SessionError(f"{path}: damaged beyond repair ({cut}: a stored end more "
+                               f"than {MAX_CUT_RATIO} times the size is no file cut short)")
     flagged = sb is not None and sb[0] != 0
-    copy = _cleared_copy(path, st.st_size) if flagged else None
+    copy = None
+    if flagged or cut is not None:
+        try:
+            copy, cut = _private_copy(path, st.st_size, sb[1])  # type: ignore[index]
+        except OSError as exc:
+            raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     try:
         with FileBytes(path=path, image=None if copy is None else copy.image) as raw:
             loop = _heap_loop(raw)
@@ -196,17 +285,39 @@ def open_untrusted(path: Path, *, kind: str = "session") -> tuple[h5py.File, boo
                            "read for ever)")
     try:
         if copy is not None:
-            return h5py.File(copy, "r", locking=False), False
-        return h5py.File(path, "r", locking=False), True
+            return h5py.File(copy, "r", locking=False), not flagged, cut
+        return h5py.File(path, "r", locking=False), True, None
     except SessionError:
         raise
     except Exception as exc:  # h5py: OSError; the file-object driver passes others through
-        raise SessionError(f"{path}: damaged beyond repair ({short_error(exc)})") from None
+        why = short_error(exc) if cut is None else f"{cut}; {short_error(exc)}"
+        raise SessionError(f"{path}: damaged beyond repair ({why})") from None
+
+
+def lost_chunks(ds: h5py.Dataset, cut: Cut | None) -> list[int]:
+    """The first rows (sorted) of the chunks of a chunked one-dimensional dataset that lie, even
+    partly, beyond ``cut`` (the file was cut short there): zeros read from the padded copy, not
+    data. ``[]`` for a whole file. HDF5 errors (the chunk index itself lost) pass through."""
+    if cut is None or ds.chunks is None:
+        return []
+    starts: list[int] = []
+
+    def visit(info: Any) -> None:
+        if info.byte_offset + info.size > cut.size:
+            starts.append(int(info.chunk_offset[0]))
+
+    if hasattr(ds.id, "chunk_iter"):
+        ds.id.chunk_iter(visit)
+    else:  # h5py < 3.8
+        for i in range(ds.id.get_num_chunks()):
+            visit(ds.id.get_chunk_info(i))
+    return sorted(starts)
 
 
 def short_error(exc: BaseException) -> str:
     """The first line of an (HDF5) error, without its internals: text for a one-line message."""
-    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc  # no quotes
+    msg = str(text).strip().splitlines()[0] if str(text).strip() else type(exc).__name__
     first = msg.split("(")[0].strip() or type(exc).__name__
     return first[:200]
 
@@ -214,23 +325,35 @@ def short_error(exc: BaseException) -> str:
 # ---------------------------------------------------------------------- objects
 
 
-def hard_links(group: h5py.Group, *, where: str,
-               kind: str = "session") -> Iterator[tuple[str, Any]]:
+def hard_links(group: h5py.Group, *, where: str, kind: str = "session",
+               unreadable: Callable[[str, Exception], None] | None = None,
+               ) -> Iterator[tuple[str, Any]]:
     """``(name, object)`` for each member of ``group``; a soft or external link, or more than
-    :data:`MAX_OBJECTS` members, is a one-line :class:`SessionError`."""
+    :data:`MAX_OBJECTS` members, is a one-line :class:`SessionError`. A member HDF5 cannot
+    open (its header damaged or beyond a cut) is an error, or, given ``unreadable``, passed
+    to it (with the error) and skipped."""
     names = list(group.keys())
     if len(names) > MAX_OBJECTS:
         raise SessionError(f"{where}: {len(names)} objects, more than a {kind} has "
                            f"({MAX_OBJECTS})")
     for name in names:
-        link = group.get(name, getlink=True)
-        if isinstance(link, h5py.ExternalLink):
-            raise SessionError(f"{where}: {name!r} links to another file "
-                               f"({link.filename}); refusing to follow it")
-        if isinstance(link, h5py.SoftLink):
-            raise SessionError(f"{where}: {name!r} is a soft link ({link.path}); {kind} files "
-                               "have none, refusing to follow it")
-        yield name, group[name]
+        try:
+            link = group.get(name, getlink=True)
+            if isinstance(link, h5py.ExternalLink):
+                raise SessionError(f"{where}: {name!r} links to another file "
+                                   f"({link.filename}); refusing to follow it")
+            if isinstance(link, h5py.SoftLink):
+                raise SessionError(f"{where}: {name!r} is a soft link ({link.path}); {kind} "
+                                   "files have none, refusing to follow it")
+            obj = group[name]
+        except SessionError:
+            raise
+        except Exception as exc:
+            if unreadable is None:
+                raise
+            unreadable(name, exc)
+            continue
+        yield name, obj
 
 
 def read_attrs(obj: h5py.HLObject, *, where: str, problems: list[str],

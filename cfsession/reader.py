@@ -1,15 +1,19 @@
 """Reading session files, including ones left behind by a crashed writer.
 
 :func:`open_session` loads every stream into memory (a flight is a few MB) and returns a
-:class:`Session`. Every file is opened through :func:`cfsession.guard.open_untrusted`, read-only
+:class:`Session`. Every file is opened through :func:`cfsession.guard.open_cut`, read-only
 and never in SWMR mode (where HDF5 retries a bad checksum for over a minute). A file whose writer
 died (its superblock still flagged open for writing) is read into memory, at most
 :data:`~cfsession.guard.MAX_UNCLEAN_BYTES`, and that private copy, its flags cleared, is opened
 in the ordinary mode; the file on disk is not changed, and :attr:`Session.problems` says the data
 end at the last flush. Rows that were allocated but never written (NaN ``host_time``) are
 dropped; a stream whose chunks cannot all be read is read as far as it goes and listed in
-:attr:`Session.problems`. So is the damage an importer found in the log it imported (root
-attribute ``source_problems``). :func:`warn_problems` repeats them as warnings.
+:attr:`Session.problems`. A file cut short (a copy interrupted, a card pulled) is read from a
+zero-padded private copy the same way; the rows of every chunk lying even partly beyond the cut
+are left out (listed per stream), and a stream whose metadata lay there is listed as unreadable
+(its root attributes lost, the file is still read if its streams are session streams). So is
+the damage an importer found in the log it imported (root attribute ``source_problems``).
+:func:`warn_problems` repeats them as warnings.
 """
 
 from __future__ import annotations
@@ -25,7 +29,16 @@ import h5py
 import numpy as np
 
 from cfsession.errors import SessionError, did_you_mean
-from cfsession.guard import check_dataset, file_size, hard_links, open_untrusted, read_attrs
+from cfsession.guard import (
+    Cut,
+    check_dataset,
+    file_size,
+    hard_links,
+    lost_chunks,
+    open_cut,
+    read_attrs,
+    short_error,
+)
 from cfsession.schema import (
     SCHEMA_NAME,
     SCHEMA_VERSION,
@@ -167,7 +180,9 @@ class Session:
 
     @property
     def schema_version(self) -> int:
-        return int(self.meta["schema_version"])
+        """The session schema it was written with; 0 when unknown (the root attributes lay
+        beyond the end of a file cut short)."""
+        return int(self.meta.get("schema_version", 0))
 
     @property
     def closed_cleanly(self) -> bool:
@@ -261,30 +276,60 @@ class Session:
                 for t, lv, src, raw in parts]
 
 
-def _read_dataset(ds: h5py.Dataset, problems: list[str], name: str) -> np.ndarray:
-    """Read all rows; on a damaged chunk, keep the rows before it and record the problem."""
-    try:
-        data = ds[()]
-    except Exception:  # h5py raises OSError / RuntimeError / KeyError on corrupt chunks
-        chunk = (ds.chunks or (1024,))[0]
-        parts = []
-        for start in range(0, ds.shape[0], chunk):
-            try:
-                parts.append(ds[start : start + chunk])
-            except Exception as exc:
-                problems.append(f"stream {name!r}: unreadable from row {start} ({exc})")
+def _read_dataset(ds: h5py.Dataset, problems: list[str], name: str,
+                  lost: list[int] | None = None) -> np.ndarray:
+    """Read all rows; on a damaged chunk, keep the rows before it and record the problem.
+    The chunks starting at the rows in ``lost`` (beyond the end of a file cut short:
+    :func:`cfsession.guard.lost_chunks`) are not read; their rows are counted in one problem."""
+    n = ds.shape[0]
+    chunk = (ds.chunks or (max(n, 1),))[0]
+    lost = [start for start in lost or [] if start < n]
+    parts: list[np.ndarray] = []
+    pos = 0
+    for start in [*lost, n]:
+        if start > pos:
+            part, whole = _read_rows(ds, pos, start, problems, name)
+            parts.append(part)
+            if not whole:
                 break
-        data = np.concatenate(parts) if parts else np.empty(0, dtype=ds.dtype)
+        pos = start + chunk
+    if lost:
+        rows = sum(min(start + chunk, n) - start for start in lost)
+        problems.append(f"stream {name!r}: unreadable from row {lost[0]} ({rows} rows lay "
+                        "beyond the cut)")
+    data = np.concatenate(parts) if parts else np.empty(0, dtype=ds.dtype)
     written = ~np.isnan(data["host_time"])
     if not written.all():
         log.info("%s: dropping %d unwritten rows", name, int((~written).sum()))
     return data[written]
 
 
-def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
+def _read_rows(ds: h5py.Dataset, start: int, stop: int, problems: list[str],
+               name: str) -> tuple[np.ndarray, bool]:
+    """Rows ``start:stop`` (``start`` on a chunk boundary) and whether all were read: on a
+    damaged chunk, the rows before it, the problem recorded."""
+    try:
+        return ds[start:stop], True
+    except Exception:  # h5py raises OSError / RuntimeError / KeyError on corrupt chunks
+        chunk = (ds.chunks or (1024,))[0]
+        parts = []
+        for at in range(start, stop, chunk):
+            try:
+                parts.append(ds[at : min(at + chunk, stop)])
+            except Exception as exc:
+                problems.append(f"stream {name!r}: unreadable from row {at} ({exc})")
+                break
+        else:
+            return np.concatenate(parts) if parts else np.empty(0, dtype=ds.dtype), True
+        return np.concatenate(parts) if parts else np.empty(0, dtype=ds.dtype), False
+
+
+def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str], *,
+                   lost: bool = False) -> None:
     """Check the root attributes a reader relies on: schema, schema_version (one-line
-    :class:`SessionError`); wrongly typed optional ones are dropped and listed in problems."""
-    if meta.get("schema") != SCHEMA_NAME:
+    :class:`SessionError`; not when they were ``lost`` beyond the end of a file cut short);
+    wrongly typed optional ones are dropped and listed in problems."""
+    if not lost and meta.get("schema") != SCHEMA_NAME:
         model = str(meta.get("format", "")).endswith("StateSpaceModel")
         what = ": a model file (sysid compare, sysid export read it)" if model else ""
         raise SessionError(f"{p}: HDF5 file but not a flight session (no '{SCHEMA_NAME}' "
@@ -292,13 +337,16 @@ def _meta_problems(meta: dict[str, Any], p: Path, problems: list[str]) -> None:
     version = meta.get("schema_version")
     if isinstance(version, float) and version.is_integer():
         version = int(version)
-    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+    if lost and "schema_version" not in meta:
+        pass
+    elif not isinstance(version, int) or isinstance(version, bool) or version < 1:
         raise SessionError(f"{p}: schema_version {version!r} is not a session schema version "
                            f"(1 to {SCHEMA_VERSION}); the file is damaged or not a session")
-    if version > SCHEMA_VERSION:
+    elif version > SCHEMA_VERSION:
         raise SessionError(f"{p}: written with session schema {version}, this groundstation "
                            f"reads up to {SCHEMA_VERSION}; upgrade groundstation")
-    meta["schema_version"] = version
+    else:
+        meta["schema_version"] = version
     for key, kinds in (*((k, (int, float)) for k in _NUMBER_ATTRS), ("start_time_ns", (int,)),
                        ("protocol_version", (int,)), *((k, (str,)) for k in _TEXT_ATTRS)):
         if key in meta and (not isinstance(meta[key], kinds) or isinstance(meta[key], bool)):
@@ -348,8 +396,8 @@ def _source_problems(meta: dict[str, Any]) -> list[str]:
     return out
 
 
-def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
-            problems: list[str]) -> StreamData | None:
+def _stream(name: str, group: h5py.Group, *, p: Path, size: int, problems: list[str],
+            cut: Cut | None = None) -> StreamData | None:
     """One stream group, checked (:mod:`cfsession.guard`) and read."""
     where = f"{p}: stream {name!r}"
     members = dict(hard_links(group, where=where))
@@ -357,6 +405,7 @@ def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
     if not isinstance(ds, h5py.Dataset):
         return None
     check_dataset(ds, where=where, file_size=size)
+    lost = lost_chunks(ds, cut)
     names = list(ds.dtype.names or ())
     required = {**_REQUIRED.get(name, {}), "fw_time_ms": "u"}
     missing = [f for f in required if f not in names and f != "fw_time_ms"]
@@ -383,40 +432,84 @@ def _stream(name: str, group: h5py.Group, *, p: Path, size: int,
         period = None
     kind = gattrs.get("kind", "")
     return StreamData(name=name, kind=kind if isinstance(kind, str) else "",
-                  data=_read_dataset(ds, problems, name), units=labels("units"),
+                  data=_read_dataset(ds, problems, name, lost), units=labels("units"),
                   sources=labels("sources"), period_s=period, attrs=gattrs)
 
 
 def open_session(path: str | os.PathLike[str]) -> Session:
     """Read a session file; one-line :class:`SessionError` if it is not a readable session
     (or was crafted to read elsewhere or exhaust memory: :mod:`cfsession.guard`).
-    A damaged file is read as far as it goes, its damage listed in :attr:`Session.problems`."""
+    A damaged file is read as far as it goes, its damage listed in :attr:`Session.problems`;
+    so is a file cut short (its tail lost: :func:`cfsession.guard.open_cut`), where what lay
+    beyond the cut (rows, a stream's metadata, the root attributes) is listed as lost."""
     p = Path(path)
     if not p.exists() and not p.is_symlink():
         raise SessionError(f"{p}: no such file")
-    f, clean_superblock = open_untrusted(p)
-    problems: list[str] = []
+    f, clean_superblock, cut = open_cut(p)
+    problems: list[str] = [] if cut is None else [
+        f"file {cut} (a copy or a card cut short): what lay beyond is lost"]
     streams: dict[str, StreamData] = {}
+    root_lost = False
+
+    def unreadable(name: str, exc: Exception) -> None:
+        problems.append(f"stream {name!r}: unreadable ({short_error(exc)}; its metadata lay "
+                        "beyond the cut)")
+
     try:
         with f:
             size = file_size(f, p)
-            meta = {k: _decode(v) for k, v in read_attrs(f, where=str(p),
-                                                         problems=problems).items()}
-            _meta_problems(meta, p, problems)
-            for name, obj in hard_links(f, where=str(p)):
-                if isinstance(obj, h5py.Group):
-                    stream = _stream(name, obj, p=p, size=size, problems=problems)
-                    if stream is not None:
-                        streams[name] = stream
+            meta, root_lost = _root_attrs(f, p, cut, problems)
+            _meta_problems(meta, p, problems, lost=root_lost)
+            for name, obj in hard_links(f, where=str(p),
+                                        unreadable=None if cut is None else unreadable):
+                if not isinstance(obj, h5py.Group):
+                    continue
+                try:
+                    stream = _stream(name, obj, p=p, size=size, problems=problems, cut=cut)
+                except SessionError:
+                    raise
+                except Exception as exc:
+                    if cut is None:
+                        raise
+                    unreadable(name, exc)
+                    continue
+                if stream is not None:
+                    streams[name] = stream
     except SessionError:
         raise
     except Exception as exc:  # HDF5 errors on damaged metadata: never a traceback
         log.debug("reading %s", p, exc_info=True)
-        raise SessionError(f"{p}: damaged beyond repair ({type(exc).__name__}: "
+        where = "" if cut is None else f"{cut}; "
+        raise SessionError(f"{p}: damaged beyond repair ({where}{type(exc).__name__}: "
                            f"{str(exc).splitlines()[0][:200] if str(exc) else ''})") from None
-    if not meta.get("closed_cleanly", 0) or not clean_superblock:
+    if root_lost and not streams:
+        raise SessionError(f"{p}: damaged beyond repair ({cut}: no session attributes and no "
+                           "stream before the cut)")
+    if not clean_superblock or (not meta.get("closed_cleanly", 0) and not root_lost):
         problems.append("writer did not close the file (crash or kill): data up to the last flush")
     return Session(p, meta, streams, problems)
+
+
+def _root_attrs(f: h5py.File, p: Path, cut: Cut | None,
+                problems: list[str]) -> tuple[dict[str, Any], bool]:
+    """The root attributes, and whether the session's own (``schema``) lay beyond the end of
+    a file cut short: then the file is read as a session if it has session streams."""
+    if cut is None:
+        return {k: _decode(v) for k, v in read_attrs(f, where=str(p),
+                                                     problems=problems).items()}, False
+    try:
+        names = list(f.attrs.keys())
+        found: list[str] = []
+        meta = {k: _decode(v) for k, v in read_attrs(f, where=str(p), problems=found).items()}
+    except SessionError:
+        raise
+    except Exception as exc:
+        log.debug("root attributes of %s", p, exc_info=True)
+        problems.append(f"root attributes unreadable ({short_error(exc)}): they lay beyond the "
+                        "cut; uri, start time, plan and summary are unknown")
+        return {}, True
+    problems.extend(found)
+    return meta, "schema" in names and "schema" not in meta
 
 
 def warn_problems(session: Session, logger: logging.Logger | None = None) -> None:
