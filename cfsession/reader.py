@@ -398,7 +398,9 @@ def _source_problems(meta: dict[str, Any]) -> list[str]:
 
 def _stream(name: str, group: h5py.Group, *, p: Path, size: int, problems: list[str],
             cut: Cut | None = None) -> StreamData | None:
-    """One stream group, checked (:mod:`cfsession.guard`) and read."""
+    """One stream group, checked (:mod:`cfsession.guard`) and read; ``None`` (listed in
+    ``problems`` when it is a damaged stream) when it is not read: a standard stream lacking a
+    field the reader uses, or holding one of the wrong type, is left out, the others read."""
     where = f"{p}: stream {name!r}"
     members = dict(hard_links(group, where=where))
     ds = members.get("data")
@@ -410,13 +412,15 @@ def _stream(name: str, group: h5py.Group, *, p: Path, size: int, problems: list[
     required = {**_REQUIRED.get(name, {}), "fw_time_ms": "u"}
     missing = [f for f in required if f not in names and f != "fw_time_ms"]
     if missing:
-        raise SessionError(f"{where}: lacks field(s) {missing}; not a session stream")
+        problems.append(f"stream {name!r}: not read: it lacks field(s) {missing}")
+        return None
     for fname, kind in required.items():
         stored = ds.dtype.fields[fname][0] if fname in names else None
         ok, what = _KIND_OK[kind]
         if stored is not None and stored.kind not in ok:
-            raise SessionError(f"{where}: field {fname!r} has type {stored}, where a session "
-                               f"stream holds {what}; not a session stream")
+            problems.append(f"stream {name!r}: not read: field {fname!r} has type {stored}, "
+                            f"where a session stream holds {what}")
+            return None
     dattrs = read_attrs(ds, where=where, problems=problems)
     gattrs = {k: _decode(v) for k, v in read_attrs(group, where=where, problems=problems).items()}
 

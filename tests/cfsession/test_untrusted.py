@@ -125,13 +125,22 @@ def test_declared_rows_the_file_cannot_hold_are_refused(session, rows):
     np.arange(5.0),  # not rows of fields
     np.zeros(3, dtype=[("host_time", "S8"), ("level", "u1")]),  # text time
     np.array([(0.0, "x")], dtype=[("host_time", "f8"), ("text", h5py.string_dtype())]),
-    np.zeros(3, dtype=[("host_time", "f8"), ("level", "u1")]),  # fields missing
 ])
 def test_wrong_dtypes_are_refused(session, data):
     with h5py.File(session, "a") as f:
         del f["events/data"]
         f["events"].create_dataset("data", data=data)
     _refused(session, "stream 'events'")
+
+
+def test_a_standard_stream_lacking_fields_is_left_out(session):
+    with h5py.File(session, "a") as f:
+        del f["events/data"]
+        f["events"].create_dataset("data", data=np.zeros(3, dtype=[("host_time", "f8"),
+                                                                   ("level", "u1")]))
+    s = open_session(session)
+    assert "events" not in s.streams and len(s["gyro"].data) == 100
+    assert s.problems == ["stream 'events': not read: it lacks field(s) ['source', 'text', 'cont']"]
 
 
 @pytest.mark.parametrize("version", [-1, 0, 2, 1.5, "1", [1, 1]])
@@ -335,8 +344,10 @@ def _retyped(data, field, dtype, values):
     ("setpoints", "roll", "S3", b"x", "numbers"),
     ("gyro", "fw_time_ms", "f8", np.nan, "integers"),  # NaN ms: garbage firmware times
 ])
-def test_a_standard_field_of_the_wrong_type_is_refused(session, stream, field, dtype, value,
-                                                       holds):
+def test_a_standard_field_of_the_wrong_type_leaves_that_stream_out(session, stream, field,
+                                                                   dtype, value, holds):
+    """The stream is not read (its field would crash what uses it) and the problem is listed;
+    the file's other streams are read, and ``info`` shows them with the problem."""
     with h5py.File(session, "a") as f:
         if stream == "phases":
             f["phases/data"].resize((2,))
@@ -348,8 +359,14 @@ def test_a_standard_field_of_the_wrong_type_is_refused(session, stream, field, d
         data = _retyped(f[f"{stream}/data"][()], field, dtype, value)
         del f[f"{stream}/data"]
         f[stream].create_dataset("data", data=data)
-    msg = _refused(session, f"stream {stream!r}: field {field!r} has type")
-    assert f"where a session stream holds {holds}" in msg
+    s = open_session(session)
+    other = "events" if stream == "gyro" else "gyro"
+    assert stream not in s.streams and len(s[other].data) > 0
+    assert s.problems == [f"stream {stream!r}: not read: field {field!r} has type "
+                          f"{np.dtype(dtype)}, where a session stream holds {holds}"]
+    result = CliRunner().invoke(main, ["info", str(session), "--width", "300"])
+    assert result.exit_code == 0, result.output
+    assert f"field {field!r} has type" in result.output
 
 
 def test_root_attributes_of_the_wrong_type_are_dropped_and_listed(session):
