@@ -25,6 +25,12 @@ Both raise :class:`click.BadParameter`, so each CLI prints one line and exits wi
   number for a program SIGPIPE ended), no traceback and no "Exception ignored" at exit (the
   rest of the output goes to the null device). click exited 1, rich's console too.
 
+* :func:`shown_text`: text from a file made elsewhere (a plan's phase names, a session's
+  events, a path) as a terminal may be given it: control characters (``ESC [2J`` clears the
+  screen, ``\r`` rewrites the line, a bell) written as Python escapes (``\x1b[2J``), so what
+  is printed is what the file holds; :func:`shown_markup` for a rich console. The error line
+  and every log record pass through it.
+
 * :func:`output_console` and :func:`output_table`: text output that fits where it goes. On a
   terminal, rich tables at the terminal's width (or ``--width``); piped (``| cat``, a file),
   plain tables, no colour, never wrapped (a line is as long as its content, or ``--width``),
@@ -39,6 +45,7 @@ import io
 import logging
 import math
 import os
+import re
 import select
 import signal
 import stat
@@ -56,7 +63,7 @@ __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "Finit
            "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
            "names_a_file",
            "output_console", "output_gone", "output_table", "reader_gone", "setup_logging",
-           "whole_file", "writing_stdout"]
+           "shown_markup", "shown_text", "whole_file", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
@@ -67,6 +74,25 @@ DEFAULT_INPUTS = "motor.m1,motor.m2,motor.m3,motor.m4"
 DEFAULT_OUTPUTS = "acc.z,gyro"
 
 _UNWRAPPED = 100_000  # a console width no line reaches: piped output is never wrapped
+
+#: What :func:`shown_text` escapes: C0 controls (tab and line feed too: one name, one line),
+#: DEL, C1 controls (``\x9b`` is a CSI on some terminals), the line and paragraph separators
+#: and the bidirectional overrides and isolates (they reorder the text shown after them).
+_UNSHOWN = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\u200e\u200f\u202a-\u202e"
+                      "\u2066-\u2069]")
+
+
+def shown_markup(text: object) -> str:
+    """:func:`shown_text` for a rich console: also ``[`` escaped, so ``[/x]`` in a file's text
+    is printed, not taken for markup."""
+    return escape(shown_text(text))
+
+
+def shown_text(text: object) -> str:
+    """``text`` (``str()`` of it) with every control character written as Python writes it in
+    a string's repr (``\x1b``, ``\r``, ``\n``, ``\u202e``); the rest unchanged (no quotes,
+    backslashes as they are: a Windows path stays readable)."""
+    return _UNSHOWN.sub(lambda m: repr(m.group())[1:-1], str(text))
 
 
 #: What a write gets when the disk, a quota or ``ulimit -f`` has no room for it (also standard
@@ -152,6 +178,11 @@ class _OneLineRecords(logging.Formatter):
         super().__init__("%(levelname)s %(name)s: %(message)s")
         self.tracebacks = tracebacks
 
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        """The record's line, control characters escaped (:func:`shown_text`): a message
+        quoting a file's text is one line and changes nothing on the terminal."""
+        return shown_text(super().formatMessage(record))
+
     def format(self, record: logging.LogRecord) -> str:
         if self.tracebacks or not record.exc_info:
             return super().format(record)
@@ -165,7 +196,7 @@ class _OneLineRecords(logging.Formatter):
         if exc is None:  # exc_info=True outside an except clause: nothing to show
             return text
         lines = str(exc).splitlines()  # an exception's text may span lines: its first
-        what = f"{lines[0]} ..." if len(lines) > 1 else "".join(lines)
+        what = shown_text(f"{lines[0]} ..." if len(lines) > 1 else "".join(lines))
         return f"{text} ({type(exc).__name__}: {what}; -v shows the traceback)"
 
 
@@ -479,7 +510,7 @@ def _say(line: str) -> None:
     """The error line on stderr; a terminal or pipe that is gone takes nothing (the exit status
     still tells)."""
     try:
-        click.echo(line, err=True)
+        click.echo(shown_text(line), err=True)
     except OSError as exc:
         if not output_gone(exc) and exc.errno not in NO_ROOM:
             raise

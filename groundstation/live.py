@@ -140,7 +140,9 @@ class RerunView:
     ``rows`` queues; a daemon thread sends every ``flush_interval`` seconds (``background``;
     without it, rows are sent when :meth:`flush` or :meth:`end` is called). More than
     ``max_pending_rows`` queued rows (viewer far behind) are dropped and counted in
-    ``dropped_rows``, never blocking the caller. ``url`` is the web viewer's address (serve);
+    ``dropped_rows``, never blocking the caller. ``sent_rows`` counts the rows shown per stream,
+    ``untimed_rows`` those left out for want of a usable time (each block with any says so in a
+    warning). ``url`` is the web viewer's address (serve);
     ``rrd_path`` the file of mode ``save``, closed by :meth:`end` (a failed write is a one-line
     :class:`ViewError`, the cut-short file removed).
     """
@@ -155,7 +157,8 @@ class RerunView:
         self.max_pending_rows = max_pending_rows
         self.background = background
         self.dropped_rows = 0
-        self.sent_rows: dict[str, int] = {}
+        self.sent_rows: dict[str, int] = {}  # rows shown, per stream
+        self.untimed_rows: dict[str, int] = {}  # rows not shown: no usable time (a warning each)
         self._pending: deque[tuple[str, list[tuple]]] = deque()
         self._n_queued = 0  # rows queued (written by the caller of rows() only)
         self._n_taken = 0  # rows taken off the queue (written by flush() only): no lock needed
@@ -246,19 +249,39 @@ class RerunView:
             return
         with self._lock:
             if ch.spec.kind == "events":
+                shown = self._event_rows_timed(t, data)
                 self._send_events(t, data)
             elif ch.spec.kind == "phases":
+                shown = _timed(t)
                 self._send_phases(t, data)
             elif ch.spec.kind == "live_id":
                 from groundstation.liveid_view import send_rows
 
+                shown = _timed(t)
                 send_rows(self.rec, data)
             else:
                 times = [("host_time", t)]
                 if ch.firmware_time:
                     times.append(("fw_time", self._unwrap(stream, data["fw_time_ms"])))
+                shown = np.logical_and.reduce([_timed(a) for _, a in times])
                 self._send_numeric(ch, times, data)
-            self.sent_rows[stream] = self.sent_rows.get(stream, 0) + len(data)
+            n_shown = int(np.count_nonzero(shown))
+            self.sent_rows[stream] = self.sent_rows.get(stream, 0) + n_shown
+            if n_shown < len(data):
+                self.untimed_rows[stream] = (self.untimed_rows.get(stream, 0)
+                                             + len(data) - n_shown)
+
+    def _event_rows_timed(self, t: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """Which rows of an events block are shown: those of an event (a row and the rows
+        continuing it) whose first row has a usable time, as :meth:`_send_events` joins them
+        (a block's leading continuation rows belong to the event the last block left open)."""
+        n = len(data)
+        starts = np.where(data["cont"].astype(bool), -1, np.arange(n))
+        if self._last_event is None and n:
+            starts[0] = 0  # nothing to continue: the first row starts an event
+        owner = np.maximum.accumulate(starts)
+        last_t = self._last_event[0] if self._last_event is not None else np.nan
+        return _timed(np.where(owner >= 0, t[np.maximum(owner, 0)], last_t))
 
     def _send_numeric(self, ch: _Channels, times: list[tuple[str, np.ndarray]],
                       data: np.ndarray) -> None:

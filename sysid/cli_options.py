@@ -15,6 +15,7 @@ from sysid.cli_support import JSON_OPTION, RRD_OPTION, session_options
 from sysid.errors import ParameterError
 from sysid.finish import FOCUS_MODES
 from sysid.methods import DEFAULT_METHOD, METHODS, Method, Options, get_method
+from sysid.model_io import MAX_DIMENSION
 from sysid.stability import STABILITY_MODES
 
 __all__ = ["FOCUS_OPTION", "FORCE_OPTION", "METHOD_OPTION", "STABILITY_OPTION", "MethodChoice",
@@ -44,13 +45,16 @@ class OneInt(click.IntRange):
 
 #: The least value and ``sysid sweep``'s option of each setting :func:`fixed_option` makes.
 _FIXED = {"order": (1, "--orders"), "past": (1, "--pasts"), "future": (2, "--futures")}
+#: The largest value of those that have one: no more states than a model file holds.
+_MOST = {"order": MAX_DIMENSION}
 
 
 def fixed_option(name: Literal["order", "past", "future"], *, help: str) -> Any:
     """``--order``, ``--past`` or ``--future`` fixed to one value (:class:`OneInt`), with the
     command's own ``help``: one rule for their least values and the sweep options they name."""
     least, sweep = _FIXED[name]
-    return click.option(f"--{name}", type=OneInt(min=least, sweep_option=sweep), help=help)
+    return click.option(f"--{name}", type=OneInt(min=least, max=_MOST.get(name),
+                                                 sweep_option=sweep), help=help)
 
 
 class MethodChoice(click.Choice):

@@ -34,10 +34,13 @@ _MAX_NDIMS = 4  # sysid writes 2; more would only make the product of the dimens
 @dataclass(frozen=True)
 class Limits:
     """How large a sysid model's MAT file may be in its parts: values in one numeric array (a
-    2000 x 2000 matrix), texts in one cell (names of 2000 channels), bytes of one text (the
-    provenance), top-level variables."""
+    2000 x 2000 matrix), rows or columns of one (``side``: states, inputs, outputs), texts in
+    one cell (names of 2000 channels), bytes of one text (the provenance), top-level
+    variables. Messages hold no parentheses: the model reader keeps a message up to its first
+    (:func:`cfsession.guard.short_error`)."""
 
     values: int = 2000 * 2000
+    side: int = 2000
     cells: int = 2000
     text_bytes: int = 1 << 20
     variables: int = 64
@@ -58,9 +61,10 @@ def _mat_tag(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int
     return word, pos + 8, nbytes, min(after, end)
 
 
-def _header(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int]:
-    """``(class, number of values, position after the name)`` of the array whose payload
-    starts at ``pos``: its flags (no complex, global or logical bit), dimensions and name."""
+def _header(data: bytes, pos: int, order: str, end: int
+            ) -> tuple[int, tuple[int, ...], str, int]:
+    """``(class, shape, name, position after the name)`` of the array whose payload starts at
+    ``pos``: its flags (no complex, global or logical bit), dimensions and name."""
     kind, flags, size, p = _mat_tag(data, pos, order, end)
     if kind != _MI_UINT32 or size != 8:
         raise ValueError(f"MAT array at byte {pos} has no array flags")
@@ -76,10 +80,10 @@ def _header(data: bytes, pos: int, order: str, end: int) -> tuple[int, int, int]
     shape = struct.unpack_from(f"{order}{size // 4}i", data, dims)
     if min(shape) < 0:
         raise ValueError(f"MAT array at byte {pos} has a negative dimension")
-    kind, _, _, p = _mat_tag(data, p, order, end)
+    kind, name, size, p = _mat_tag(data, p, order, end)
     if kind != _MI_INT8:
         raise ValueError(f"MAT array at byte {pos} has no name")
-    return word & 0xFF, math.prod(shape), p
+    return word & 0xFF, shape, data[name:name + min(size, 64)].decode("latin-1"), p
 
 
 def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool,
@@ -96,7 +100,11 @@ def _mat_array(data: bytes, pos: int, order: str, *, end: int, in_cell: bool,
     if nbytes == 0:
         return after
     stop = start + nbytes
-    cls, count, p = _header(data, start, order, stop)
+    cls, shape, name, p = _header(data, start, order, stop)
+    count = math.prod(shape)
+    if cls in _MX_NUMBERS and max(shape) > limits.side:
+        raise ValueError(f"MAT matrix {name!r} at byte {pos} is {' x '.join(map(str, shape))}"
+                         f"; a sysid model has at most {limits.side} states, inputs and outputs")
     most = limits.cells if cls == _MX_CELL else limits.values
     if cls != _MX_CHAR and count > most:
         raise ValueError(f"MAT array at byte {pos} holds {count} values; a sysid model has at "

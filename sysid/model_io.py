@@ -13,9 +13,11 @@ noise_cov)``.
 (more than :data:`MAX_DIMENSION` states, inputs or outputs; a ``.mat`` or ``.json`` file over
 :data:`MAX_FILE_BYTES`; in ``.h5`` or ``.mat``, a text over :data:`MAX_TEXT_BYTES`), naming the
 limit and the format that holds it: the caps bound what an untrusted file costs to read, so they
-are not raised to the largest model the formats can hold (a 2000-state model with a few channels
-is 31 MB as ``.mat``, about 100 MB as JSON: only hundreds of channels, over a thousand as ``.mat``,
-pass :data:`MAX_FILE_BYTES`).
+are not raised to the largest model the formats can hold. :data:`MAX_DIMENSION` (500) is 2.5
+times the largest order live identification takes and over ten times what order selection
+sweeps (:data:`sysid.growth.MAX_ORDER`); ``sysid identify --order`` refuses more. A 2000-state
+model took ``sysid compare`` over 25 s and a JSON export of hundreds of MB; a 500-state model
+with a few channels is 2 MB as ``.mat``, about 6 MB as JSON, and compares in seconds.
 
 **Model files come from anywhere**, so :func:`load` reads each format into one plain dict
 and checks it before a model is made: the format name; a version from 1 to
@@ -58,14 +60,16 @@ __all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "check_not_a_session", "load", "sa
 log = logging.getLogger(__name__)
 
 _H5 = (".h5", ".hdf5")
-MAX_DIMENSION = 2000
-"""Most states, inputs or outputs a model file may have (a 2000 x 2000 matrix is 32 MB)."""
+MAX_DIMENSION = 500
+"""Most states, inputs or outputs a model file may have, and a model :func:`save` writes (the
+module docstring says why 500)."""
 MAX_FILE_BYTES = 128 << 20
-"""Largest JSON or MAT model file read (a 2000-state JSON model is about 90 MB)."""
+"""Largest JSON or MAT model file read (a model of 500 states, inputs and outputs is about
+36 MB as JSON)."""
 MAX_TEXT_BYTES = 1 << 20
 """Largest text of a MAT model (its provenance JSON), as an HDF5 model's attributes."""
 MAX_JSON_CONTAINERS = 1_000_000
-"""Most JSON arrays and objects in a JSON model file (a 2000-state model has about 12 000)."""
+"""Most JSON arrays and objects in a JSON model file (a 500-state model has about 1 500)."""
 _SHAPES = {"A": "nn", "B": "nm", "C": "ln", "D": "lm", "K": "nl", "noise_cov": "ll"}
 _LABELS = {"input_names": "m", "output_names": "l", "input_units": "m", "output_units": "l"}
 _COUNTS = {"n": "states", "m": "inputs", "l": "outputs"}
@@ -300,8 +304,8 @@ def _matrix_type(name: str, *, dtype: np.dtype, shape: tuple[int, ...], path: Pa
         raise _unreadable(path, f"matrix {name!r} has shape {shape}; it must be "
                           "two-dimensional")
     if max(shape, default=0) > MAX_DIMENSION:
-        raise _unreadable(path, f"matrix {name!r} has shape {shape}; a sysid model has at most "
-                          f"{MAX_DIMENSION} states, inputs and outputs")
+        raise _unreadable(path, f"matrix {name!r} has shape {shape}; a sysid model file has at "
+                          f"most {MAX_DIMENSION} states, inputs and outputs (MAX_DIMENSION)")
 
 
 def _matrix(name: str, value: object, *, path: Path) -> np.ndarray:
@@ -332,7 +336,7 @@ def _read_bounded(path: Path) -> bytes:
 def _load_json(path: Path) -> object:
     data = _read_bounded(path)
     # Python builds an object of about 60 bytes for each "[]": a file of them would take 20
-    # times its size in memory. A 2000-state model has about 12 000 arrays.
+    # times its size in memory. A 500-state model has about 1 500 arrays.
     containers = data.count(b"[") + data.count(b"{")
     if containers > MAX_JSON_CONTAINERS:
         raise _unreadable(path, f"{containers} JSON arrays and objects, more than a model has "
@@ -354,10 +358,12 @@ def _load_h5(path: Path) -> dict[str, Any]:
         with f:
             problems: list[str] = []
             attrs = read_attrs(f, where=where, problems=problems, kind=kind)
+            _refuse_unread(problems, [n for n in f.attrs if n not in attrs], path=path,
+                           where=where)
             if "format" not in attrs:  # e.g. a session file
                 return {}
-            if problems:
-                raise SessionError(problems[0])
+            for problem in problems:  # an attribute no model has: the model reads without it
+                log.warning("%s; a sysid model does not use it", problem)
             d: dict[str, Any] = {k: _scalar(v) for k, v in attrs.items()
                                  if k in ("format", "version", "dt", "dt_unit")}
             for key in ("provenance", *_LABELS):
@@ -375,6 +381,23 @@ def _load_h5(path: Path) -> dict[str, Any]:
     except SessionError as exc:
         raise _unreadable(path, str(exc).removeprefix(f"{where}: ")) from None
     return d
+
+
+_MODEL_ATTRS = frozenset({"format", "version", "dt", "dt_unit", "provenance", *_LABELS})
+"""The root attributes of an HDF5 model that :func:`load` reads; any other is not used."""
+
+
+def _refuse_unread(problems: list[str], left_out: list[str], *, path: Path, where: str) -> None:
+    """One line for the first attribute in ``left_out`` (those the guard did not read: too
+    large, of another type, unreadable) that a model needs; the guard's ``problems`` say
+    "skipped", but a model is not read without one of these."""
+    for name in left_out:
+        if name not in _MODEL_ATTRS:
+            continue
+        said = next((p.removeprefix(f"{where}: ") for p in problems
+                     if f"attribute {name!r} " in p), f"attribute {name!r} unreadable ()")
+        head, _, why = said.replace(" skipped (", " unreadable (", 1).partition(" unreadable (")
+        raise _unreadable(path, f"{head} cannot be read: {why.removesuffix(')') or 'unknown'}")
 
 
 def _within(path: Path, what: str, size: int, limit: tuple[int, str], instead: str) -> None:
@@ -449,7 +472,8 @@ def _load_mat(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
 
     data = _read_bounded(path)
-    check_mat(data, limits=Limits(values=MAX_DIMENSION ** 2, cells=MAX_DIMENSION,
+    check_mat(data, limits=Limits(values=MAX_DIMENSION ** 2, side=MAX_DIMENSION,
+                                  cells=MAX_DIMENSION,
                                   text_bytes=MAX_TEXT_BYTES))
     m = loadmat(io.BytesIO(data), squeeze_me=False)
     if "format" not in m:

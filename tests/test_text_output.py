@@ -55,3 +55,31 @@ def test_identify_prints_the_formatters_table(tmp_path):
     cells = pole_cells(pole_rows(model.poles(), dt=model.dt))
     for row in cells:  # every pole on one line, in the formatter's order and words
         assert re.search(r"\s+".join(map(re.escape, row)), res.output), (row, res.output)
+
+
+def test_info_shows_a_sessions_control_characters_escaped(tmp_path):
+    """A session made elsewhere whose phase name and event text hold a screen clear, a
+    carriage return and a bell: ``info`` printed them raw (review); escaped now, and a log
+    record quoting such text is one line with them escaped too."""
+    import logging
+
+    import h5py
+    import numpy as np
+
+    from cfcommon.cli import _OneLineRecords
+    from tests.viz.test_replay_hostile import EVENTS, PHASES, _craft
+
+    phases = ("phases", "phases", PHASES, [(0.1, 0, b"ho\x1b[2Jver\r", b"hover")])
+    session = _craft(tmp_path / "s.h5", extra=phases)
+    with h5py.File(session, "a") as f:
+        g = f.create_group("events")
+        g.attrs["kind"] = "events"
+        g.create_dataset("data", data=np.array([(0.2, 3, b"runner", b"bell\x07X", 0)],
+                                                dtype=EVENTS))
+    res = CliRunner().invoke(gs_main, ["info", str(session), "--events"])
+    assert res.exit_code == 0, res.output
+    assert not re.search("[\x00-\x09\x0b-\x1f\x7f-\x9f]", res.output), repr(res.output)
+    assert r"ho\x1b[2Jver\r" in res.output and r"bell\x07" in res.output
+    record = logging.LogRecord("x", logging.WARNING, __file__, 1, "phase %s", ("a\x1b[2J\nb",),
+                               None)
+    assert _OneLineRecords(tracebacks=False).format(record) == r"WARNING x: phase a\x1b[2J\nb"

@@ -28,7 +28,14 @@ from typing import Any
 
 import click
 
-from cfcommon.cli import NO_ROOM, FiniteFloat, drop_failing_stdout, output_gone
+from cfcommon.cli import (
+    NO_ROOM,
+    FiniteFloat,
+    drop_failing_stdout,
+    output_gone,
+    shown_markup,
+    shown_text,
+)
 from cfsession.schema import StreamSpec
 from groundstation.errors import GroundStationError, PlanError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
@@ -131,7 +138,7 @@ class PlainProgress:
         if stream in self._logs:
             self._packets[stream] = self._packets.get(stream, 0) + len(rows)
         elif stream == "phases" and rows:
-            self._phase = rows[-1][2].decode(errors="replace")
+            self._phase = shown_text(rows[-1][2].decode(errors="replace"))  # the plan's text
             self._emit(self._elapsed(rows[-1][0]))
         elif stream == "setpoints" and rows:
             t = self._elapsed(rows[-1][0])
@@ -184,7 +191,7 @@ class ProgressListener:
         if stream in self._logs:
             self._packets[stream] = self._packets.get(stream, 0) + len(rows)
         elif stream == "phases":
-            update["description"] = rows[-1][2].decode(errors="replace")
+            update["description"] = shown_markup(rows[-1][2].decode(errors="replace"))
         elif stream == "setpoints":
             ticks = [r for r in rows if r[6] >= 0]
             if ticks and self._t0 is None:
@@ -385,7 +392,7 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
         if as_json:
             click.echo(json.dumps(result.summary, indent=2))
         else:
-            click.echo("\n".join(summary_lines(result.summary)))
+            click.echo("\n".join(map(shown_text, summary_lines(result.summary))))
     except OSError as exc:  # the terminal closed (the hang-up that aborted the flight?): the
         if exc.errno in NO_ROOM:  # exit status below still tells how the flight ended;
             drop_failing_stdout()  # a full disk under a redirection says so after it

@@ -9,11 +9,10 @@ from typing import Any
 
 import click
 import numpy as np
-from rich.markup import escape
 from rich.measure import Measurement
 from rich.table import Table
 
-from cfcommon.cli import output_console, output_table
+from cfcommon.cli import output_console, output_table, shown_markup
 from cfsession import Session, open_session
 
 __all__ = ["command", "describe", "live_id"]
@@ -208,19 +207,20 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
     state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
     if isinstance(d.get("summary"), dict) and d["summary"].get("aborted"):
         state += ", flight ABORTED (its cause is under the flight summary)"
-    out.print(f"[bold]{escape(d['path'])}[/] schema {d['schema_version']}, {state}")
+    out.print(f"[bold]{shown_markup(d['path'])}[/] schema {d['schema_version']}, {state}")
     t0, t1 = d["time_s"]
     span = (f"data {t0:.2f} to {t1:.2f} s of firmware time ({d['duration_s']:.2f} s)"
             if d["imported"] else f"duration {d['duration_s']:.2f} s")
-    out.print(escape(  # the file's own text: "[/x]" in it is no markup
+    out.print(shown_markup(  # the file's own text: "[/x]" in it is no markup
         f"start {d['start']}  {span}  uri {d['uri'] or '-'}  "
         f"plan {d['plan'] or '-'}{'  tag ' + d['tag'] if d['tag'] else ''}  "
         f"firmware {d['firmware'] or '-'}"
     ))
-    rows = [[escape(name), escape(e["kind"]), str(e["rows"]), _fmt(e.get("rate_hz"), ".1f"),
-             str(e.get("expected", "-")), str(e.get("dropped", "-"))]
+    rows = [[shown_markup(name), shown_markup(e["kind"]), str(e["rows"]),
+             _fmt(e.get("rate_hz"), ".1f"), str(e.get("expected", "-")),
+             str(e.get("dropped", "-"))]
             for name, e in d["streams"].items()]
-    fields = [escape(_fields_text(e["fields"]) if e["kind"] != "events" else
+    fields = [shown_markup(_fields_text(e["fields"]) if e["kind"] != "events" else
                      f"level, source, text ({_count(d['events'], 'event')})")
               for e in d["streams"].values()]
     columns = ["stream", "kind", "rows", "rate Hz", "expected", "dropped"]
@@ -236,7 +236,7 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
     _keep_names_whole(table, [row[0] for row in rows], out.width)
     out.print(table)
     if not beside:
-        out.print(escape("fields [unit]:"))
+        out.print(shown_markup("fields [unit]:"))
         grid = Table.grid(padding=(0, 1), pad_edge=True)
         grid.add_column()
         grid.add_column()
@@ -247,11 +247,11 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
     if d["phases"]:
         shown = d["phases"][:MAX_PHASE_ROWS]
         phases = output_table("phase", "kind", "start s", "end s", "length s", console=out)
-        _keep_names_whole(phases, [escape(p["name"]) for p in shown], out.width)
+        _keep_names_whole(phases, [shown_markup(p["name"]) for p in shown], out.width)
         for p in shown:
             phases.add_row(
-                escape(p["name"]),
-                escape(p["kind"]),
+                shown_markup(p["name"]),
+                shown_markup(p["kind"]),
                 _fmt(p["start_s"]),
                 _fmt(p["end_s"]),
                 _fmt(p["end_s"] - p["start_s"]),
@@ -263,17 +263,17 @@ def command(session: Path, as_json: bool, show_events: bool, width: int | None) 
         out.print("flight summary, stored when the flight ended (counts to its end: a stream "
                   "silent after a link loss counts as dropped there):")
         for line in _summary_text(d["summary"]):
-            out.print(escape(line))
+            out.print(shown_markup(line))
     if d.get("parameters"):
-        out.print("firmware parameters for the flight: " + escape(", ".join(
+        out.print("firmware parameters for the flight: " + shown_markup(", ".join(
             f"{k} = {v['value']:g} (was {v['was']:g})" for k, v in d["parameters"].items())))
     if "live_id" in d:
         for line in _live_id_text(d["live_id"]):
-            out.print(escape(line))
+            out.print(shown_markup(line))
     for problem in d["problems"]:
-        out.print(f"[yellow]problem:[/] {escape(problem)}")
+        out.print(f"[yellow]problem:[/] {shown_markup(problem)}")
     if show_events:
         for e in s.events():
-            out.print(escape(f"{e.t:9.3f} {e.level:8s} {e.source:8s} {e.text}"))
+            out.print(shown_markup(f"{e.t:9.3f} {e.level:8s} {e.source:8s} {e.text}"))
     else:
         out.print(f"{d['events']} events (--events lists them)")

@@ -17,10 +17,9 @@ from typing import Any
 import click
 import numpy as np
 from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
 
-from cfcommon.cli import check_output, output_console
+from cfcommon.cli import check_output, output_console, shown_markup
 from groundstation.commands.plan_design import design
 from groundstation.plan import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
 from groundstation.plan.design import design_notes
@@ -107,7 +106,8 @@ def summarize(plan: Plan, schedule: Schedule) -> dict[str, Any]:
 
 
 def _print_check(console: Console, s: dict[str, Any]) -> None:
-    console.print(f"[bold]plan {escape(s['name'])}[/] ({escape(s['source'])}): [green]valid[/]")
+    console.print(f"[bold]plan {shown_markup(s['name'])}[/] ({shown_markup(s['source'])}): "
+                  "[green]valid[/]")
     console.print(
         f"{s['n_setpoints']} setpoints at {s['rate_hz']:g} Hz, duration {s['duration_s']:g} s"
     )
@@ -125,12 +125,12 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
     for p in s["phases"]:
         table.add_row(
             str(p["id"]),
-            escape(p["name"]),
+            shown_markup(p["name"]),
             p["kind"],
             f"{p['start_s']:g}",
             f"{p['end_s']:g}",
             str(p["setpoints"]),
-            escape(p["excitation"]),
+            shown_markup(p["excitation"]),
         )
     console.print(table)
     if s["prbs"]:
@@ -139,7 +139,7 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
             prbs.add_column(col, justify="left" if col == "PRBS" else "right", no_wrap=True)
         for f in s["prbs"]:
             prbs.add_row(
-                f"{escape(f['phase'])}/{f['axis']}",
+                f"{shown_markup(f['phase'])}/{f['axis']}",
                 f"±{f['amplitude']:g} {f['unit']}",
                 str(f["register_length"]),
                 str(f["seed"]),
@@ -171,9 +171,9 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
     console.print(f"on abort: {abort}")
     if s["parameters"]:
         console.print("firmware parameters for the flight (restored after it): " + ", ".join(
-            f"{escape(k)} = {v:g}" for k, v in s["parameters"].items()))
+            f"{shown_markup(k)} = {v:g}" for k, v in s["parameters"].items()))
     for w in s["warnings"]:
-        console.print(f"[yellow]warning:[/] {escape(w)}")
+        console.print(f"[yellow]warning:[/] {shown_markup(w)}")
 
 
 def plot_lines(values: np.ndarray, *, width: int, height: int) -> list[str]:
@@ -197,12 +197,12 @@ def _print_show(console: Console, schedule: Schedule, *, width: int, height: int
     n = len(schedule)
     width = max(10, min(width, n))
     console.print(
-        f"[bold]plan {escape(schedule.name)}[/]: {n} setpoints, "
+        f"[bold]plan {shown_markup(schedule.name)}[/]: {n} setpoints, "
         f"{schedule.duration:g} s at {schedule.rate_hz:g} Hz"
     )
     for axis in SETPOINT_CHANNELS:
         values = getattr(schedule, axis).astype(float)
-        console.print(f"[bold cyan]{axis}[/] " + escape(f"[{UNITS[axis]}]"))
+        console.print(f"[bold cyan]{axis}[/] " + shown_markup(f"[{UNITS[axis]}]"))
         for r, line in enumerate(plot_lines(values, width=width, height=height)):
             label = (
                 f"{values.max():g}" if r == 0 else f"{values.min():g}" if r == height - 1 else ""
@@ -215,7 +215,8 @@ def _print_show(console: Console, schedule: Schedule, *, width: int, height: int
     console.print(f"{'phases':>8} └{''.join(ruler)}", highlight=False)
     console.print(f"{'':>8}  0 s{f'{schedule.duration:g} s':>{width - 3}}", highlight=False)
     for ph in schedule.phases:
-        console.print(f"{'':>8}  {ph.id}: {ph.start:g}-{ph.end:g} s {escape(ph.name)} ({ph.kind})")
+        console.print(f"{'':>8}  {ph.id}: {ph.start:g}-{ph.end:g} s {shown_markup(ph.name)} "
+                      f"({ph.kind})")
 
 
 @click.group("plan")
@@ -297,9 +298,9 @@ def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | N
     if header or keys:
         console.print("[bold]design[/] (the plan's '# design:' notes)")
         for note in header:
-            console.print(f"  {escape(note)}", highlight=False)
+            console.print(f"  {shown_markup(note)}", highlight=False)
         for key, why in keys:
-            console.print(f"  {escape(key)}: {escape(why)}", highlight=False)
+            console.print(f"  {shown_markup(key)}: {shown_markup(why)}", highlight=False)
 
 
 command.add_command(design)

@@ -15,9 +15,8 @@ from typing import Any
 
 import click
 import numpy as np
-from rich.markup import escape
 
-from cfcommon.cli import FiniteFloat, check_output, output_console
+from cfcommon.cli import FiniteFloat, check_output, output_console, shown_markup
 from groundstation.errors import GroundStationError, PlanError
 from groundstation.plan import Plan, load_plan, parse_plan
 from groundstation.plan.aliasing import axis_shares
@@ -158,8 +157,8 @@ def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
     out.write_text(result.plan.text, encoding="utf-8")
     console = output_console()
     for note in result.notes:
-        console.print(escape(note), highlight=False)
+        console.print(shown_markup(note), highlight=False)
     for ch in result.changes:
-        console.print(f"  {escape(dotted(ch.path))} = {ch.value}: "
-                      f"{escape(ch.why)}", highlight=False)
+        console.print(f"  {shown_markup(dotted(ch.path))} = {ch.value}: "
+                      f"{shown_markup(ch.why)}", highlight=False)
     console.print(f"wrote {out}; check it with `groundstation plan check {out}`")

@@ -42,7 +42,8 @@ def specs_of(session: Session) -> list[StreamSpec]:
 def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
     """Send every non-empty stream of ``session`` through ``view`` and end it.
 
-    Returns the rows sent per stream.
+    Returns the rows shown per stream: a row with no usable time (not finite, beyond what
+    Rerun's time columns hold) is left out and not counted (``view.untimed_rows``).
     """
     meta = dict(session.meta) | {"problems": list(session.problems)}
     specs = [s for s in specs_of(session) if len(session[s.name])]  # no empty panels
@@ -54,6 +55,12 @@ def replay_session(*, session: Session, view: RerunView) -> dict[str, int]:
         "duration_s": session.duration}
     view.end(summary=summary)
     return dict(view.sent_rows)
+
+
+def _left_out(view: RerunView) -> str:
+    """``; N rows with no usable time left out`` when the view left rows out, else ``""``."""
+    n = sum(view.untimed_rows.values())
+    return f"; {n} rows with no usable time left out" if n else ""
 
 
 @click.command("replay", short_help="Show a recorded session in Rerun, or write it to .rrd.")
@@ -84,9 +91,10 @@ def command(session: Path, rrd: Path | None, mode: str | None, web_port: int) ->
     view = open_view(mode="save" if rrd else mode or "rerun", name=session.stem, rrd_path=rrd,
                      web_port=web_port)
     counts = replay_session(session=s, view=view)
-    log.info("replayed %d rows in %.2f s", sum(counts.values()), time.perf_counter() - t0)
+    replayed = f"{sum(counts.values())} rows from {len(counts)} streams{_left_out(view)}"
+    log.info("replayed %s in %.2f s", replayed, time.perf_counter() - t0)
     if rrd is not None:
-        click.echo(f"wrote {rrd} ({sum(counts.values())} rows from {len(counts)} streams)")
+        click.echo(f"wrote {rrd} ({replayed})")
         return
     if view.url:
         click.echo(f"Rerun web viewer: {view.url}  (Ctrl-C to stop serving)")

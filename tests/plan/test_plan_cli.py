@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 
 import numpy as np
@@ -117,3 +118,33 @@ def test_plot_lines_draws_a_ramp_as_a_diagonal_and_a_prbs_as_a_band():
     assert band == ["█████"] * 3
     coarse = plot_lines(np.arange(40.0), width=4, height=4)  # each column spans its min..max
     assert coarse == ["   █", "  ██", "██  ", "█   "]
+
+
+CONTROL = re.compile("[\x00-\x09\x0b-\x1f\x7f-\x9f\u202e]")  # every control but line feed
+HOSTILE_NAME = "ex\x1b[2Jcite\r\x07\u202e"
+"""A phase name that clears the screen, rewrites the line, rings the bell and reverses what
+follows, printed raw by ``plan check``/``show`` before (review)."""
+
+
+@pytest.mark.parametrize("args", [("check",), ("show", "--width", "40")])
+def test_control_characters_of_a_plan_are_shown_escaped(tmp_path, args):
+    path = tmp_path / "hostile.toml"
+    # TOML takes control characters as escapes only; the PRBS covers less than its period, so
+    # the name is in the table, the PRBS table and the warning
+    path.write_text(BASE.replace('name = "excite"', f"name = {json.dumps(HOSTILE_NAME)}")
+                    .replace("register_length = 5", "register_length = 6"))
+    result = _run("plan", *args, str(path))
+    assert result.exit_code == 0, result.output
+    assert not CONTROL.search(result.output), repr(result.output)
+    shown = r"ex\x1b[2Jcite\r\x07\u202e"
+    assert shown in result.output
+    if args[0] == "check":
+        assert f"{shown}/roll" in result.output and f"warning: phase {shown} roll" in \
+            result.output
+
+
+def test_an_error_naming_a_hostile_path_is_escaped(tmp_path):
+    """The one error line quotes the path as given: its control characters escaped."""
+    result = _run("plan", "check", str(tmp_path / "no\x1b[2Jplan.toml"))
+    assert result.exit_code == 2
+    assert "\x1b" not in result.output and r"no\x1b[2Jplan" in result.output

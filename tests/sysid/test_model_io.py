@@ -70,14 +70,64 @@ def test_a_fifo_as_the_model_is_refused_at_once(tmp_path, suffix):
 
 
 # ------------------------------------------------- what save writes, load reads (the caps)
-def test_a_2000_state_model_round_trips_as_mat(tmp_path):
-    """MAX_DIMENSION states with a Crazyflie's channels: 31 MB, well within MAX_FILE_BYTES."""
+def test_a_model_of_the_most_states_round_trips_as_mat(tmp_path):
+    """MAX_DIMENSION states with a Crazyflie's channels: 2 MB, well within MAX_FILE_BYTES."""
     n, rng = model_io.MAX_DIMENSION, np.random.default_rng(0)
     m = StateSpaceModel(A=rng.standard_normal((n, n)) * 0.01, B=rng.standard_normal((n, 4)),
                         C=rng.standard_normal((6, n)), D=np.zeros((6, 4)), dt=0.01)
     path = save(m, tmp_path / "m.mat")
     assert path.stat().st_size < model_io.MAX_FILE_BYTES / 4
     assert np.array_equal(load(path).A, m.A)
+
+
+def test_the_ceiling_is_above_every_order_sysid_identifies():
+    """A model the project makes is never refused for its order: live identification takes
+    up to 200 states, the automatic grid grows to sysid.growth.MAX_ORDER, and
+    ``identify --order`` stops at the ceiling itself (so no identification is spent on a model
+    that save would then refuse)."""
+    from click.testing import CliRunner
+
+    from sysid.cli import main
+    from sysid.growth import MAX_ORDER
+
+    assert MAX_ORDER < model_io.MAX_DIMENSION and model_io.MAX_DIMENSION >= 200
+    n = model_io.MAX_DIMENSION + 1
+    res = CliRunner().invoke(main, ["identify", "flight.h5", "--order", str(n)])
+    assert res.exit_code == 2 and f"{n} is not in the range 1<=x<={n - 1}" in res.stderr
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("suffix", [".h5", ".json", ".mat"])
+def test_a_model_file_beyond_the_ceiling_is_one_line_naming_file_matrix_and_limit(tmp_path,
+                                                                                suffix):
+    """A crafted model of 2000 states took ``sysid compare`` over 25 s and its JSON export
+    hundreds of MB (review); now one line, before any matrix is read (.h5) or used."""
+    n = model_io.MAX_DIMENSION + 1
+    m = sample_model()
+    d = {**m.to_dict(), "A": np.eye(n) * 0.5, "B": np.ones((n, 1)), "C": np.ones((1, n)),
+         "K": np.zeros((n, 1))}
+    path = tmp_path / f"big{suffix}"
+    if suffix == ".h5":
+        import h5py
+
+        save(m, path)
+        with h5py.File(path, "a") as f:
+            for name in "ABCK":
+                del f[name]
+                f[name] = d[name]
+    elif suffix == ".json":
+        path.write_text(json.dumps({k: v.tolist() if isinstance(v, np.ndarray) else v
+                                    for k, v in d.items()}))
+    else:
+        import scipy.io
+
+        save(m, path)
+        mat = scipy.io.loadmat(path)
+        mat.update({name: d[name] for name in "ABCK"})
+        scipy.io.savemat(path, {k: v for k, v in mat.items() if not k.startswith("__")})
+    msg = refused(path, rf"matrix 'A' .*(has shape \({n}, {n}\)|is {n} x {n}); a sysid model "
+                  rf"(file )?has at most {n - 1} states, inputs and outputs")
+    assert str(path) in msg
 
 
 @pytest.mark.parametrize("suffix", [".mat", ".json"])
@@ -118,7 +168,8 @@ def test_more_states_than_load_reads_are_not_written(tmp_path, suffix):
     n = model_io.MAX_DIMENSION + 1
     m = StateSpaceModel(A=np.zeros((n, n)), B=np.zeros((n, 1)), C=np.zeros((1, n)), dt=0.01)
     path = tmp_path / f"m{suffix}"
-    with pytest.raises(ModelFileError, match=rf"{n} states, more than the 2000 that load reads"):
+    with pytest.raises(ModelFileError, match=rf"{n} states, more than the {n - 1} that load "
+                       "reads"):
         save(m, path)
     assert not path.exists()
 

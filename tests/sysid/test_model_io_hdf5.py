@@ -106,8 +106,9 @@ HDF5_CASES = {
                             r"declares shape \(100, 100\) but stores 0"),
     "unstored chunks": (_replace("A", shape=(1000, 1000), dtype="f8", chunks=(10, 10)),
                         r"declares shape \(1000, 1000\) but stores at most 200"),
-    "too many states": (_replace("B", data=np.zeros((2, 2001))),
-                        r"matrix 'B' has shape \(2, 2001\); a sysid model has at most 2000"),
+    "too many states": (_replace("B", data=np.zeros((2, 501))),
+                        r"matrix 'B' has shape \(2, 501\); a sysid model file has at most 500 "
+                        r"states, inputs and outputs \(MAX_DIMENSION\)"),
     "a group": (_group_a, "matrix 'A' is a group"),
     "text": (_replace("A", data=np.array([[b"1", b"2"], [b"3", b"4"]])), "'A' holds text"),
     "complex": (_replace("A", data=np.eye(2) * (1 + 1j)), "'A' is complex"),
@@ -145,7 +146,8 @@ HDF5_CASES = {
     "deep provenance": (_attr("provenance", "[" * 100_000 + "]" * 100_000),
                         "not a readable sysid model"),
     "dt_unit a sequence": (_vlen_attr("dt_unit"),
-                           r"'dt_unit' skipped \(HDF5 type class variable-length sequence"),
+                           r"attribute 'dt_unit' cannot be read: HDF5 type class "
+                           "variable-length sequence"),
 }
 
 
@@ -165,7 +167,8 @@ def test_a_damaged_string_type_is_one_line_not_a_crash(tmp_path):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=60)
     assert done.returncode == 0, (done.returncode, done.stderr[-500:])
-    assert "'dt_unit' skipped" in done.stdout and "\n" not in done.stdout.strip()
+    assert "attribute 'dt_unit' cannot be read: HDF5 type class" in done.stdout
+    assert "skipped" not in done.stdout and "\n" not in done.stdout.strip()
 
 
 def test_text_declaring_a_gigabyte_is_one_line_unread(tmp_path):
@@ -182,8 +185,8 @@ def test_text_declaring_a_gigabyte_is_one_line_unread(tmp_path):
                           text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     message, peak_mib = done.stdout.strip().split("\n")
-    assert "attribute 'provenance' skipped (variable-length text of 1073741824 declared " \
-           "bytes)" in message, message
+    assert "attribute 'provenance' cannot be read: variable-length text of 1073741824 " \
+           "declared bytes)" in message, message
     assert int(peak_mib) < 400, peak_mib  # about 120 MiB with sysid's imports; 1 GiB before
 
 
@@ -219,3 +222,46 @@ def test_cli_process_prints_one_line_without_traceback(tmp_path):
     assert "data stored outside the file" in proc.stderr and proc.stdout == ""
 
 
+
+
+def _with_large_attribute(tmp: Path, name: str, value: object) -> Path:
+    """A saved sample model rewritten with the root attribute ``name`` set to ``value`` (dense
+    attribute storage: HDF5's compact header holds at most 64 KiB)."""
+    src = save(sample_model(), tmp / "small.h5")
+    path = tmp / "m.h5"
+    with h5py.File(src) as a, h5py.File(path, "w", libver="latest") as f:
+        f.attrs.update(dict(a.attrs))
+        for key in a:
+            a.copy(key, f)
+        f.attrs[name] = value
+    return path
+
+
+def test_an_unused_attribute_too_large_to_read_is_skipped_and_the_model_loads(tmp_path, caplog):
+    """An extra attribute over the guard's MAX_ATTR_BYTES: the message said "skipped", yet the
+    model was refused (review). A model does not use it: it loads, with one warning."""
+    from cfsession.guard import MAX_ATTR_BYTES
+    from sysid.model_io import load
+
+    path = _with_large_attribute(tmp_path, "notes", np.zeros(MAX_ATTR_BYTES // 8 + 1))
+    with caplog.at_level("WARNING", logger="sysid.model_io"):
+        model = load(path)
+    assert np.array_equal(model.A, sample_model().A)
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and f"attribute 'notes' skipped ({MAX_ATTR_BYTES + 8} bytes); a " \
+        "sysid model does not use it" in said[0], said
+    res = CliRunner().invoke(main, ["export", str(path), "--format", "json"])
+    assert res.exit_code == 0, res.output
+    assert path.with_suffix(".json").exists()
+
+
+def test_a_used_attribute_too_large_to_read_is_refused_without_saying_skipped(tmp_path):
+    """The provenance over MAX_ATTR_BYTES: the model cannot be read without it, so the one
+    line says it cannot be read (not "skipped", which reads as if the model loaded)."""
+    from cfsession.guard import MAX_ATTR_BYTES
+
+    path = _with_large_attribute(tmp_path, "provenance",
+                                 json.dumps({"x": "a" * MAX_ATTR_BYTES}))
+    msg = refused(path, rf"attribute 'provenance' cannot be read: variable-length text of "
+                  rf"{MAX_ATTR_BYTES + 9} declared bytes")
+    assert "skipped" not in msg

@@ -83,7 +83,7 @@ MAT_CASES = {
     "150 001 dimensions": (lambda p: p.write_bytes(_mat_file(_mat_element(
         6, "A", _DOUBLE_1, dims=(2**31 - 1,) * 150_000 + (0,)))), "has 150001 dimensions"),
     "a cell of 5 million": (lambda p: p.write_bytes(_mat_file(_mat_element(
-        1, "InputName", b"", dims=(1, 5_000_000)))), "holds 5000000 values; .* at most 2000"),
+        1, "InputName", b"", dims=(1, 5_000_000)))), "holds 5000000 values; .* at most 500"),
     "a 2 MB text": (lambda p: p.write_bytes(_mat_file(_mat_element(
         4, "provenance", struct.pack("<II", 16, 2 << 20) + b"[" * (2 << 20),
         dims=(1, 2 << 20)))), r"MAT text at byte 128 has 2097152 bytes"),

@@ -130,3 +130,38 @@ def test_a_phase_or_event_with_no_usable_time_is_left_out_not_the_others(tmp_pat
     if case != "log":
         entity = load(tmp_path / "o.rrd")[PHASE if case == "phases" else EVENTS_PATH]
         assert list(entity.times["host_time"]) == [0.1, 0.5]
+
+
+def test_the_row_count_is_of_the_rows_replayed(tmp_path):
+    """Rows with no usable time are left out of the recording, yet the count said 49 rows
+    for 47 shown (review): it counts what was replayed and says how many were left out and
+    why, in the one line. A row never written (NaN host_time) is no row of the session."""
+    session = _craft(tmp_path / "s.h5", extra=("phases", "phases", PHASES, [
+        (0.1, 0, b"a", b"hover"), (np.inf, 1, b"b", b"hover")]))
+    with h5py.File(session, "r+") as f:
+        rows = f["gyro/data"][...]
+        rows["host_time"][5], rows["host_time"][7], rows["host_time"][9] = np.inf, 1e300, np.nan
+        f["gyro/data"][...] = rows
+    res = CliRunner().invoke(gs_main, ["replay", str(session), "--rrd", str(tmp_path / "o.rrd")])
+    assert res.exit_code == 0, res.output
+    assert f"wrote {tmp_path / 'o.rrd'} (48 rows from 2 streams; 3 rows with no usable time " \
+           "left out)" in res.stdout
+
+
+def test_events_left_out_count_with_the_rows_that_continue_them():
+    """An event whose first row has no usable time is left out with its continuation rows,
+    also when they come in the next block; an event continued from a shown one is shown."""
+    import rerun as rr
+
+    from cfsession.schema import Field, StreamSpec
+    from groundstation.live import RerunView
+
+    spec = StreamSpec(name="events", kind="events", fields=tuple(
+        Field(n, t, "", "") for n, t in EVENTS))
+    view = RerunView(rec=rr.RecordingStream("test-events"), background=False)
+    view.begin(streams=[spec], metadata={})
+    view.send_block("events", np.array([(0.1, 2, b"r", b"one", 0), (0.1, 2, b"r", b"+", 1),
+                                        (np.inf, 2, b"r", b"two", 0)], dtype=EVENTS))
+    view.send_block("events", np.array([(0.3, 2, b"r", b"+", 1), (0.4, 2, b"r", b"three", 0),
+                                        (np.nan, 2, b"r", b"+", 1)], dtype=EVENTS))
+    assert view.sent_rows == {"events": 4} and view.untimed_rows == {"events": 2}
