@@ -433,7 +433,8 @@ def _same_file(a: Path, b: Path) -> bool:
 class OneLineErrorGroup(click.Group):
     """A click group whose user errors print one line and exit 2, never a traceback.
 
-    Subclasses name their own exception trees in ``user_errors`` (printed as their first line)
+    Subclasses name their own exception trees in ``user_errors`` (printed whole, control
+    characters escaped: a name quoted in it may hold a line feed)
     and may add messages for other exceptions in :meth:`user_error_message`. ``sysid X`` alone
     (no arguments) still shows X's help.
     """
@@ -449,8 +450,8 @@ class OneLineErrorGroup(click.Group):
             # click puts a required choice's values on lines of their own ("Missing option
             # '--format'. Choose from:\n\tjson,\n\tmat"): one line, as every error here
             return f"{' '.join(exc.format_message().split())} (see '{where} -h')"
-        if isinstance(exc, self.user_errors):
-            return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, self.user_errors):  # one line by construction; a file's name in
+            return str(exc) or type(exc).__name__  # it may hold a line feed: _say escapes it
         if isinstance(exc, FileNotFoundError | PermissionError | IsADirectoryError):
             return f"{exc.strerror}: {exc.filename}"
         if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:

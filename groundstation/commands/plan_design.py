@@ -146,7 +146,7 @@ def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
     try:
         model = load(model_path)
     except SysIdError as exc:
-        raise GroundStationError(str(exc).splitlines()[0]) from None
+        raise GroundStationError(str(exc)) from None  # one line; a name in it is escaped
     fits, fit_source, share, aliasing = (_measured(model, flown) if flown
                                          else (None, "", None, None))
     facts = ModelFacts.from_model(model, source=model_path.name, fits=fits,

@@ -56,7 +56,7 @@ from groundstation.plan.model_facts import (
     weakness,
 )
 from groundstation.plan.timing import prbs_timing
-from groundstation.plan.toml import dotted, ensure_tables, key_lines, set_keys
+from groundstation.plan.toml import comment_text, dotted, ensure_tables, key_lines, set_keys
 from groundstation.plan.variants import advanced_seed
 
 __all__ = ["AXIS_OUTPUTS", "MAX_SATURATION", "Change", "Design", "ModelFacts", "choose_seeds",
@@ -265,7 +265,7 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                                "model's inputs are not motor.m1..m4)"),
              *chip_notes,
              "rules and equations: docs/flightplans.md, 'Designing the next flight'")
-    header = "".join(f"{MARK} {n}\n" for n in notes)
+    header = "".join(f"{MARK} {comment_text(n)}\n" for n in notes)  # names from files
     earlier = f"{MARK} (earlier design)"
     kept = "".join(ln.replace(MARK, earlier) if MARK in ln and earlier not in ln else ln
                    for ln in plan.text.splitlines(keepends=True)

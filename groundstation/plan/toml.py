@@ -26,7 +26,8 @@ from tomlkit.items import Array, InlineTable
 
 from groundstation.errors import PlanError
 
-__all__ = ["REQUIRED", "TomlSource", "TomlTable", "dotted", "key_lines", "set_keys", "shown"]
+__all__ = ["REQUIRED", "TomlSource", "TomlTable", "comment_text", "dotted", "key_lines", "set_keys",
+           "shown"]
 
 _KEY = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
 _DOTTED = re.compile(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*")
@@ -115,12 +116,22 @@ def _children(node: Any, part: str | int) -> list[Any]:
     return [item for key, item in body if key is not None and key.key == part]
 
 
+_NOT_IN_COMMENTS = re.compile("[\x00-\x08\x0a-\x1f\x7f]")
+"""What a TOML comment may not hold: control characters other than tab (TOML 1.0)."""
+
+
+def comment_text(text: str) -> str:
+    """``text`` as one TOML comment may hold it: control characters (a line feed in a file
+    name that would end the comment and start a key) written as Python escapes (``\\n``)."""
+    return _NOT_IN_COMMENTS.sub(lambda m: repr(m.group())[1:-1], text)
+
+
 def set_keys(text: str, *, edits: Sequence[tuple[tuple, Any, str]], mark: str = "#") -> str:
     """``text`` with each ``(path, value, note)`` applied by :mod:`tomlkit`: the key at ``path``
     (as :func:`key_lines`'s) set to ``value``, or added to its table when absent, and a ``note``
-    (if any) made its line's trailing comment ``MARK NOTE``; comments keep their column. Keys
-    of an inline table share its line: ``MARK key: note; key: note``. Everything not edited
-    stays byte for byte; no edits give ``text`` back."""
+    (if any) made its line's trailing comment ``MARK NOTE`` (:func:`comment_text`); comments
+    keep their column. Keys of an inline table share its line: ``MARK key: note; key: note``.
+    Everything not edited stays byte for byte; no edits give ``text`` back."""
     doc = tomlkit.parse(text)
     notes: dict[Any, tuple[Any, int, list[str]]] = {}  # line -> its item, old width, notes
     for path, value, note in edits:
@@ -147,7 +158,7 @@ def set_keys(text: str, *, edits: Sequence[tuple[tuple, Any, str]], mark: str = 
         if had or texts:
             pad = len(item.trivia.comment_ws) + width - len(item.as_string()) if had else 2
             if texts:
-                item.comment(f"{mark} {'; '.join(texts)}")
+                item.comment(comment_text(f"{mark} {'; '.join(texts)}"))
             item.trivia.comment_ws = " " * max(2 if texts else 1, pad)
     return doc.as_string()
 

@@ -62,6 +62,26 @@ def _amplitudes(plan) -> dict[str, float]:
     return {e.axis: e.amplitude for p in plan.phases for e in p.excitation}
 
 
+def test_names_from_files_stay_inside_their_comments(tmp_path):
+    """A model file named with a line feed and a TOML line: the note names it escaped, on one
+    comment line; nothing of the name becomes a key of the plan (it was invalid TOML, and a
+    crafted name could have set a key)."""
+    model = _model(tmp_path / "m\ninjected = 0\x1b[2J.json",
+                   outputs=("acc\nz = 1", *GYROS))
+    out = tmp_path / "next.toml"
+    res = _run("plan", "design", "--model", model, "--out", out)
+    assert res.exit_code == 0, res.output
+    text = out.read_text(encoding="utf-8")
+    assert "designed from m\\ninjected = 0\\x1b[2J.json by" in text.splitlines()[0]
+    assert not any(line.startswith(("injected", "z = 1")) for line in text.splitlines())
+    assert _run("plan", "check", out).exit_code == 0
+    bad = _model(tmp_path / "m\nx.json", outputs=("acc.z", "gyro.x", "gyro.y", "gyro\nz"))
+    res = _run("plan", "design", "--model", bad, "--out", tmp_path / "other.toml")
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "m\\nx.json: the model has no output for the plan's yaw_rate axis" in res.output
+    assert "gyro\\nz" in res.output
+
+
 def test_prbs_timing_follows_the_rule():
     # tau_L = 0.2 s: chip <= 2.78 x 0.2 / 2 = 0.278 s -> 2 ticks at 10 Hz; tau_H = 2 s: period
     # >= 2 pi x 3 x 2 = 37.7 s = 189 chips of 0.2 s -> 8 bits (255 chips = 51 s, fits 102.3 s)
