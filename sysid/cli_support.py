@@ -91,12 +91,13 @@ class Group(OneLineErrorGroup):
 
 
 # ------------------------------------------------------------------------------- parsing
-def parse_grid(*, text: str, option: str, minimum: int = 1) -> range | list[int]:
+def parse_grid(*, text: str, option: str, minimum: int = 1,
+               maximum: int | None = None) -> range | list[int]:
     """``20:80:10`` -> range(20, 81, 10) (stop included); ``6,8`` -> [6, 8]; ``8`` -> [8].
 
-    Every value must be an integer ``>= minimum``. A ``START:STOP:STEP`` stays a lazy
-    :class:`range`, so a huge range can be refused (by its length or largest value) before it
-    takes memory."""
+    Every value must be an integer ``>= minimum`` (and ``<= maximum`` when given). A
+    ``START:STOP:STEP`` stays a lazy :class:`range`, so a huge range can be refused (by its
+    length or largest value) before it takes memory."""
     try:
         if ":" in text:
             parts = [int(x) for x in text.split(":")]
@@ -114,6 +115,8 @@ def parse_grid(*, text: str, option: str, minimum: int = 1) -> range | list[int]
     if not values or grid_min(values) < minimum:
         what = "positive integers" if minimum == 1 else f"integers >= {minimum}"
         raise ParameterError(f"{option} {text!r}: give {what}")
+    if maximum is not None and grid_max(values) > maximum:
+        raise ParameterError(f"{option} {text!r}: at most {maximum}")
     return values
 
 

@@ -49,7 +49,7 @@ from sysid.errors import DataError, HorizonError
 from sysid.holdout import GIVE_HORIZONS, VALIDATE_WITH
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
-from sysid.model_io import check_not_a_session
+from sysid.model_io import MAX_DIMENSION, check_not_a_session
 from sysid.refit import saved_as
 from sysid.sweep import SweepRow
 from sysid.variants import ALTERNATIVE
@@ -181,7 +181,8 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
                   window_s: float | None, top: int, out: Path | None, force: bool,
                   as_json: bool, rrd: Path | None, opts: dict[str, Any]) -> None:
     """The body of ``sysid sweep`` (its options and help are in :mod:`sysid.cli`)."""
-    lazy = {k: parse_grid(text=v, option=f"--{k}", minimum=2 if k == "futures" else 1)
+    lazy = {k: parse_grid(text=v, option=f"--{k}", minimum=2 if k == "futures" else 1,
+                          maximum=MAX_DIMENSION if k == "orders" else None)  # a model file's
             for k, v in (("pasts", pasts), ("futures", futures), ("orders", orders))
             if v is not None}
     if out is not None:

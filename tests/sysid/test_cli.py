@@ -285,6 +285,14 @@ def test_parse_grid() -> None:
             parse_grid(text=text, option="--pasts")
     with pytest.raises(ParameterError, match=">= 2"):
         parse_grid(text="1:4", option="--futures", minimum=2)
+    with pytest.raises(ParameterError, match="at most 500"):  # a lazy range, by its stop
+        parse_grid(text="2:100000000", option="--orders", maximum=500)
+
+
+def test_sweep_refuses_orders_no_model_file_holds_before_it_runs(flights) -> None:
+    res = run("sweep", flights[0].path, "--pasts", "10", "--futures", "10", "--orders", "4,600")
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "--orders '4,600': at most 500" in res.output
 
 
 @pytest.mark.parametrize(("args", "words"), [
