@@ -83,8 +83,17 @@ def test_demo_speed_is_a_factor_or_flat_out(speed, ok):
     assert res.exit_code == 2 and "--speed" in res.output and "Traceback" not in res.output
 
 
-def test_fixed_horizons_the_flight_cannot_support_are_one_line_keeping_the_flights(tmp_path):
-    """``demo --order 40 --past 1 --future 2`` ended in sysid's NoStableModel traceback."""
+def test_fixed_horizons_the_flight_cannot_support_are_one_line_keeping_the_flights(
+        tmp_path, monkeypatch):
+    """``demo --order 40 --past 1 --future 2`` ended in sysid's NoStableModel traceback.
+    (The demo's plan with 20.5 s of its 102.3 s PRBS: past 1 bounds the rank whatever the
+    length, and the two whole flights cost 4 s each.)"""
+    import groundstation.commands.demo as demo
+    from tests.flight.conftest import plan_variant
+
+    short = plan_variant("prbs-3axis", **{"duration = 102.3": "duration = 20.5"})
+    monkeypatch.setattr(demo, "load_plan", lambda name: short if name == "prbs-3axis"
+                        else pytest.fail(f"the demo loads {name}"))
     try:
         res = CliRunner().invoke(main, ["demo", "--out", str(tmp_path), "--speed", "inf",
                                         "--order", "40", "--past", "1", "--future", "2"])
@@ -94,7 +103,9 @@ def test_fixed_horizons_the_flight_cannot_support_are_one_line_keeping_the_fligh
     line = res.output.strip().splitlines()[-1]
     assert line.startswith("error: identification failed: all 1 models of the grid failed: "
                            "order=40 exceeds the rank available")
-    flights = sorted(tmp_path.glob("*.h5"))
+    # flight 1 first (on sim://0): two short flights in the same second are named
+    # prbs-3axis-<time>.h5 and prbs-3axis-<time>-2.h5, which sort the other way round
+    flights = sorted(tmp_path.glob("*.h5"), key=lambda p: open_session(p).meta["uri"])
     assert len(flights) == 2 and line.endswith(f"the sessions are kept: {flights[0]} "
                                                f"{flights[1]}")
     assert all(open_session(p).closed_cleanly for p in flights)

@@ -188,10 +188,13 @@ def test_udp_failing_abort_path_still_delivers_the_stop(udp, tmp_path, monkeypat
     monkeypatch.setattr(Schedule, "abort_schedule", broken)
 
     def hook(k: int) -> None:
-        if k == 30:
+        if k == 12:  # in the hover, from tick 10
             raise RuntimeError("injected fault")
 
-    result = fly_plan(plan="hover-check", out=tmp_path, uri=udp.uris[0], tick_hook=hook)
+    # hover-check with a 1 s take-off (real time), as the held-up test below
+    plan = plan_variant("hover-check", **{
+        "duration = 2.0                 # s\nthrust_start": "duration = 1.0\nthrust_start"})
+    result = fly_plan(plan=plan, out=tmp_path, uri=udp.uris[0], tick_hook=hook)
     assert result.cause == "runner error: RuntimeError: injected fault"
     assert _stopped_by_the_ground_station(sim)
     s = check_closed_with_stop(result)

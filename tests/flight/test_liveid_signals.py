@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from groundstation.plan import load_plan
+
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(),
                                 reason="POSIX process groups, children found in /proc")
 
@@ -71,8 +73,13 @@ def test_a_signal_to_the_process_group_aborts_without_the_childs_traceback(tmp_p
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-c",
                                            "from groundstation.cli import main; main()"]
     out, err = tmp_path / "stdout", tmp_path / "stderr"
+    # roll-only with small horizons: its first update comes back 5 s of flight into the PRBS
+    # instead of 15 s (the thesis' past 60, future 17 need 615 samples)
+    plan = tmp_path / "roll-only.toml"
+    plan.write_text(load_plan("roll-only").text + "\n[live_id]\norder = 4\npast = 15\n"
+                    "future = 8\n", encoding="utf-8")
     with out.open("wb") as fo, err.open("wb") as fe:
-        proc = subprocess.Popen([*cmd, "fly", "roll-only", "--uri", "sim://0?speed=5&seed=1",
+        proc = subprocess.Popen([*cmd, "fly", str(plan), "--uri", "sim://0?speed=5&seed=1",
                                  "--out", str(tmp_path / "sessions"), "--live-id"],
                                 stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
                                 start_new_session=True)  # its own group, as a terminal job

@@ -157,8 +157,12 @@ def test_an_interrupt_is_honoured_from_the_start_when_launched_with_sigint_ignor
 def test_a_flight_started_under_nohup_outlives_the_hangup(sim_uri, tmp_path):
     """``nohup groundstation fly ...`` sets SIGHUP to be ignored so that the flight survives
     a closed terminal: it stays ignored while flying (the review found the flight's handler
-    aborting it at the first hangup)."""
-    plan, uri = _pitch_only(), sim_uri()
+    aborting it at the first hangup). (pitch-only flown whole here: 5 s of its PRBS, the
+    hangup 2 s into it, and its 1 s doublet in 2 s.)"""
+    plan = plan_variant("pitch-only", **{
+        f"{_SETTLE}3.0": f"{_SETTLE}1.0", "duration = 25.5 ": "duration = 5.0 ",
+        "duration = 5.0                 # s": "duration = 2.0                 # s"})
+    uri = sim_uri()
     hook = signal_in_excitation(plan, signal.SIGHUP)
 
     previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
