@@ -191,8 +191,8 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
         check_not_a_session(out)  # before the sweep, not after it
     check_rrd(rrd, inputs=(session, *validate))
     groups = load_groups([session], opts=opts)
-    val = (load_flights(list(validate), opts=opts, verb="validate the models on") if validate
-           else None)
+    val = (load_flights(list(validate), opts={**opts, "dt": groups[0][0].dt},  # its grid
+                        verb="validate the models on") if validate else None)
     if "pasts" in lazy or "futures" in lazy:
         ident = groups[0] if val else holdout(groups)[0]
         # the default grid (and the memory it takes) only for what was not given

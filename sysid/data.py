@@ -178,10 +178,16 @@ def as_flights(data: IOData | Sequence[IOData]) -> tuple[IOData, ...]:
                 f"{ref.n_inputs}/{ref.n_outputs}; give every flight the same channels"
             )
         if abs(d.dt - ref.dt) > 1e-9 * ref.dt:
-            raise DataError(f"data[{i}] has dt={d.dt} s but data[0] has dt={ref.dt} s; "
-                            "resample every flight to the same rate")
+            raise DataError(f"data[{i}]{_from(d)} has dt={d.dt} s but data[0]{_from(ref)} has "
+                            f"dt={ref.dt} s; resample every flight to the same rate (sessions "
+                            "read together by sysid.session_io.load_sessions share one)")
     check_magnitudes(flights)
     return flights
+
+
+def _from(d: IOData) -> str:
+    """`` (from SOURCE)`` for a flight that says where it comes from, else ``""``."""
+    return f" (from {d.source})" if d.source else ""
 
 
 def hankel_columns(n_samples: int, *, block_rows: int) -> int:

@@ -435,8 +435,10 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
 def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
                   windows: dict[str, Window] | None = None, **kwargs: Any) -> list[list[IOData]]:
     """The experiments of each session (:func:`load_experiments`; never joined end to end),
-    one list per session. ``windows`` maps a session (its path as given, or its file name)
-    to its own window; the others use ``window``; other ``kwargs`` as
+    one list per session, all on one grid period: with ``dt`` None, the first session's
+    logged period when every session's is within :data:`PERIOD_MATCH` of it (else one-line
+    :class:`~sysid.errors.DataError`). ``windows`` maps a session (its path as given, or its
+    file name) to its own window; the others use ``window``; other ``kwargs`` as
     :func:`load_experiments`."""
     if not paths:
         raise DataError("no session files given; pass at least one")
@@ -449,9 +451,47 @@ def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
         if str(p) != Path(p).name and str(p) in windows and Path(p).name in windows:
             raise ParameterError(f"two windows for session {p}: one given for its path, one "
                                  f"for its name {Path(p).name!r}; give one")
-    out = []
-    for p in paths:
-        own = windows.get(str(p), windows.get(Path(p).name, kwargs.get("window", AUTO)))
-        out.append(load_experiments(p, **{**kwargs, "window": own}))
-    return out
+    each = [{**kwargs, "window": windows.get(str(p), windows.get(Path(p).name,
+                                                                  kwargs.get("window", AUTO)))}
+            for p in paths]
+    out = [load_experiments(p, **kw) for p, kw in zip(paths, each, strict=True)]
+    return out if kwargs.get("dt") is not None else _common_grid(paths, out, each=each)
+
+
+PERIOD_MATCH = 0.01
+"""Sessions whose logged periods differ by at most this fraction are gridded at one period,
+the first session's (two vehicles' clocks, or a period measured from each log's timestamps,
+differ by parts per million; each session is resampled on its own timestamps, so that is
+exact). Beyond it a grid period must be given."""
+
+
+def _common_grid(paths: Sequence[str | os.PathLike[str]], loaded: list[list[IOData]], *,
+                 each: list[dict[str, Any]]) -> list[list[IOData]]:
+    """``loaded`` (each session at its logged period, read with the arguments in ``each``)
+    with every session on the first one's grid period when the periods match to
+    :data:`PERIOD_MATCH`; else one line naming them."""
+    periods = [group[0].dt for group in loaded]
+    dt = periods[0]
+    if all(abs(q - dt) <= 1e-9 * dt for q in periods):
+        return loaded
+    if max(periods) > (1 + PERIOD_MATCH) * min(periods):
+        listed = ", ".join(f"{Path(p).name} {q:g} s" for p, q in zip(paths, periods, strict=True))
+        raise DataError(f"the sessions are logged at different periods ({listed}); pass one "
+                        "grid period for all (dt= in Python, --dt on the command line)")
+    log.info("logged periods %g to %g s: every session gridded at %g s", min(periods),
+             max(periods), dt)
+    quiet = _Quiet()  # each session's problems were said when it was first read
+    log.addFilter(quiet)
+    try:
+        return [group if abs(q - dt) <= 1e-9 * dt else load_experiments(p, **{**kw, "dt": dt})
+                for p, group, q, kw in zip(paths, loaded, periods, each, strict=True)]
+    finally:
+        log.removeFilter(quiet)
+
+
+class _Quiet(logging.Filter):
+    """Drops warnings (a session read again says nothing new)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno < logging.WARNING
 
