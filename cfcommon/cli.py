@@ -171,19 +171,26 @@ def _flush_stdout() -> None:
 
 
 class _OneLineRecords(logging.Formatter):
-    """Each log record one line, ``LEVEL logger: message``; a record with an exception gets
-    its type and text on that line, and its traceback only with ``tracebacks`` (``-v``)."""
+    """Each log record one line, ``warning: message`` as the commands' own warnings are
+    (``LEVEL logger: message``, naming the module, with ``tracebacks``: ``-v``); a record with
+    an exception gets its type and text on that line, and its traceback only with
+    ``tracebacks``."""
 
     def __init__(self, *, tracebacks: bool) -> None:
-        super().__init__("%(levelname)s %(name)s: %(message)s")
+        super().__init__("%(levelname)s %(name)s: %(message)s" if tracebacks
+                         else "%(level)s: %(message)s")
         self.tracebacks = tracebacks
+
+    def format(self, record: logging.LogRecord) -> str:
+        record.level = record.levelname.lower()
+        return self._format(record)
 
     def formatMessage(self, record: logging.LogRecord) -> str:
         """The record's line, control characters escaped (:func:`shown_text`): a message
         quoting a file's text is one line and changes nothing on the terminal."""
         return shown_text(super().formatMessage(record))
 
-    def format(self, record: logging.LogRecord) -> str:
+    def _format(self, record: logging.LogRecord) -> str:
         if self.tracebacks or not record.exc_info:
             return super().format(record)
         exc = record.exc_info[1]

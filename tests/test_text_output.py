@@ -82,4 +82,4 @@ def test_info_shows_a_sessions_control_characters_escaped(tmp_path):
     assert r"ho\x1b[2Jver\r" in res.output and r"bell\x07" in res.output
     record = logging.LogRecord("x", logging.WARNING, __file__, 1, "phase %s", ("a\x1b[2J\nb",),
                                None)
-    assert _OneLineRecords(tracebacks=False).format(record) == r"WARNING x: phase a\x1b[2J\nb"
+    assert _OneLineRecords(tracebacks=False).format(record) == r"warning: phase a\x1b[2J\nb"

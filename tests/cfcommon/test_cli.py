@@ -283,7 +283,8 @@ def test_a_library_error_logged_in_a_command_is_one_line_unless_verbose(verbose,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr  # the listener is dropped, the flight goes on
     failed = [line for line in done.stderr.splitlines() if "progress broken" in line]
-    assert failed and failed[0].startswith("ERROR groundstation.flight")
+    assert failed and failed[0].startswith("ERROR groundstation.flight" if verbose else
+                                           "error: listener PlainProgress.rows failed")
     assert ("Traceback (most recent call last)" in done.stderr) is verbose
     if not verbose:
         assert failed[0].endswith("(RuntimeError: progress broken; -v shows the traceback)")
@@ -305,11 +306,14 @@ def test_a_log_record_stays_one_line_whatever_its_exception_says() -> None:
 
         record = logging.LogRecord("x", logging.ERROR, __file__, 1, "it failed", None,
                                    sys.exc_info())
-    assert fmt.format(record) == ("ERROR x: it failed (ValueError: first line ...; -v shows "
+    assert fmt.format(record) == ("error: it failed (ValueError: first line ...; -v shows "
                                   "the traceback)")
     bare = logging.LogRecord("x", logging.ERROR, __file__, 1, "no exception", None,
                              (None, None, None))
-    assert fmt.format(bare) == "ERROR x: no exception"
+    assert fmt.format(bare) == "error: no exception"
+    named = _OneLineRecords(tracebacks=True)  # -v: the module named, as logging does
+    assert named.format(logging.LogRecord("x", logging.WARNING, __file__, 1, "w", None,
+                                          None)) == "WARNING x: w"
 
 
 def _raising(exc: BaseException) -> object:
