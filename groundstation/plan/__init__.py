@@ -50,7 +50,7 @@ from groundstation.plan.sections import (
     read_vehicle,
 )
 from groundstation.plan.settings import LiveIdConfig, read_live_id, read_parameters
-from groundstation.plan.toml import TomlSource, TomlTable, shown
+from groundstation.plan.toml import TomlSource, TomlTable, did_you_mean, shown
 
 __all__ = [
     "MAX_PLAN_S",
@@ -169,7 +169,8 @@ def find_plan(name_or_path: str | Path) -> Path:
     if path.suffix == "" and len(path.parts) == 1 and shipped.exists():
         return shipped
     names = sorted(p.stem for p in SHIPPED_PLANS_DIR.glob("*.toml"))
-    raise PlanError(f"{name_or_path}: no such plan file; give a path or one of {names}")
+    raise PlanError(f"{name_or_path}: no such plan file; {did_you_mean(path.name, names)}"
+                    f"give a path or one of {names}")
 
 
 def load_plan(path: str | Path) -> Plan:

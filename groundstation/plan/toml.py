@@ -17,7 +17,7 @@ import difflib
 import math
 import re
 import reprlib
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import tomlkit
@@ -26,8 +26,8 @@ from tomlkit.items import Array, InlineTable
 
 from groundstation.errors import PlanError
 
-__all__ = ["REQUIRED", "TomlSource", "TomlTable", "comment_text", "dotted", "key_lines", "set_keys",
-           "shown"]
+__all__ = ["REQUIRED", "TomlSource", "TomlTable", "comment_text", "did_you_mean", "dotted",
+           "key_lines", "set_keys", "shown"]
 
 _KEY = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
 _DOTTED = re.compile(rf"\s*({_KEY}(?:\s*\.\s*{_KEY})*)\s*")
@@ -114,6 +114,13 @@ def _children(node: Any, part: str | int) -> list[Any]:
         return [node[part]] if 0 <= part < len(node) else []
     body = node.body if isinstance(node, Container) else node.value.body
     return [item for key, item in body if key is not None and key.key == part]
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``did you mean 'x'? `` for the one of ``known`` closest to ``name`` (a typo of a key, a
+    choice or a plan's name), ``""`` when none is close."""
+    near = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
+    return f"did you mean '{near[0]}'? " if near else ""
 
 
 _NOT_IN_COMMENTS = re.compile("[\x00-\x08\x0a-\x1f\x7f]")
@@ -255,12 +262,9 @@ class TomlTable:
         """Refuse any key outside ``allowed`` (typos must not pass silently); returns self."""
         for key in self.data:
             if key not in allowed:
-                near = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.5)
                 names = ", ".join(sorted(allowed))
-                hint = f"did you mean '{near[0]}'? " if near else ""
-                raise self.src.error(
-                    (*self.path, key), f"unknown key {shown(key)}; {hint}allowed keys: {names}"
-                )
+                raise self.src.error((*self.path, key), f"unknown key {shown(key)}; "
+                                     f"{did_you_mean(key, allowed)}allowed keys: {names}")
         return self
 
     def pwm(self, key: str, *, default: Any = REQUIRED) -> int:
@@ -319,7 +323,9 @@ class TomlTable:
     def choice(self, key: str, options: tuple[str, ...], *, default: Any = REQUIRED) -> str:
         value = self.get(key, str, default=default)
         if value not in options:
-            raise self.src.error((*self.path, key), f"{shown(value)} is not one of {list(options)}")
+            hint = did_you_mean(value, options).rstrip()
+            raise self.src.error((*self.path, key), f"{shown(value)} is not one of "
+                                 f"{list(options)}{'; ' + hint if hint else ''}")
         return value
 
     def ticks(

@@ -88,6 +88,27 @@ def test_bad_plan_exits_2_with_one_line_naming_key_and_line(tmp_path, old, new, 
 def test_missing_plan_exits_2():
     result = _run("plan", "check", "no-such-plan")
     assert result.exit_code == 2 and "prbs-3axis" in result.stderr
+    assert "did you mean" not in result.stderr  # nothing close
+
+
+@pytest.mark.parametrize(("args", "hint"), [
+    (["plan", "check", "prbs3axis"], "no such plan file; did you mean 'prbs-3axis'?"),
+    (["fly", "hover-chek", "--uri", "sim://0"], "did you mean 'hover-check'?"),
+])
+def test_a_mistyped_plan_name_is_named(args, hint):
+    result = _run(*args)
+    assert result.exit_code == 2 and hint in result.stderr, result.output
+
+
+def test_a_mistyped_choice_is_named(tmp_path):
+    path = tmp_path / "bad.toml"
+    text = BASE.replace('kind = "landing"', 'kind = "landng"', 1)
+    assert text != BASE
+    path.write_text(text)
+    result = _run("plan", "check", str(path))
+    assert result.exit_code == 2
+    assert result.stderr.strip().endswith("'landng' is not one of ['takeoff', 'hover', "
+                                          "'excitation', 'landing']; did you mean 'landing'?")
 
 
 def test_show_json_dumps_the_schedule():
