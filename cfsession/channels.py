@@ -67,6 +67,20 @@ def session_specs(session: Session) -> list[StreamSpec]:
     return [spec_of(s) for s in session.streams.values() if s.kind == "log" and len(s)]
 
 
+_LISTED = 12
+"""Most variables a message lists (an imported uSD log is one stream of dozens)."""
+
+
+def _variables(by_source: dict[str, list[tuple[str, str]]]) -> str:
+    """`` holding variables a, b, ... (N in all)`` for a message: what the streams log, by
+    the firmware's names, when the stream names alone do not say it."""
+    names = sorted(by_source)
+    if not names:
+        return ""
+    more = f", ... ({len(names)} in all)" if len(names) > _LISTED else ""
+    return f" holding variables {', '.join(shown_name(n) for n in names[:_LISTED])}{more}"
+
+
 def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
                      role: Role) -> list[Channel]:
     """The log variables ``names`` select on the log streams among ``streams``, in order
@@ -109,8 +123,8 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
                      *by_source]
             raise ChannelError(f"no log stream or variable {shown_name(name)} for the {role}s"
                                f"{did_you_mean(name, known)}; log streams are "
-                               f"[{', '.join(shown_name(n) for n in sorted(fields))}] (use "
-                               "STREAM or STREAM.FIELD or "
+                               f"[{', '.join(shown_name(n) for n in sorted(fields))}]"
+                               f"{_variables(by_source)} (use STREAM or STREAM.FIELD or "
                                "group.variable)", problem="unknown", role=role, name=name,
                                logged=tuple(sorted(fields)))
     if not out:

@@ -96,7 +96,8 @@ def test_an_unknown_name_names_itself_the_role_and_the_log_streams(name):
     logged = ("a_att", "b_att", "ctrl", "ctrl_fast", "gyro", "imu", "motors")  # log streams only
     assert exc.logged == logged
     assert f"no log stream or variable {name!r} for the outputs" in msg and "\n" not in msg
-    assert f"log streams are {list(logged)}" in msg
+    assert f"log streams are {list(logged)} holding variables " in msg
+    assert "'gyro.x', " in msg and " in all) (use STREAM" in msg  # the firmware's names too
     assert isinstance(exc, SessionError) and isinstance(exc, ValueError)  # printed as one line
 
 
