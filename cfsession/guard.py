@@ -42,10 +42,11 @@ from __future__ import annotations
 
 import io
 import os
+import shlex
 import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import h5py
 import numpy as np
@@ -53,12 +54,29 @@ import numpy as np
 from cfsession.errors import SessionError
 from cfsession.vlen_text import FileBytes, Texts, declared_text_bytes, is_vlen_text, text_problem
 
-__all__ = ["CUT_SLACK_BYTES", "HDF5_SIGNATURE", "MAX_ATTR_BYTES", "MAX_CUT_RATIO", "MAX_EXPANSION",
-           "MAX_OBJECTS", "MAX_UNCLEAN_BYTES", "Cut", "check_dataset", "check_storage",
-           "file_size", "hard_links", "lost_chunks", "open_cut", "open_untrusted", "read_attrs",
-           "short_error"]
+__all__ = ["CUT_SLACK_BYTES", "FLIGHT_LOGS", "HDF5_SIGNATURE", "MAX_ATTR_BYTES", "MAX_CUT_RATIO",
+           "MAX_EXPANSION", "MAX_OBJECTS", "MAX_UNCLEAN_BYTES", "Cut", "check_dataset",
+           "check_storage", "file_size", "flight_log_kind", "hard_links", "lost_chunks",
+           "open_cut", "open_untrusted", "read_attrs", "short_error"]
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: The flight logs ``groundstation import`` makes sessions of, by :func:`flight_log_kind`.
+FLIGHT_LOGS = {"usd": "Crazyflie uSD-card deck log", "csv": "cfclient log CSV"}
+_USD_MAGIC = b"\xbc"  # the deck log's header byte
+_CSV_HEADER = b"Timestamp"  # the first column of a cfclient "log to file" CSV
+_UTF8_BOM = b"\xef\xbb\xbf"  # Excel's save of a CSV
+
+
+def flight_log_kind(head: bytes) -> Literal["usd", "csv"] | None:
+    """``"usd"`` or ``"csv"`` (:data:`FLIGHT_LOGS`) from a file's first bytes (at least 12),
+    None for anything else: the one check of the importer (``groundstation import``) and of
+    the hint that a session reader gives for such a file."""
+    head = head.removeprefix(_UTF8_BOM)
+    if head[:1] == _USD_MAGIC:
+        return "usd"
+    if head.startswith(_CSV_HEADER):
+        return "csv"
+    return None
 MAX_UNCLEAN_BYTES = 1 << 30
 """Largest file not closed cleanly, or stored end of a file cut short, that is read (into
 memory, see the module docstring)."""
@@ -252,7 +270,10 @@ def _open(path: Path, *, kind: str, cut_ok: bool) -> tuple[h5py.File, bool, Cut 
     except OSError as exc:
         raise SessionError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if head[:8] != HDF5_SIGNATURE:
-        raise SessionError(f"{path}: not an HDF5 file, so not a {kind} file")
+        log_kind = flight_log_kind(head) if kind == "session" else None
+        raise SessionError(f"{path}: not an HDF5 file, so not a {kind} file" + (
+            "" if log_kind is None else f": it is a {FLIGHT_LOGS[log_kind]}; make a session "
+            f"of it with `groundstation import {shlex.quote(str(path))} --out DIR`"))
     if len(head) < 48:
         raise SessionError(f"{path}: damaged beyond repair (truncated at {len(head)} bytes, "
                            "inside its superblock)")

@@ -16,7 +16,9 @@ and the parsimonious best stable model is taken (:meth:`sysid.sweep.SweepResult.
 smallest order within one standard error of the best score, :mod:`sysid.parsimony`). A choice
 at the edge of the grid (largest or smallest past, future or order tried, when more than one
 was) is flagged when no row inside the grid in that parameter scores within that tolerance of
-the best (the score still rises towards the edge; on a flat top the edge says nothing), and a
+the best (the score still rises towards the edge; on a flat top the edge says nothing; in
+values the caller gave, never grown, also when it scores better than the next value inside:
+:func:`sysid.parsimony.rising_edges`, the warning naming the option to extend), and a
 warning says when that standard error is a point or more (held-out data too few to rank the
 models). Where the caller did not fix the grid, an edge that binds is followed: the grid grows
 past it and is swept again with the chosen focus and direct term (:mod:`sysid.growth`, at
@@ -130,7 +132,7 @@ def finish(p: Plan, result: SweepResult, *, method: Method, options: Options) ->
              "?" if ranked[0].errors is None else ranked[0].errors.shape[0],
              sorted({r.order for r in close_to_best(ranked)}))
     warnings = edge_warnings(best, ranked, p.grid, capped=p.capped,
-                             n_outputs=p.ident[0].n_outputs)
+                             n_outputs=p.ident[0].n_outputs, given=p.fixed)
     # held-out inputs that do not move rank nothing: that is the warning, whatever the scores
     unresolved = unexcited_warning(p) or ranking_warning(
         ranked, n_samples=sum(d.n_samples for d in p.val), validation_given=p.given_validation)

@@ -48,6 +48,7 @@ from sysid.cli_options import (
 from sysid.cli_order import order_command
 from sysid.cli_progress import progress
 from sysid.cli_support import (
+    GRID_FORMS,
     JSON_OPTION,
     MAX_WINDOW_S,
     Group,
@@ -177,10 +178,10 @@ def order(session: Path, method: str, past: int | None, future: int | None, show
 @main.command("sweep")
 @click.argument("session", type=click.Path(path_type=Path))
 @METHOD_OPTION
-@click.option("--pasts", help="START:STOP:STEP or a,b,c (default: scaled to the data rate "
-                              "and length, see docs/sysid.md).")
-@click.option("--futures", help="START:STOP:STEP or a,b,c, each >= 2 (default: scaled).")
-@click.option("--orders", help="START:STOP:STEP or a,b,c (default: 2 to 12).")
+@click.option("--pasts", help=f"{GRID_FORMS} (default: scaled to the data rate and length, "
+                              "see docs/sysid.md).")
+@click.option("--futures", help=f"{GRID_FORMS}, each >= 2 (default: scaled).")
+@click.option("--orders", help=f"{GRID_FORMS} (default: 2 to 12).")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes (Ctrl-C stops them all).")
 @SCHEDULER_OPTION

@@ -29,12 +29,13 @@ from sysid.cli_support import (
     fit_table,
     fits_json,
     load_flights,
+    load_model_arg,
     pole_kind,
     write_rrd,
 )
 from sysid.data import IOData
 from sysid.errors import DataError
-from sysid.model import StateSpaceModel, load_model
+from sysid.model import StateSpaceModel
 from sysid.pole_format import pole_number
 from sysid.residuals import residuals
 from sysid.validate import MIN_WINDOW_SAMPLES, SAMPLES_PER_STATE, compare, min_fit_samples
@@ -76,7 +77,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
       sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
     """
     check_rrd(rrd, inputs=(model_path, *sessions))
-    model = load_model(model_path)
+    model = load_model_arg(model_path, sessions, command="compare")
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                            outputs=model.output_names, verb="compare the model on")
     check_fit_samples(model, flights, window_s=window_s)
@@ -177,7 +178,7 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
       sysid resid model.h5 val1.h5 val2.h5 --max-lag 30
     """
     check_rrd(rrd, inputs=(model_path, *sessions))
-    model = load_model(model_path)
+    model = load_model_arg(model_path, sessions, command="resid")
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                            outputs=model.output_names, verb="analyse the residuals on")
     res = residuals(model, flights, max_lag=max_lag, confidence=confidence)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ from rich.markup import escape
 
 from cfcommon.cli import output_table
 from sysid.auto import default_grid
-from sysid.cli_support import console, load_flights
+from sysid.cli_support import console, load_flights, session_args
 from sysid.methods import get_method
 from sysid.order import information_criteria, singular_values, suggest_order
 
@@ -86,7 +87,8 @@ def order_command(session: Path, *, method: str, past: int | None, future: int |
     con.print(f"largest gap ({hint.gap_decades:.2f} decades) after s_{hint.by_rule['gap']}; "
               f"AIC picks {ic.chosen['aic']}, AICc {ic.chosen['aicc']}, BIC {ic.chosen['bic']}")
     con.print(f"suggested order: {hint.order}, by {hint.reason}")
-    con.print(f"to identify with it: sysid identify {session} --method {meth.name} --past "
-              f"{past} --future {future} --order {hint.order} (and the same channel options); "
-              "without --order and the horizons, validation on held-out data chooses them, "
-              "which judges better")
+    command = shlex.join(["sysid", "identify", str(session), "--method", meth.name,
+                          "--past", str(past), "--future", str(future),
+                          "--order", str(hint.order), *session_args(opts)])
+    con.print(f"to identify with it: {command}; without --order and the horizons, validation "
+              "on held-out data chooses them, which judges better", markup=False)

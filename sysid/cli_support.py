@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import shlex
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,8 +31,15 @@ from cfcommon.cli import (
 )
 from sysid.comparison import CompareResult
 from sysid.data import IOData
-from sysid.errors import DataError, MissingDependencyError, ParameterError, SysIdError
-from sysid.model import StateSpaceModel
+from sysid.errors import (
+    DataError,
+    MissingDependencyError,
+    ModelFileError,
+    ParameterError,
+    SysIdError,
+)
+from sysid.model import StateSpaceModel, load_model
+from sysid.model_io import holds_a_session
 from sysid.pole_format import POLE_COLUMNS, pole_cells, pole_rows
 from sysid.session_io import (
     AUTO,
@@ -47,10 +55,12 @@ from sysid.validate import simulation_window
 
 __all__ = [
     "DETREND_OPTION",
+    "GRID_FORMS",
     "JSON_OPTION",
     "MAX_WINDOW_S",
     "MODEL_SUFFIXES",
     "RRD_OPTION",
+    "SESSION_DEFAULTS",
     "Group",
     "check_rrd",
     "console",
@@ -61,6 +71,7 @@ __all__ = [
     "grid_min",
     "load_flights",
     "load_groups",
+    "load_model_arg",
     "parse_grid",
     "parse_window",
     "parse_windows",
@@ -68,6 +79,7 @@ __all__ = [
     "pole_table",
     "poles_rich_table",
     "require_viz",
+    "session_args",
     "session_options",
     "split_names",
     "write_rrd",
@@ -91,6 +103,10 @@ class Group(OneLineErrorGroup):
 
 
 # ------------------------------------------------------------------------------- parsing
+#: The forms of a sweep's grid option (:func:`parse_grid`), for help and messages.
+GRID_FORMS = "START:STOP (every value), START:STOP:STEP or a,b,c"
+
+
 def parse_grid(*, text: str, option: str, minimum: int = 1,
                maximum: int | None = None) -> range | list[int]:
     """``20:80:10`` -> range(20, 81, 10) (stop included); ``6,8`` -> [6, 8]; ``8`` -> [8].
@@ -110,8 +126,8 @@ def parse_grid(*, text: str, option: str, minimum: int = 1,
         else:
             values = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise ParameterError(f"{option} {text!r}: use START:STOP:STEP (STOP >= START, STEP >= 1),"
-                             " a,b,c or one integer") from None
+        raise ParameterError(f"{option} {text!r}: use {GRID_FORMS} (STOP >= START, STEP >= 1) "
+                             "or one integer") from None
     if not values or grid_min(values) < minimum:
         what = "positive integers" if minimum == 1 else f"integers >= {minimum}"
         raise ParameterError(f"{option} {text!r}: give {what}")
@@ -140,8 +156,14 @@ WINDOW_HELP = ("Window: auto (the excitation phases, else the airborne-N phases,
                "SESSION=WINDOW applies to that session only (file name or path); repeatable.")
 
 
+#: The default of each option of :func:`session_options`, by parameter name.
+SESSION_DEFAULTS: dict[str, Any] = {"inputs": DEFAULT_INPUTS, "outputs": DEFAULT_OUTPUTS,
+                                    "windows": ("auto",), "dt": None, "detrend": "mean"}
+
+
 DETREND_OPTION = click.option(
-    "--detrend", default="mean", show_default=True, type=click.Choice(["mean", "linear", "none"]),
+    "--detrend", default=SESSION_DEFAULTS["detrend"], show_default=True,
+    type=click.Choice(["mean", "linear", "none"]),
     help="Removed from each channel of each experiment first: its mean, a straight line (slow "
          "drift), or nothing.")
 
@@ -149,15 +171,15 @@ DETREND_OPTION = click.option(
 def session_options(func: Callable) -> Callable:
     """Options shared by every command that reads sessions."""
     opts = [
-        click.option("--inputs", default=DEFAULT_INPUTS, show_default=True, help=(
+        click.option("--inputs", default=SESSION_DEFAULTS["inputs"], show_default=True, help=(
                      "Input channels: STREAM, STREAM.FIELD, group.variable or a variable "
                      "group (gyro: gyro.x, gyro.y, gyro.z), comma-separated.")),
-        click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
+        click.option("--outputs", default=SESSION_DEFAULTS["outputs"], show_default=True,
                      help="Output channels, as --inputs (default: what the motors drive "
                           "directly; see docs/sysid.md)."),
-        click.option("--window", "windows", multiple=True, default=("auto",),
+        click.option("--window", "windows", multiple=True, default=SESSION_DEFAULTS["windows"],
                      show_default=True, help=WINDOW_HELP),
-        click.option("--dt", default=None, type=FiniteFloat(min=1e-4),
+        click.option("--dt", default=SESSION_DEFAULTS["dt"], type=FiniteFloat(min=1e-4),
                      help="Grid period in seconds (default: the logged period; faster streams "
                           "are low-passed before the hold)."),
         DETREND_OPTION,
@@ -165,6 +187,21 @@ def session_options(func: Callable) -> Callable:
     for opt in reversed(opts):
         func = opt(func)
     return func
+
+
+def session_args(opts: dict[str, Any]) -> list[str]:
+    """The options of :func:`session_options` in ``opts`` that differ from their defaults, as
+    command-line arguments (``["--outputs", "gyro.x", "--window", "prbs"]``): what a command
+    that suggests another one passes on, so that it reads the same data."""
+    args: list[str] = []
+    for name, default in SESSION_DEFAULTS.items():
+        value = opts.get(name, default)
+        if value is None or value == default or (name == "windows" and tuple(value) == default):
+            continue
+        option = "--window" if name == "windows" else f"--{name}"
+        for one in value if name == "windows" else (value,):
+            args += [option, f"{one:g}" if isinstance(one, float) else str(one)]
+    return args
 
 
 def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
@@ -229,6 +266,28 @@ def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],
     """Every experiment of the sessions, in order (:func:`load_groups` flattened)."""
     return [e for g in load_groups(paths, opts=opts, inputs=inputs, outputs=outputs,
                                    verb=verb) for e in g]
+
+
+def load_model_arg(model_path: Path, sessions: Sequence[Path], *, command: str
+                   ) -> StateSpaceModel:
+    """The MODEL argument of ``sysid COMMAND MODEL SESSIONS...``. When it is a session and one
+    of ``sessions`` a model file, the arguments were swapped: one line says so and gives the
+    command in the right order (other errors as :func:`sysid.model.load_model`'s)."""
+    try:
+        return load_model(model_path)
+    except ModelFileError:
+        if not holds_a_session(model_path):
+            raise
+        for other in sessions:
+            try:
+                load_model(other)
+            except ModelFileError:
+                continue
+            order = [other, model_path, *(p for p in sessions if p != other)]
+            raise ModelFileError(
+                f"{model_path} is a flight session and {other} a model: the model comes "
+                f"first, swap them: sysid {command} {shlex.join(map(str, order))}") from None
+        raise
 
 
 # ------------------------------------------------------------------------------- output

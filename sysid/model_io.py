@@ -55,7 +55,8 @@ from sysid.mat_guard import Limits, check_mat
 if TYPE_CHECKING:
     from sysid.model import StateSpaceModel
 
-__all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "check_not_a_session", "load", "save"]
+__all__ = ["MAX_DIMENSION", "MAX_FILE_BYTES", "check_not_a_session", "holds_a_session", "load",
+           "save"]
 
 log = logging.getLogger(__name__)
 
@@ -120,13 +121,13 @@ def save(model: StateSpaceModel, path: str | os.PathLike[str]) -> Path:
 def check_not_a_session(path: str | os.PathLike[str]) -> None:
     """One-line :class:`ModelFileError` when ``path`` holds a flight session: a model never
     replaces recorded data (``--force`` replaced a read-only session with a model)."""
-    if _holds_a_session(Path(path)):
+    if holds_a_session(Path(path)):
         raise ModelFileError(f"cannot write model file {str(path)!r}: it holds a recorded flight "
                              "session, which a model never replaces (not even with --force); "
                              "choose another name")
 
 
-def _holds_a_session(path: Path) -> bool:
+def holds_a_session(path: Path) -> bool:
     """Whether ``path`` is a flight session file, read as an untrusted file: an HDF5 file whose
     root ``schema`` attribute (read through the session guard's size checks) names the session
     schema, or an HDF5 file the guard will not open (damaged, cut short, too large, unreadable)
@@ -226,7 +227,7 @@ def _checked(d: object, *, path: Path) -> dict[str, Any]:
 
     fmt = _scalar(d.get("format")) if isinstance(d, dict) else None
     if (not isinstance(d, dict) or not isinstance(fmt, str) or fmt != FORMAT) and (
-            _holds_a_session(path)):  # the arguments swapped: `sysid compare SESSION MODEL`
+            holds_a_session(path)):  # the arguments swapped: `sysid compare SESSION MODEL`
         raise ModelFileError(f"{str(path)!r} is a flight session, not a sysid model file: make "
                              f"a model from it with `sysid identify {path} --out model.h5` and "
                              "pass that")

@@ -77,7 +77,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -85,11 +85,11 @@ import numpy as np
 from sysid.comparison import CompareResult
 from sysid.validate import split_windows
 
-__all__ = ["DOMINANT_Z", "FIXED_TOL", "FLOOR_POINTS", "IMPRECISE_POINTS", "LOW_SCORE_POINTS",
-           "MAX_BLOCKS", "MIN_BLOCKS", "UNRESOLVED_POINTS", "binding_edges", "block_errors",
-           "block_shares", "close_to_best", "dominant_blocks", "edge_warnings", "parsimonious",
-           "ranking_warning", "score_se", "scores", "significantly_better", "tolerance",
-           "tolerance_basis"]
+__all__ = ["DOMINANT_Z", "FIXED_TOL", "FLOOR_POINTS", "GRID_OPTIONS", "IMPRECISE_POINTS", "LEAST",
+           "LOW_SCORE_POINTS", "MAX_BLOCKS", "MIN_BLOCKS", "UNRESOLVED_POINTS", "binding_edges",
+           "block_errors", "block_shares", "close_to_best", "dominant_blocks", "edge_warnings",
+           "parsimonious", "ranking_warning", "rising_edges", "score_se", "scores",
+           "significantly_better", "tolerance", "tolerance_basis"]
 
 #: Fewest blocks the errors are accounted in: windows are cut into pieces below this count.
 MIN_BLOCKS = 10
@@ -359,10 +359,14 @@ def ranking_warning(ranked: Sequence[Scored], *, n_samples: int,
                     f"says little of how the model will validate; {remedy}")
     blocks = ranked[0].errors
     if blocks is not None and blocks.shape[0] < MIN_BLOCKS:
+        count = blocks.shape[0]
         return (f"the {n_samples} held-out samples are too few to measure reliably how "
-                f"precise the score is ({blocks.shape[0]} piece(s) of at least "
-                f"{MIN_PIECE_SAMPLES} samples; {MIN_BLOCKS} are needed): the choice used "
-                f"{tolerance(ranked[0]):.2g} points as its tolerance; {remedy}")
+                f"precise the score is: its standard error comes from how the score varies "
+                f"between stretches of at least {MIN_PIECE_SAMPLES} held-out samples, and "
+                f"they make {count} such stretch{'' if count == 1 else 'es'} where "
+                f"{MIN_BLOCKS} are needed (about {MIN_BLOCKS * MIN_PIECE_SAMPLES} held-out "
+                f"samples); the choice used {tolerance(ranked[0]):.2g} points as its "
+                f"tolerance; {remedy}")
     return None
 
 
@@ -376,33 +380,95 @@ def binding_edges(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[i
     error of its score, :func:`close_to_best`, or a fixed ``tol`` points): the score is still
     rising towards the edge. When rows inside the grid score as well (a flat top: the held-out
     score cannot tell them apart), the edge is not binding. ``ranked``: the stable rows, best
-    score first, ``best`` among them."""
+    score first, ``best`` among them. A smallest value that is the least possible
+    (:data:`LEAST`) has nothing below it and is never binding."""
     close = close_to_best(ranked, tol=tol)
+    out = []
+    for name, value, side in _edges(best, grid):
+        if any(getattr(r, name) != value for r in close):
+            continue
+        out.append((name, side))
+    return out
+
+
+#: The least value of each parameter (past 1, future 2, order 1): a choice there has no
+#: smaller one to try.
+LEAST = {"past": 1, "future": 2, "order": 1}
+#: The option of ``sysid sweep`` that gives each parameter's values.
+GRID_OPTIONS = {"past": "--pasts", "future": "--futures", "order": "--orders"}
+
+
+def _edges(best: Scored, grid: dict[str, list[int]]) -> list[tuple[str, int, str]]:
+    """``(parameter, value, side)`` for each parameter whose chosen value in ``best`` is the
+    largest (``"above"``) or smallest (``"below"``, unless :data:`LEAST`) of at least two
+    values in ``grid``."""
     out = []
     for name, value in (("past", best.past), ("future", best.future), ("order", best.order)):
         values = grid[f"{name}s"]
-        if len(values) < 2 or value not in (min(values), max(values)):
+        if len(values) < 2:
             continue
-        if any(getattr(r, name) != value for r in close):
+        if value == max(values):
+            out.append((name, value, "above"))
+        elif value == min(values) and value > LEAST[name]:
+            out.append((name, value, "below"))
+    return out
+
+
+def rising_edges(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]],
+                 given: Collection[str]) -> list[tuple[str, str, Scored]]:
+    """The edges of the values the caller gave (``given`` holds ``"pasts"``, ``"futures"``,
+    ``"orders"``) where the choice sits and scores at least :data:`FLOOR_POINTS` (the
+    resolution floor) higher than the next value inside the grid, the other two parameters as
+    chosen: ``(parameter, side, that inner row)``.
+
+    Within one standard error such an edge is not binding (:func:`binding_edges`: the
+    held-out score cannot tell the values apart) and a default grid is not grown past it;
+    but a grid the caller gave is theirs to extend, and a score still rising at its edge is
+    what they need to know to do it. ``ranked``: the stable rows, ``best`` among them."""
+    out = []
+    for name, _value, side in _edges(best, grid):
+        if f"{name}s" not in given:
             continue
-        out.append((name, "above" if value == max(values) else "below"))
+        values = sorted(grid[f"{name}s"])
+        inner = values[-2] if side == "above" else values[1]
+        others = [n for n in ("past", "future", "order") if n != name]
+        row = next((r for r in ranked if getattr(r, name) == inner
+                    and all(getattr(r, n) == getattr(best, n) for n in others)), None)
+        if row is not None and best.score - row.score >= FLOOR_POINTS:
+            out.append((name, side, row))
     return out
 
 
 def edge_warnings(best: Scored, ranked: Sequence[Scored], grid: dict[str, list[int]], *,
-                  capped: bool, tol: float | None = None, n_outputs: int | None = None
-                  ) -> list[str]:
+                  capped: bool, tol: float | None = None, n_outputs: int | None = None,
+                  given: Collection[str] = ()) -> list[str]:
     """A warning for each of :func:`binding_edges`; ``capped``: the data cut the horizons
     short of the default grid's range (:func:`sysid.auto.plan`); ``n_outputs``: says when an
-    order is the most the largest future's rank allows, ``(f - 1) l``."""
+    order is the most the largest future's rank allows, ``(f - 1) l``. ``given``: the
+    parameters whose values the caller gave (``"pasts"``, ``"futures"``, ``"orders"``, never
+    grown): their edges are also flagged while the score still rises towards them within one
+    standard error (:func:`rising_edges`), and their warnings name the option to extend
+    (:data:`GRID_OPTIONS`)."""
+    binding = binding_edges(best, ranked, grid, tol=tol)
+    rising = {(name, side): row for name, side, row in rising_edges(best, ranked, grid, given)}
     out = []
-    for name, side in binding_edges(best, ranked, grid, tol=tol):
-        value = getattr(best, name)
+    for name, value, side in _edges(best, grid):
+        if (name, side) not in binding and (name, side) not in rising:
+            continue
         if side == "above":
             why = " (the data allow no longer horizons)" if capped and name != "order" else ""
             if name == "order" and n_outputs and value >= (grid["futures"][-1] - 1) * n_outputs:
                 why = f" (the most a future of {grid['futures'][-1]} allows)"
-            out.append(f"{name} {value} is the largest tried{why}: the best may lie beyond")
+            text, where = f"{name} {value} is the largest tried{why}", "beyond"
         else:
-            out.append(f"{name} {value} is the smallest tried: the best may lie below")
+            text, where = f"{name} {value} is the smallest tried", "below"
+        if (name, side) not in binding:
+            row = rising[(name, side)]
+            text += (f" and the score still rose towards it ({row.score:.1f} % at {name} "
+                     f"{getattr(row, name)}, {best.score:.1f} % at {value}, less than the "
+                     "tolerance apart)")
+        text += f": the best may lie {where}"
+        if f"{name}s" in given:
+            text += f"; extend {GRID_OPTIONS[name]} {where} {value}"
+        out.append(text)
     return out

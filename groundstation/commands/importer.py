@@ -10,13 +10,13 @@ from typing import Literal
 import click
 
 from cfsession import open_session
+from cfsession.guard import flight_log_kind
 from groundstation.errors import SessionError
 from groundstation.importers.to_session import OutputFolderError, csv_to_session, usd_to_session
 from groundstation.recorder import check_folder
 
 __all__ = ["ImportJob", "command", "plan_imports"]
 
-_USD_MAGIC = b"\xbc"
 Kind = Literal["usd", "csv"]
 
 
@@ -30,17 +30,14 @@ class ImportJob:
 
 
 def _kind(path: Path) -> Kind | None:
-    """``usd`` or ``csv`` from the first bytes, None for anything else."""
+    """``usd`` or ``csv`` from the first bytes (:func:`cfsession.guard.flight_log_kind`),
+    None for anything else."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(12).removeprefix(b"\xef\xbb\xbf")  # a UTF-8 BOM: Excel's save
+            head = fh.read(12)
     except OSError as exc:
         raise SessionError(f"{path}: cannot read ({exc.strerror}); check the path") from None
-    if head[:1] == _USD_MAGIC:
-        return "usd"
-    if head.startswith(b"Timestamp"):
-        return "csv"
-    return None
+    return flight_log_kind(head)
 
 
 def _is_hdf5(path: Path) -> bool:

@@ -277,6 +277,37 @@ def test_an_edge_is_flagged_only_while_the_score_rises_towards_it() -> None:
         "beyond"]
 
 
+def test_an_edge_of_given_values_is_flagged_while_the_score_still_rises() -> None:
+    """``sysid sweep --pasts 20:80:10`` chose past 80 with the score still rising (76.0 at
+    past 70, 76.5 at 80) but within the tolerance: a default grid's edge says nothing there,
+    values the caller gave are flagged, naming the option to extend. A rise under the
+    resolution floor, or a smallest value nothing is below (past 1), is not flagged."""
+    from sysid.parsimony import edge_warnings
+
+    grid = {"pasts": [60, 70, 80], "futures": [9], "orders": [12]}
+    result = SweepResult(rows=(_row(80, 9, 12, 76.5), _row(70, 9, 12, 76.0),
+                               _row(60, 9, 12, 75.0)),
+                         method="iem", horizon=None, window=2.0)
+    best, ranked = result.best(), result.ranked()
+    assert (best.past, best.order) == (80, 12)
+    assert edge_warnings(best, ranked, grid, capped=False) == []  # within 0.5: a flat top
+    assert edge_warnings(best, ranked, grid, capped=False, given=("pasts",)) == [
+        "past 80 is the largest tried and the score still rose towards it (76.0 % at past 70, "
+        "76.5 % at 80, less than the tolerance apart): the best may lie beyond; extend --pasts "
+        "beyond 80"]
+    flat = SweepResult(rows=(_row(80, 9, 12, 76.05), _row(70, 9, 12, 76.0)),
+                       method="iem", horizon=None, window=2.0)
+    assert edge_warnings(flat.best(), flat.ranked(), grid, capped=False,
+                         given=("pasts",)) == []
+    # a binding edge of given values names the option too; past 1 has nothing below it
+    low = {"pasts": [1, 4], "futures": [9], "orders": [2, 3, 4]}
+    rising = SweepResult(rows=(_row(1, 9, 4, 80.0), _row(4, 9, 4, 70.0), _row(1, 9, 3, 60.0)),
+                         method="iem", horizon=None, window=2.0)
+    assert edge_warnings(rising.best(), rising.ranked(), low, capped=False,
+                         given=("pasts", "orders")) == [
+        "order 4 is the largest tried: the best may lie beyond; extend --orders beyond 4"]
+
+
 def test_a_grid_whose_models_all_fail_says_why() -> None:
     """Not "none is stable" when none was identified: the failure itself, counted."""
     meth = get_method("iem")

@@ -100,6 +100,53 @@ def test_order_suggests_the_true_order(flights) -> None:
     assert np.all(np.diff(sv) <= 0)
 
 
+def test_order_suggests_a_command_with_the_options_given(flights) -> None:
+    """The suggested `identify` reads the same data: the session options given (not a
+    reminder to repeat them), none when all are the defaults."""
+    res = run("order", flights[0].path, "--past", "20", "--future", "10", "--outputs", "gyro",
+              "--window", "excitation", "--detrend", "linear")
+    assert res.exit_code == 0, res.output
+    line = " ".join(res.stdout.split())
+    assert (f"to identify with it: sysid identify {flights[0].path} --method iem --past 20 "
+            "--future 10 --order 4 --outputs gyro --window excitation --detrend linear; "
+            "without") in line, line
+    plain = " ".join(run("order", flights[0].path, "--past", "20", "--future", "10").stdout
+                     .split())
+    assert "--order 4; without" in plain and "same channel options" not in plain
+
+
+def test_compare_with_the_arguments_swapped_says_to_swap_them(flights, tmp_path) -> None:
+    model = tmp_path / "true.h5"
+    flights[0].system.save(model)
+    for command in ("compare", "resid"):
+        res = run(command, flights[0].path, model)
+        assert res.exit_code == 2, res.output
+        assert res.stderr.strip() == (
+            f"error: {flights[0].path} is a flight session and {model} a model: the model comes "
+            f"first, swap them: sysid {command} {model} {flights[0].path}")
+
+
+def test_a_flight_log_passed_as_a_session_says_to_import_it(tmp_path) -> None:
+    """A uSD-card log or a cfclient CSV is no session: one line names what it is and the
+    command that makes a session of it."""
+    usd = tmp_path / "log00"
+    usd.write_bytes(b"\xbc\x02\x00\x02\x00\xff\xffrest of a deck log")
+    csv = tmp_path / "stab-20260101T10-00-00.csv"
+    csv.write_text("Timestamp,stabilizer.roll\n1000,0.5\n")
+    for path, what in ((usd, "Crazyflie uSD-card deck log"), (csv, "cfclient log CSV")):
+        res = run("identify", path)
+        assert res.exit_code == 2, res.output
+        assert res.stderr.strip() == (
+            f"error: {path}: not an HDF5 file, so not a session file: it is a {what}; make a "
+            f"session of it with `groundstation import {path} --out DIR`")
+
+
+def test_sweep_help_names_both_range_forms() -> None:
+    text = " ".join(run("sweep", "--help").stdout.split())
+    for option in ("--pasts", "--futures", "--orders"):
+        assert f"{option} TEXT START:STOP (every value), START:STOP:STEP or a,b,c" in text
+
+
 def test_sweep_picks_the_true_order(flights) -> None:
     res = run("sweep", flights[0].path, "--pasts", "15,20", "--futures", "10",
               "--orders", "2:6:2", "--horizon", "1", "--json")
@@ -244,7 +291,8 @@ def test_sweep_reports_the_best_candidates_and_the_grid_edge(flights) -> None:
     text = " ".join(res.stdout.split())
     assert "best 3 candidates of 4" in text and "acc.z" in text and "gyro.x" in text
     assert "chosen: past" in text and "order 3, method iem, focus prediction" in text
-    assert "warning: order 3 is the largest tried: the best may lie beyond" in text
+    assert ("warning: order 3 is the largest tried: the best may lie beyond; extend --orders "
+            "beyond 3") in text  # the values given: the option to extend
     assert "futures [10], orders [2, 3]" in text  # the orders swept, not a range of them
 
 

@@ -129,7 +129,9 @@ def test_held_out_data_too_short_for_a_standard_error_say_so() -> None:
     assert "too few to measure reliably" in ranking_warning(one, n_samples=15)
     few = [_row(3, _blocks(90.0, spread=0.05, n_blocks=4))]
     assert tolerance_basis(few[0]) == "one standard error"
-    assert "4 piece(s)" in ranking_warning(few, n_samples=45)
+    text = ranking_warning(few, n_samples=45)  # what a piece is, and how much data is enough
+    assert ("between stretches of at least 10 held-out samples, and they make 4 such "
+            "stretches where 10 are needed (about 100 held-out samples)") in text
     many = [_row(3, _blocks(90.0, spread=0.05, n_blocks=12))]
     assert ranking_warning(many, n_samples=1200) is None
 
