@@ -62,8 +62,8 @@ from rich.table import Table
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "FiniteFloat",
            "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
            "names_a_file",
-           "output_console", "output_gone", "output_table", "reader_gone", "setup_logging",
-           "shown_markup", "shown_text", "whole_file", "writing_stdout"]
+           "output_console", "output_gone", "output_table", "reader_gone", "same_file_pairs",
+           "setup_logging", "shown_markup", "shown_text", "whole_file", "writing_stdout"]
 
 #: The channels both command lines take from a session by default: ``sysid``'s commands and
 #: ``groundstation export --to mat`` (so MATLAB gets the data sysid identifies from). Firmware
@@ -435,6 +435,18 @@ def _same_file(a: Path, b: Path) -> bool:
         return a.exists() and b.exists() and os.path.samefile(a, b)
     except OSError:
         return a.resolve() == b.resolve()
+
+
+def same_file_pairs(paths: Sequence[Path], others: Sequence[Path] | None = None
+                    ) -> list[tuple[Path, Path]]:
+    """``(a, b)`` for each two of ``paths`` that name one file (as given twice, or through a
+    link or another spelling of its path), or, with ``others``, for each of ``paths`` that is
+    also one of ``others``: the same session read twice (``sysid identify A A``, ``identify A
+    --validate A``) is the same data, whatever the command then does with it."""
+    paths = [Path(p) for p in paths]
+    if others is None:
+        return [(a, b) for i, a in enumerate(paths) for b in paths[i + 1:] if _same_file(a, b)]
+    return [(a, Path(b)) for a in paths for b in others if _same_file(a, Path(b))]
 
 
 class OneLineErrorGroup(click.Group):

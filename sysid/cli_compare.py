@@ -9,6 +9,7 @@ can write a Rerun report. Registered on the ``sysid`` group by :mod:`sysid.cli`.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -38,9 +39,17 @@ from sysid.errors import DataError
 from sysid.model import StateSpaceModel
 from sysid.pole_format import pole_number
 from sysid.residuals import residuals
-from sysid.validate import MIN_WINDOW_SAMPLES, SAMPLES_PER_STATE, compare, min_fit_samples
+from sysid.validate import (
+    MIN_WINDOW_SAMPLES,
+    SAMPLES_PER_STATE,
+    below_mean_warning,
+    compare,
+    min_fit_samples,
+)
 
 __all__ = ["check_fit_samples", "compare_cmd", "resid"]
+
+log = logging.getLogger(__name__)
 
 
 @click.command("compare")
@@ -104,6 +113,8 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
                 f"{modes[0][0]}, each from its own x0; --window-s or --horizon choose "
                 "another mode", style="dim")
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
+    if below := below_mean_warning(results, data=", ".join(p.name for p in sessions)):
+        log.warning("%s", below)
     if rrd is not None:
         write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
                    comparisons=[r for _, r in results])

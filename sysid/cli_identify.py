@@ -14,7 +14,7 @@ import numpy as np
 from rich.console import Console
 from rich.markup import escape
 
-from cfcommon.cli import check_output
+from cfcommon.cli import check_output, same_file_pairs
 from sysid.cli_compare import check_fit_samples
 from sysid.cli_options import (
     METHOD_OPTION,
@@ -27,6 +27,7 @@ from sysid.cli_support import (
     MODEL_SUFFIXES,
     check_rrd,
     console,
+    default_compare_mode,
     fit_or_none,
     fit_table,
     fits_json,
@@ -44,7 +45,7 @@ from sysid.model_io import check_not_a_session
 from sysid.pole_format import pole_number
 from sysid.quirks import frozen_warnings
 from sysid.refit import PROVENANCE_KEY
-from sysid.validate import compare, min_fit_samples, simulation_window
+from sysid.validate import below_mean_warning, compare, min_fit_samples
 
 __all__ = ["identify", "samples_line"]
 
@@ -84,8 +85,8 @@ def samples_line(flights: Sequence[IOData], *, dt: float,
                    "model is chosen, a direct term is also tried where the data show no "
                    "feedback, and kept when it scores better on held-out data).")
 @click.option("--validate", "validate", multiple=True, type=click.Path(path_type=Path),
-              help="Score the model on this session (1-step and windowed simulation); "
-                   "repeatable.")
+              help="Score the model on this session (simulation as `sysid compare` scores "
+                   "it by default, and 1-step prediction); repeatable.")
 @click.option("--workers", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes for the choice of horizons and order.")
 @model_options(out_help="Save the model (.h5, .json or .mat); an existing file needs --force.")
@@ -102,8 +103,9 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     PARSIM-K is tried beside IEM at the chosen horizons and the smaller order that scores as
     well wins (IEM on a tie; docs/sysid.md, "Method"). Then prints the
     poles, whether the model and its predictor A - KC are stable, and the fit on the
-    identification data (windowed simulation and one-step prediction), and on each --validate
-    session.
+    identification data and on each --validate session: simulation as `sysid compare` gives
+    it by default (over 2 s windows for a model with a pole near the unit circle), and
+    one-step prediction. A fit below 0 % on a --validate session is warned of.
 
     \b
     Examples:
@@ -118,6 +120,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                      overwrite=force, force_flag="--force")
         check_not_a_session(out)  # before the identification, not after it
     check_rrd(rrd, inputs=(*sessions, *validate))
+    check_sessions_distinct(sessions, validate)
     meth, options = method_options(method, feedthrough=feedthrough, focus=focus,
                                    stability=stability)
     groups = load_groups(sessions, opts=opts)
@@ -138,13 +141,12 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                            choose_feedthrough="open-loop" if feedthrough is None else False)
         model = selection.model
         order, past, future = selection.best.order, selection.best.past, selection.best.future
-    # A quadrotor's rates integrate torque: simulating a whole flight drifts even for a good
-    # model, so the fit is over short windows (initial state estimated per window).
-    # The selection's own window when it chose the model (sized for the grid's largest order).
-    window_s = (selection.window_s if selection is not None and selection.window_s else
-                simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in flights),
-                                  n_states=model.n_states, n_outputs=model.n_outputs))
-    sim = compare(model, flights, window=window_s, warn=False)
+    # Simulation as `sysid compare` scores it by default (one rule, one figure: a model with
+    # a pole near the unit circle over windows, each from its own initial state, since a
+    # quadrotor's rates integrate torque and a whole flight drifts even for a good model).
+    sim_label, sim_mode = default_compare_mode(model,
+                                               n_samples=min(d.n_samples for d in flights))
+    sim = compare(model, flights, warn=False, **sim_mode)
     pred = compare(model, flights, horizon=1, warn=False)
     checks = []
     if validate:
@@ -163,15 +165,18 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                         else "", exc)
         val = [d for d in val if d.n_samples >= need]
         if val:
-            # the window of the identification rows (one report, one window), capped by the
-            # validation records: `sysid compare --window-s` with it gives the same figures
-            v_win = simulation_window(dt=model.dt, n_samples=min(d.n_samples for d in val),
-                                      n_states=model.n_states, n_outputs=model.n_outputs,
-                                      samples=round(window_s / model.dt))
-            checks = [(f"validation: simulation, {v_win:.3g} s windows",
-                       compare(model, val, window=v_win, warn=False)),
+            # `sysid compare MODEL VALIDATION` prints the same simulation figures, and
+            # `--horizon 1` the same prediction's
+            v_label, v_mode = default_compare_mode(model,
+                                                   n_samples=min(d.n_samples for d in val))
+            checks = [(f"validation: {v_label}", compare(model, val, warn=False, **v_mode)),
                       ("validation: 1-step prediction",
                        compare(model, val, horizon=1, warn=False))]
+            below = below_mean_warning([(label.removeprefix("validation: "), r)
+                                        for label, r in checks],
+                                       data=", ".join(p.name for p in validate))
+            if below:
+                log.warning("%s", below)
     if all(fit_or_none(f) is None for f in (*sim.fit, *pred.fit)):  # no use to anyone
         raise DataError(
             f"the model diverges on the data it was identified from (every windowed-simulation "
@@ -195,7 +200,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
             "dt_s": model.dt, "poles": poles, "stable": model.is_stable,
             "predictor_stable": model.predictor_is_stable,
             "fit_percent": {"simulation": fits_json(sim), "1-step": fits_json(pred)},
-            "simulation_window_s": window_s,
+            "simulation_window_s": sim_mode.get("window"),
             "selection": selection_json(selection) if selection else None,
             "validation": [{"mode": label, "fit_percent": fits_json(r)} for label, r in checks],
             "focus": model.provenance.get("focus"),
@@ -222,7 +227,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
                else f"{-cost:+.2f} points")))
     con.print(fit_table(console=con, title="fit on the identification data [%]",
                         names=model.output_names,
-                        rows=[(f"simulation, {window_s:.3g} s windows", sim.fit),
+                        rows=[(sim_label, sim.fit),
                               ("1-step prediction", pred.fit)]))
     if checks:
         con.print(fit_table(console=con,
@@ -233,3 +238,22 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     else:  # a long identification shown and then lost is a surprise: say it
         con.print("model not saved: --out FILE.h5 saves it (sysid compare, export and the "
                   "Python API read it)")
+
+
+def check_sessions_distinct(sessions: Sequence[Path], validate: Sequence[Path]) -> None:
+    """Refuse a session given twice (its experiments would count twice, and the last session
+    is the held-out one); warn, once, when a --validate session is one identified from (its
+    fits are then on the identification data, no check of the model)."""
+    twice = same_file_pairs(sessions)
+    if twice:
+        first, again = twice[0]
+        also = "" if str(first) == str(again) else f" (as {first})"
+        raise click.BadParameter(f"{again} is given twice{also}: one flight would count as "
+                                 "two experiments (and be held out to validate the models "
+                                 "it chose); give each session once", param_hint="SESSIONS")
+    both = same_file_pairs(validate, sessions)
+    if both:
+        names = ", ".join(dict.fromkeys(str(v) for v, _ in both))
+        log.warning("--validate %s is also identified from: its fits are on the "
+                    "identification data, not a check of the model; validate on another "
+                    "flight of the same kind", names)

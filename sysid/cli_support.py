@@ -51,7 +51,7 @@ from sysid.session_io import (
     shown_name,
 )
 from sysid.stability import NEAR_BAND
-from sysid.validate import simulation_window
+from sysid.validate import default_window
 
 __all__ = [
     "DETREND_OPTION",
@@ -406,10 +406,6 @@ JSON_OPTION = click.option("--json", "as_json", is_flag=True, help="Print the re
 # ------------------------------------------------------------------------------- commands
 
 
-#: A model with a pole at least this far out integrates over any validation window.
-INTEGRATING_RADIUS = 0.995
-
-
 def default_compare_mode(model: StateSpaceModel, *, n_samples: int | None = None
                          ) -> tuple[str, dict[str, Any]]:
     """``(label, compare keywords)`` when the user chose no mode: whole-record simulation, or
@@ -417,11 +413,9 @@ def default_compare_mode(model: StateSpaceModel, *, n_samples: int | None = None
     at ``|z| >= INTEGRATING_RADIUS`` (simulating a whole flight through an integrator measures
     only its drift). ``n_samples``: the shortest record, which caps the window (as
     ``identify`` caps it); the label then says so."""
-    radius = float(np.max(np.abs(model.poles()), initial=0.0))
-    if radius >= INTEGRATING_RADIUS:
-        sized = {"dt": model.dt, "n_states": model.n_states, "n_outputs": model.n_outputs}
-        window = simulation_window(**sized, n_samples=n_samples)
-        full = simulation_window(**sized)
+    window = default_window(model, n_samples=n_samples)  # the one rule (identify's too)
+    if window is not None:
+        full = default_window(model)
         capped = (f" (the shortest record: shorter than {full:.3g} s)"
                   if round(window / model.dt) < round(full / model.dt) else "")
         return (f"simulation, {window:.3g} s windows{capped}", {"window": window})

@@ -172,13 +172,15 @@ def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,
     """``model`` with ``provenance["stability"]``: the poles moved and the fit it cost.
 
     The cost is measured on the identification data with the measure the focus optimises
-    (one-step prediction, or simulation over :func:`~sysid.validate.simulation_window`
-    windows, each from a least-squares x0), against the same model with ``stability="free"``
-    (``free``, scaled units). ``cost_points`` is None when the free model's fit is not finite
-    or below -100 % on every channel (it diverges: the move costs nothing measurable).
+    (one-step prediction, or simulation as ``sysid compare`` and ``identify`` report it by
+    default, :func:`~sysid.validate.default_window`: windows for a model with a pole near the
+    unit circle, each from a least-squares x0, else each record whole), against the same
+    model with ``stability="free"`` (``free``, scaled units). ``cost_points`` is None when the
+    free model's fit is not finite or below -100 % on every channel (it diverges: the move
+    costs nothing measurable).
     """
     # validate imports nothing of the methods
-    from sysid.validate import compare, simulation_window
+    from sysid.validate import compare, default_window
 
     free_model = build_model(a=free.a, b=free.b, c=free.c, d=free.d, k=free.k,
                              noise_cov=free.noise_cov, u_scale=products.u_scale,
@@ -188,8 +190,7 @@ def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,
     flights = list(products.flights)
     window = None
     if horizon is None:
-        window = simulation_window(dt=model.dt, n_samples=min(fl.n_samples for fl in flights),
-                                   n_states=model.n_states, n_outputs=model.n_outputs)
+        window = default_window(model, n_samples=min(fl.n_samples for fl in flights))
     with np.errstate(all="ignore"):
         fit = np.asarray(compare(model, flights, horizon=horizon, window=window, warn=False))
         fit_free = np.asarray(compare(free_model, flights, horizon=horizon, window=window,
@@ -202,6 +203,7 @@ def stability_report(*, model: StateSpaceModel, fin: Finished, free: Finished,
         "moved": [{"from": [p.real, p.imag], "to": [q.real, q.imag], "radius_from": abs(p),
                    "radius_to": abs(q)} for p, q in fin.moved],
         "measure": ("1-step prediction" if horizon == 1
+                    else "simulation (each record whole)" if window is None
                     else f"simulation ({window:.3g} s windows)"),
         "fit_percent": fit.tolist(), "fit_percent_free": fit_free.tolist(),
         "cost_points": cost,

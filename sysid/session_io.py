@@ -80,7 +80,9 @@ class PhaseRelative:
 
 Window = str | tuple[float, float] | PhaseRelative | None
 """``"auto"``, a phase name or kind, a host-time ``(t0, t1)`` in seconds, a
-:class:`PhaseRelative`, or None for the whole log (module docstring)."""
+:class:`PhaseRelative`, or None for the whole log (module docstring). A name or kind is
+first to last matching phase, one experiment, except the kind ``airborne`` of an imported
+log's segments: each its own experiment, never the ground between them."""
 
 AUTO = "auto"
 _AIRBORNE = re.compile(r"airborne-(\d+)")
@@ -195,6 +197,11 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
                  (start + window.t0, t1))]
     if isinstance(window, str):
         if window != AUTO:
+            hits = [p for p in session.phases() if window in (p.name, p.kind)]
+            if len(hits) > 1 and all(_AIRBORNE.fullmatch(p.name) for p in hits):
+                # an imported log's segments (kind "airborne"): each its own experiment, as
+                # "auto" takes them; first to last would hold the ground between them
+                return [(p.name, (p.start_s, p.end_s)) for p in hits]
             return [(window, _phase(session, window))]
         phases = session.phases()
         excited = [p for p in phases if "excitation" in (p.name, p.kind)]

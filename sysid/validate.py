@@ -53,11 +53,14 @@ from sysid.errors import DataError, DimensionError, HorizonError
 from sysid.model import StateSpaceModel
 
 __all__ = [
+    "INTEGRATING_RADIUS",
     "MIN_WINDOW_SAMPLES",
     "SIMULATION_WINDOW_S",
     "CompareResult",
+    "below_mean_warning",
     "channel_weights",
     "compare",
+    "default_window",
     "estimate_x0",
     "fit_percent",
     "min_fit_samples",
@@ -96,6 +99,25 @@ def simulation_window(*, dt: float, n_samples: int | None = None, n_states: int 
     base = round(SIMULATION_WINDOW_S / dt) if samples is None else samples
     samples = max(base, min_fit_samples(n_states=n_states, n_outputs=n_outputs))
     return (samples if n_samples is None else min(samples, n_samples)) * dt
+
+
+#: A model with a pole at least this far out integrates over any validation window: simulating
+#: a whole record through it measures only its drift (or growth).
+INTEGRATING_RADIUS = 0.995
+
+
+def default_window(model: StateSpaceModel, *, n_samples: int | None = None) -> float | None:
+    """Seconds of the simulation windows of a fit whose mode nobody chose, the one rule of
+    ``sysid compare``'s default, ``identify``'s fit tables (identification and --validate
+    data) and the cost line of ``stability=``: :func:`simulation_window` sized for the model
+    (2 s; longer for many states) and capped by ``n_samples`` (the shortest record), when the
+    model has a pole at ``|z| >= INTEGRATING_RADIUS``; None otherwise (each record simulated
+    whole)."""
+    if float(np.max(np.abs(model.poles()), initial=0.0)) < INTEGRATING_RADIUS:
+        return None
+    return simulation_window(dt=model.dt, n_samples=n_samples, n_states=model.n_states,
+                             n_outputs=model.n_outputs)
+
 
 log = logging.getLogger(__name__)
 
@@ -421,3 +443,24 @@ def compare(
         x0=tuple(x0s), horizon=horizon, window=win, model_stable=model_stable,
         predictor_stable=pred_stable, diverged=diverged, output_names=names,
     )
+
+
+def below_mean_warning(results: Sequence[tuple[str, CompareResult]], *, data: str
+                       ) -> str | None:
+    """One line naming every channel whose fit on ``data`` (the sessions' names) is below 0 %
+    in any of ``results`` (``(mode label, result)``: the overall fit of each), what that
+    means and what to try; None when every fit is 0 % or more (a constant channel's NaN is
+    no fit, not a bad one). For the commands that print validation fits (``sysid identify
+    --validate``, ``sysid compare``) to log once per run."""
+    bad = []
+    for label, res in results:
+        for name, fit in zip(res.output_names, np.asarray(res.fit, dtype=float), strict=True):
+            if fit < 0:  # NaN is not
+                shown = f"{fit:.1f} %" if np.isfinite(fit) else "diverged"
+                bad.append(f"{name} {shown} ({label})")
+    if not bad:
+        return None
+    return (f"fit below 0 % on {data}: {', '.join(bad)}: the model reproduces these channels "
+            "worse than a constant at their mean would; try one-step or k-step prediction "
+            "(sysid compare --horizon K) for near-integrating closed-loop rate dynamics, more "
+            "excitation, a lower --order, or validation on a flight of the same kind")

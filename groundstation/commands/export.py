@@ -7,17 +7,20 @@
   Windows, a FAT card): the later one's file gets ``_2``, ``_3``, ... (``motors_2.csv``), and
   ``metadata.json`` maps every stream to its file (``stream_files``).
 * ``mat``: one MATLAB file holding what ``iddata`` needs, ``u`` (N x m), ``y`` (N x l), ``Ts``
-  (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit`` (cell arrays): the data
-  ``sysid identify`` identifies from, with its default channels and the logged period
-  (resampled on a uniform grid, not detrended; ``--inputs``, ``--outputs``, ``--window``, one
-  experiment, ``--dt``), plus every stream as ``streams.STREAM.FIELD`` (column
-  vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata`` (a log
-  without the default channels or window, imported from elsewhere: every stream and no
+  (s), ``InputName``, ``OutputName``, ``InputUnit``, ``OutputUnit``, ``ExperimentName``
+  (cell arrays): the data ``sysid identify`` identifies from, with its default channels,
+  window (``auto``: each excitation phase, else each airborne segment) and the logged period
+  (resampled on a uniform grid, not detrended; ``--inputs``, ``--outputs``, ``--window``,
+  ``--dt``). Several experiments make ``u`` and ``y`` 1 x E cell arrays, one N_e x m (N_e x l)
+  matrix each, iddata's multi-experiment form. Plus every stream as ``streams.STREAM.FIELD``
+  (column vectors), their units as ``units.STREAM.FIELD`` and the metadata as ``metadata`` (a
+  log without the default channels or window, imported from elsewhere: every stream and no
   iddata part, with a warning, unless ``--inputs``/``--outputs``/``--window`` is given)::
 
       s = load('flight.mat');
       data = iddata(s.y, s.u, s.Ts, 'InputName', s.InputName, 'OutputName', s.OutputName, ...
-                    'InputUnit', s.InputUnit, 'OutputUnit', s.OutputUnit);
+                    'InputUnit', s.InputUnit, 'OutputUnit', s.OutputUnit, ...
+                    'ExperimentName', s.ExperimentName);
 
 * ``parquet``: a folder with one ``STREAM.parquet`` per stream (each field's unit in its
   metadata, key ``unit``; files named as for ``csv``) and the same ``metadata.json`` as
@@ -215,12 +218,12 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
     from scipy.io import savemat
 
     from sysid.errors import ParameterError, SysIdError
-    from sysid.session_io import load_session
+    from sysid.session_io import host_windows, load_experiments
 
     data, left_out = None, ""
     try:
-        data = load_session(session.path, inputs=inputs, outputs=outputs, window=window, dt=dt,
-                            detrend=None)
+        data = load_experiments(session.path, inputs=inputs, outputs=outputs, window=window,
+                                dt=dt, detrend=None, verb="export as iddata")
     except (SysIdError, SessionError) as exc:  # SessionError: no such phase
         if iddata == "required":  # a value given (--dt, a window): its own advice
             advice = "" if isinstance(exc, ParameterError) else \
@@ -248,17 +251,34 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
     meta_ids = _identifiers(metadata)
     meta = {meta_ids[k]: json.dumps(v) if not isinstance(v, str) else v
             for k, v in metadata.items()}
-    content: dict[str, Any] = {} if data is None else {
-        "u": np.asarray(data.u, dtype=float), "y": np.asarray(data.y, dtype=float),
-        "Ts": float(data.dt), "InputName": _cell(data.input_names),
-        "OutputName": _cell(data.output_names), "InputUnit": _cell(data.input_units),
-        "OutputUnit": _cell(data.output_units),
-        "Window": "all" if window is None else str(window)}
+    content: dict[str, Any] = {} if data is None else _iddata_part(
+        data, window=window, names=[label for label, _ in host_windows(session, window)])
     with whole_file(path) as part:
         savemat(part, {**content, "streams": streams, "units": units, "names": names,
                        "metadata": meta},
                 long_field_names=True, do_compression=True, oned_as="column", appendmat=False)
     return left_out
+
+
+def _iddata_part(data: list[Any], *, window: Any, names: list[str]) -> dict[str, Any]:
+    """iddata's fields for the experiments ``data`` (IOData, one grid): ``u``, ``y`` as
+    matrices for one experiment, as 1 x E cell arrays of matrices for several (iddata's
+    multi-experiment form), and ``ExperimentName`` (``names``, their windows) either way."""
+    first = data[0]
+
+    def part(values: list[np.ndarray]) -> np.ndarray:
+        if len(values) == 1:
+            return np.asarray(values[0], dtype=float)
+        cell = np.empty((1, len(values)), dtype=object)
+        for i, v in enumerate(values):
+            cell[0, i] = np.asarray(v, dtype=float)
+        return cell
+
+    return {"u": part([d.u for d in data]), "y": part([d.y for d in data]),
+            "Ts": float(first.dt), "InputName": _cell(first.input_names),
+            "OutputName": _cell(first.output_names), "InputUnit": _cell(first.input_units),
+            "OutputUnit": _cell(first.output_units), "ExperimentName": _cell(names),
+            "Window": "all" if window is None else str(window)}
 
 
 def export_parquet(session: Session, folder: Path) -> list[Path]:
@@ -346,9 +366,10 @@ class _Choice(click.Choice):
               help="mat: iddata inputs u (streams, stream.field or group.variable), as sysid.")
 @click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
               help="mat: iddata outputs y, as sysid.")
-@click.option("--window", default="excitation", show_default=True,
-              help="mat: phase name or kind, T0:T1 (session seconds), or 'all' (one "
-                   "experiment: iddata holds one).")
+@click.option("--window", default="auto", show_default=True,
+              help="mat: as sysid: auto (each excitation phase, else each airborne segment), "
+                   "a phase name or kind, T0:T1 (session seconds), PHASE@T0:T1, or all; "
+                   "several experiments are iddata's multi-experiment form.")
 @click.option("--dt", type=FiniteFloat(min=0, min_open=True), default=None,
               help="mat: sample time Ts of u and y, s [default: the logged period, as sysid].")
 def command(session: Path, to: Format, out: Path | None, force: bool, inputs: str,

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from cfsession import open_session
 from groundstation.cli import main
-from sysid.session_io import load_session
+from sysid.session_io import load_experiments, load_session
 from tests.sysid.flights import known_system, write_flight
 from tests.viz.sessions import LONG_TEXT, write_session
 
@@ -83,7 +83,7 @@ def test_mat_holds_what_iddata_needs(tmp_path):
     np.testing.assert_array_equal(m["streams"]["gyro"]["x"], gyro["x"].astype(float))
     np.testing.assert_array_equal(m["streams"]["gyro"]["host_time"], gyro["host_time"])
     assert m["units"]["gyro"]["x"] == s["gyro"].units["x"]
-    assert m["Window"] == "excitation"
+    assert m["Window"] == "auto" and m["ExperimentName"] == "excitation"  # sysid's default
     # a channel the session lacks: one line naming the options
     res = _run(flight.path, "--to", "mat", "--out", tmp_path / "g.mat", "--inputs", "nope")
     assert res.exit_code == 2 and res.output.count("\n") == 1 and "--inputs" in res.output
@@ -91,11 +91,11 @@ def test_mat_holds_what_iddata_needs(tmp_path):
 
 
 def test_mat_of_a_log_without_the_default_window_holds_every_stream(tmp_path):
-    """A log imported from elsewhere (airborne segments, no excitation phase): ``--to mat``
-    with the defaults refused to write anything; it writes every stream and says how to get
-    u and y. Named channels or windows that are missing are still an error (above)."""
+    """A log imported from elsewhere (no excitation or airborne phase): ``--to mat`` with the
+    defaults refused to write anything; it writes every stream and says how to get u and y.
+    Named channels or windows that are missing are still an error (above)."""
     flight = write_flight(tmp_path / "elsewhere.h5", system=known_system(), seed=4, n=800,
-                          phases=[(0.0, "ground-0", "ground"), (1.0, "airborne-1", "airborne")])
+                          phases=[(0.0, "ground-0", "ground"), (1.0, "log", "imported")])
     out = tmp_path / "e.mat"
     res = _run(flight.path, "--to", "mat", "--out", out)
     assert res.exit_code == 0, res.output
@@ -104,10 +104,34 @@ def test_mat_of_a_log_without_the_default_window_holds_every_stream(tmp_path):
     assert "u" not in m and "y" not in m and "Ts" not in m
     s = open_session(flight.path)
     np.testing.assert_array_equal(m["streams"]["motors"]["m1"], s["motors"].data["m1"])
-    res = _run(flight.path, "--to", "mat", "--out", tmp_path / "f.mat", "--window",
-               "airborne-1")
+    res = _run(flight.path, "--to", "mat", "--out", tmp_path / "f.mat", "--window", "log")
     assert res.exit_code == 0 and "no iddata" not in res.output, res.output
     assert scipy.io.loadmat(tmp_path / "f.mat")["u"].shape[1] == 4
+
+
+@pytest.mark.parametrize("window", [[], ["--window", "auto"], ["--window", "airborne"]])
+def test_mat_of_an_imported_log_holds_each_airborne_segment(tmp_path, window):
+    """An imported log's two airborne segments: the default window was `excitation` (no
+    iddata part at all), `--window auto` was refused naming a Python function, and
+    `--window airborne` joined the segments with the ground between them. Each segment is now
+    one experiment of iddata's multi-experiment form (u, y: 1 x 2 cell arrays), the data
+    `sysid identify` identifies from."""
+    flight = write_flight(tmp_path / "imp.h5", system=known_system(), seed=4, n=1500,
+                          phases=[(0.0, "ground-0", "ground"), (3.0, "airborne-1", "airborne"),
+                                  (12.0, "ground-1", "ground"), (15.0, "airborne-2", "airborne"),
+                                  (27.0, "ground-2", "ground")])
+    out = tmp_path / "imp.mat"
+    res = _run(flight.path, "--to", "mat", "--out", out, *window)
+    assert res.exit_code == 0, res.output
+    assert res.output.strip() == f"wrote {out}"
+    m = scipy.io.loadmat(out, simplify_cells=True)
+    ref = load_experiments(flight.path, inputs=["motors"], outputs=["acc.z", "gyro"],
+                           dt=None, detrend=None)
+    assert len(ref) == 2 and list(m["ExperimentName"]) == ["airborne-1", "airborne-2"]
+    for got_u, got_y, exp in zip(m["u"], m["y"], ref, strict=True):
+        np.testing.assert_array_equal(got_u, exp.u)
+        np.testing.assert_array_equal(got_y, exp.y)
+    assert sum(len(u) for u in m["u"]) * m["Ts"] < 22.0  # 9 s + 12 s airborne, no ground
 
 
 def test_parquet_round_trip_and_without_pyarrow(session, tmp_path, monkeypatch):

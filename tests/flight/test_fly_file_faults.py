@@ -118,8 +118,11 @@ def test_a_file_size_limit_aborts_with_one_line_and_a_readable_file(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, (proc.returncode, proc.stderr[-3000:])  # -11: h5py crashed
     assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    # the safety check's record when it fires, then the command's one error line, last
     errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-    assert len(errors) == 1, proc.stderr
+    assert len(errors) == 2 and errors[0].startswith("error: safety: file size limit"), \
+        proc.stderr
+    errors = errors[1:]
     assert errors[0].startswith(f"error: flight aborted: file size limit reached writing in "
                                 f"{out}: a file may not grow past 60000 bytes (ulimit -f); "
                                 "session saved to ")

@@ -390,11 +390,12 @@ def test_rrd_reports_are_written(flights, tmp_path) -> None:
     assert res.exit_code == 0 and "/sysid/sweep/poles/order_4" in load(tmp_path / "sw.rrd")
 
 
-def _rrd_fits(ents, base: str, names) -> dict[str, dict[str, float]]:
+def _rrd_fits(ents, base: str, names, slugs=("windowed_simulation", "prediction_1_step")
+              ) -> dict[str, dict[str, float]]:
     """``{mode slug: {channel: fit}}`` of the summary texts under ``base``; each model
     series' name (one experiment: its fit is the overall fit) must say the same."""
     out = {}
-    for slug in ("windowed_simulation", "prediction_1_step"):
+    for slug in slugs:
         text = ents[f"{base}/{slug}/summary"].static["TextDocument:text"][0]
         fits = {n: float(f) for n, f in re.findall(r"^  (\S+):\s+(\S+) %$", text, re.M)}
         assert list(fits) == list(names), text
@@ -418,14 +419,16 @@ def test_identify_validate_rrd_keeps_both_data_sets(flights, tmp_path) -> None:
     assert res.exit_code == 0, res.output
     report = json.loads(res.stdout)
     names = list(report["fit_percent"]["1-step"])
-    want = {"/sysid": {"windowed_simulation": report["fit_percent"]["simulation"],
+    # simulation as `sysid compare` does it by default: windows only for a pole near |z| = 1
+    sim = "windowed_simulation" if report["simulation_window_s"] else "simulation"
+    want = {"/sysid": {sim: report["fit_percent"]["simulation"],
                        "prediction_1_step": report["fit_percent"]["1-step"]},
-            "/sysid/validation": {"windowed_simulation": report["validation"][0]["fit_percent"],
+            "/sysid/validation": {sim: report["validation"][0]["fit_percent"],
                                   "prediction_1_step": report["validation"][1]["fit_percent"]}}
     assert report["validation"][0]["mode"].startswith("validation: simulation")
     ents = load(tmp_path / "j.rrd", sort_by=None)
     for base, modes in want.items():
-        got = _rrd_fits(ents, base, names)
+        got = _rrd_fits(ents, base, names, slugs=(sim, "prediction_1_step"))
         for slug, fits in modes.items():
             np.testing.assert_allclose([got[slug][n] for n in names], [fits[n] for n in names],
                                        atol=0.005 + 1e-9, err_msg=f"{base}/{slug}")
@@ -447,11 +450,11 @@ def test_identify_validate_rrd_keeps_both_data_sets(flights, tmp_path) -> None:
     assert res.exit_code == 0, res.output
     ents = load(tmp_path / "t.rrd", sort_by=None)
     lines = res.stdout.splitlines()
-    for base, rows in (("/sysid", ("simulation, ", "1-step prediction")),
-                       ("/sysid/validation", ("validation: simulation, ",
+    for base, rows in (("/sysid", ("simulation", "1-step prediction")),
+                       ("/sysid/validation", ("validation: simulation",
                                               "validation: 1-step prediction"))):
-        got = _rrd_fits(ents, base, names)
-        for slug, label in zip(("windowed_simulation", "prediction_1_step"), rows, strict=True):
+        got = _rrd_fits(ents, base, names, slugs=(sim, "prediction_1_step"))
+        for slug, label in zip((sim, "prediction_1_step"), rows, strict=True):
             line = next(ln for ln in lines if ln.startswith(label))
             printed = [float(v) for v in line.split()[-len(names):]]
             np.testing.assert_allclose(printed, [got[slug][n] for n in names],

@@ -12,7 +12,6 @@ import sysid
 from cfsession.errors import SessionError
 from sysid.cli_support import (
     DIVERGED_FIT,
-    INTEGRATING_RADIUS,
     Group,
     check_rrd,
     default_compare_mode,
@@ -26,6 +25,7 @@ from sysid.cli_support import (
 from sysid.comparison import CompareResult
 from sysid.errors import ParameterError
 from sysid.session_io import AUTO, PhaseRelative
+from sysid.validate import INTEGRATING_RADIUS
 
 
 def _group(exc: BaseException) -> click.Group:

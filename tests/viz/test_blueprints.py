@@ -193,15 +193,24 @@ def _by_name(path: Path) -> dict[str, View]:
     return {v.name: v for v in views(path)}
 
 
+def _simulation_slug(path: Path) -> str:
+    """The entity name of the simulation mode ``identify`` chose (compare's default: whole
+    records, or windows when a pole is near z = 1)."""
+    slugs = {v.origin.removeprefix("/sysid/") for v in views(path) if v.name == "gyro.x"
+             and v.origin in ("/sysid/simulation", "/sysid/windowed_simulation")}
+    assert len(slugs) == 1, slugs
+    return slugs.pop()
+
+
 def test_identification_report_panels(recordings) -> None:
     path = recordings["identify"]
     ents = load(path, sort_by=None)
     by_name = _by_name(path)
     # measured and model of every output channel, not an empty plot
+    sim = _simulation_slug(path)  # "simulation" (whole records) or in windows: as compare's
     gyro_x = [resolve(v, path, timeline="t") for v in views(path)
-              if v.name == "gyro.x" and v.origin == "/sysid/windowed_simulation"]
-    assert gyro_x[0] == ["/sysid/windowed_simulation/exp0/gyro.x/measured",
-                      "/sysid/windowed_simulation/exp0/gyro.x/model"]
+              if v.name == "gyro.x" and v.origin == f"/sysid/{sim}"]
+    assert gyro_x[0] == [f"/sysid/{sim}/exp0/gyro.x/measured", f"/sysid/{sim}/exp0/gyro.x/model"]
     # the chosen order is drawn over the singular values; the log chart starts at 0
     bars = resolve(by_name["singular values (order in red)"], path)
     assert bars == ["/sysid/order/singular_values", "/sysid/order/singular_values/chosen"]
@@ -227,15 +236,15 @@ def test_validation_panels_show_the_validation_flight(recordings) -> None:
     path = recordings["identify with validation"]
     found = views(path)
     for base in ("/sysid", "/sysid/validation"):
-        for slug in ("windowed_simulation", "prediction_1_step"):
+        for slug in (_simulation_slug(path), "prediction_1_step"):
             plot = [v for v in found if v.name == "gyro.x" and v.origin == f"{base}/{slug}"]
             assert len(plot) == 1, [(v.name, v.origin) for v in found]
             assert resolve(plot[0], path, timeline="t") == [
                 f"{base}/{slug}/exp0/gyro.x/measured", f"{base}/{slug}/exp0/gyro.x/model"]
     texts = {v.name: v.origin for v in found if v.kind == "TextDocument"}
-    assert texts["windowed_simulation fit"] == "/sysid/windowed_simulation/summary"
-    assert texts["validation windowed_simulation fit"] == \
-        "/sysid/validation/windowed_simulation/summary"
+    sim = _simulation_slug(path)
+    assert texts[f"{sim} fit"] == f"/sysid/{sim}/summary"
+    assert texts[f"validation {sim} fit"] == f"/sysid/validation/{sim}/summary"
     assert timeline(path) == "t"
 
 
