@@ -185,6 +185,12 @@ class Session:
         return int(self.meta.get("schema_version", 0))
 
     @property
+    def imported(self) -> bool:
+        """A log imported from elsewhere (uSD card, cfclient CSV): it has no host clock, so its
+        ``host_time`` holds the firmware's seconds (root attribute ``time_base`` says so)."""
+        return str(self.meta.get("time_base", "")).startswith("imported")
+
+    @property
     def closed_cleanly(self) -> bool:
         """False when the writer died (the file holds what was flushed before)."""
         return bool(self.meta.get("closed_cleanly", 0))

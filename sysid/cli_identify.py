@@ -40,6 +40,7 @@ from sysid.cli_support import (
 from sysid.cli_sweep import choose, print_selection, saved_line, selection_json
 from sysid.data import IOData
 from sysid.errors import DataError
+from sysid.holdout import ORDERS
 from sysid.model import StateSpaceModel
 from sysid.model_io import check_not_a_session
 from sysid.pole_format import pole_number
@@ -123,10 +124,15 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     check_sessions_distinct(sessions, validate)
     meth, options = method_options(method, feedthrough=feedthrough, focus=focus,
                                    stability=stability)
-    groups = load_groups(sessions, opts=opts)
+    fixed = order is not None and past is not None and future is not None
+    # a session's window too short to score on, refused before the search (one session is
+    # split, and its refusal says what the split needs: sysid.holdout)
+    whole = not fixed and len(sessions) > 1
+    groups = load_groups(sessions, opts=opts, elsewhere=validate,
+                         min_states=order or ORDERS[0] if whole else None)
     flights = [e for g in groups for e in g]
     selection = None
-    if order is not None and past is not None and future is not None:
+    if fixed:
         for warning in frozen_warnings(flights):  # the selection's cheapest check, said here
             log.warning("%s", warning)  # (its outlier and drift checks cost more than this fit)
         with Console(stderr=True).status(f"identifying ({method}, n={order})"):
@@ -152,7 +158,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     if validate:
         val = load_flights(list(validate), opts={**opts, "dt": model.dt},
                            inputs=model.input_names, outputs=model.output_names,
-                           verb="validate the model on")
+                           verb="validate the model on", elsewhere=sessions)
         # records too short to score (the rule `sysid compare` refuses them by) are named and
         # left out; the others are scored; the model is saved either way
         need = min_fit_samples(n_states=model.n_states, n_outputs=model.n_outputs)

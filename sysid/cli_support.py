@@ -48,10 +48,11 @@ from sysid.session_io import (
     Window,
     load_sessions,
     parse_window,
+    session_window,
     shown_name,
 )
 from sysid.stability import NEAR_BAND
-from sysid.validate import default_window
+from sysid.validate import default_window, min_fit_samples
 
 __all__ = [
     "DETREND_OPTION",
@@ -63,6 +64,7 @@ __all__ = [
     "SESSION_DEFAULTS",
     "Group",
     "check_rrd",
+    "check_window_samples",
     "console",
     "experiment_label",
     "fit_table",
@@ -82,6 +84,7 @@ __all__ = [
     "session_args",
     "session_options",
     "split_names",
+    "window_texts",
     "write_rrd",
 ]
 
@@ -204,25 +207,32 @@ def session_args(opts: dict[str, Any]) -> list[str]:
     return args
 
 
-def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
-    """``--window`` values: ``(window for every session, {session: its own window})``."""
-    common: Window = AUTO
-    own: dict[str, Window] = {}
-    given: dict[str, str] = {}  # whose window -> the text that set it (two: the user meant one)
+def window_texts(texts: Sequence[str]) -> dict[str | None, str]:
+    """``--window`` values by whose window each sets (a session as named, None for every
+    session's), each as given; two for one are refused in one line."""
+    given: dict[str | None, str] = {}  # two for one: the user meant one
     for text in texts:
-        session, eq, spec = text.partition("=")
-        whose = session.strip() if eq else ""
+        session, eq, _ = text.partition("=")
+        whose = session.strip() if eq else None
         if whose in given:
-            who = f"session {whose!r}" if whose else "every session"
+            who = "every session" if whose is None else f"session {whose!r}"
             raise ParameterError(f"--window {given[whose]!r} and --window {text!r}: two windows "
                                  f"for {who}; give one (a flight's phases are each their own "
                                  "experiment with the default auto)")
         given[whose] = text
+    return given
+
+
+def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
+    """``--window`` values: ``(window for every session, {session: its own window})``."""
+    common: Window = AUTO
+    own: dict[str, Window] = {}
+    for whose, text in window_texts(texts).items():
         try:
-            if eq:
-                own[whose] = parse_window(spec)
-            else:
+            if whose is None:
                 common = parse_window(text)
+            else:
+                own[whose] = parse_window(text.partition("=")[2])
         except ParameterError as exc:
             raise ParameterError(f"--{exc}") from None
     return common, own
@@ -230,16 +240,21 @@ def parse_windows(texts: Sequence[str]) -> tuple[Window, dict[str, Window]]:
 
 def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
                 inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
-                verb: str = "identify from") -> list[list[IOData]]:
+                verb: str = "identify from", elsewhere: Sequence[Path] = (),
+                min_states: int | None = None) -> list[list[IOData]]:
     """The experiments of each session, as the session options select them; ``verb`` is
-    what they are for (:func:`sysid.session_io.load_experiments`)."""
+    what they are for (:func:`sysid.session_io.load_experiments`). ``elsewhere``: the
+    command's other sessions, read by another call (``--validate``), whose ``--window
+    SESSION=...`` the options may hold too. ``min_states``: the smallest order the models
+    scored on these data may have; each experiment of a window the user gave (not ``auto``)
+    must hold the samples such a model's fit needs (:func:`check_window_samples`)."""
     common, own = parse_windows(opts["windows"])
     try:
-        return load_sessions(
+        groups = load_sessions(
             list(paths), inputs=inputs or split_names(opts["inputs"]),
             outputs=outputs or split_names(opts["outputs"]), window=common, windows=own,
-            dt=opts["dt"], detrend=None if opts["detrend"] == "none" else opts["detrend"],
-            verb=verb)
+            elsewhere=list(elsewhere), dt=opts["dt"],
+            detrend=None if opts["detrend"] == "none" else opts["detrend"], verb=verb)
     except DataError as exc:  # a channel the session lacks: say which option chooses them
         channel = getattr(exc, "channel", None)
         if channel is None or channel.problem != "unknown":
@@ -253,6 +268,37 @@ def load_groups(paths: Sequence[Path], *, opts: dict[str, Any],
                             f"{verb.split()[0]} the model on sessions that log the channels it "
                             "was identified with") from None
         raise DataError(f"{exc}; choose the {role} with --{role}") from None
+    if min_states is not None:
+        check_window_samples(paths, groups, windows=opts["windows"], min_states=min_states)
+    return groups
+
+
+def check_window_samples(paths: Sequence[Path], groups: Sequence[Sequence[IOData]], *,
+                         windows: Sequence[str], min_states: int) -> None:
+    """Refuse, in one line naming the session and its ``--window``, an experiment of a window
+    the user gave that holds fewer samples than a model of ``min_states`` states (the
+    smallest candidate) needs for a fit with its own initial state
+    (:func:`sysid.validate.min_fit_samples`): a 15-sample window on the validating session
+    ran the whole search, its score's tolerance falling back to a guess, and capped every
+    simulation window of the fits at 15 samples. ``auto`` windows are left alone: a short
+    phase among long ones is left out of the score with a warning (:mod:`sysid.holdout`)."""
+    given = window_texts(windows)
+    own = {whose: text for whose, text in given.items() if whose is not None}
+    for path, group in zip(paths, groups, strict=True):
+        text = session_window(path, own, given.get(None, AUTO))  # as given: V.h5=prbs@0:1
+        if parse_window(text.partition("=")[2] if "=" in text else text) == AUTO:
+            continue
+        for e in group:
+            need = min_fit_samples(n_states=min_states, n_outputs=e.n_outputs)
+            if e.n_samples >= need:
+                continue
+            label = experiment_label(e.source) if "#" in e.source else path.name
+            raise DataError(
+                f"{label}: --window {text} holds {e.n_samples} samples ({e.n_samples * e.dt:.3g} "
+                f"s at dt {e.dt:g} s), fewer than the {need} the smallest candidate model "
+                f"(order {min_states}, {e.n_outputs} output(s)) needs to be scored with its own "
+                f"initial state; give {path.name} a window of {need * e.dt:.3g} s at least "
+                f"(--window {path.name}=...) or leave the session out")
 
 
 def _stream_name(name: str) -> str:
@@ -262,10 +308,12 @@ def _stream_name(name: str) -> str:
 
 def load_flights(paths: Sequence[Path], *, opts: dict[str, Any],
                  inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None,
-                 verb: str = "identify from") -> list[IOData]:
+                 verb: str = "identify from", elsewhere: Sequence[Path] = (),
+                 min_states: int | None = None) -> list[IOData]:
     """Every experiment of the sessions, in order (:func:`load_groups` flattened)."""
     return [e for g in load_groups(paths, opts=opts, inputs=inputs, outputs=outputs,
-                                   verb=verb) for e in g]
+                                   verb=verb, elsewhere=elsewhere, min_states=min_states)
+            for e in g]
 
 
 def load_model_arg(model_path: Path, sessions: Sequence[Path], *, command: str

@@ -46,7 +46,7 @@ from sysid.cli_support import (
 )
 from sysid.data import IOData
 from sysid.errors import DataError, HorizonError
-from sysid.holdout import GIVE_HORIZONS, VALIDATE_WITH
+from sysid.holdout import GIVE_HORIZONS, ORDERS, VALIDATE_WITH
 from sysid.methods import Method, Options
 from sysid.model import StateSpaceModel
 from sysid.model_io import MAX_DIMENSION, check_not_a_session
@@ -190,9 +190,15 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
                      overwrite=force, force_flag="--force")
         check_not_a_session(out)  # before the sweep, not after it
     check_rrd(rrd, inputs=(session, *validate))
-    groups = load_groups([session], opts=opts)
+    # the smallest candidate's order: a window too short to score it on is refused before the
+    # sweep (one session without --validate is split, and its refusal says what the split
+    # needs: sysid.holdout)
+    smallest = grid_min(lazy["orders"]) if "orders" in lazy else ORDERS[0]
+    groups = load_groups([session], opts=opts, elsewhere=validate,
+                         min_states=smallest if validate else None)
     val = (load_flights(list(validate), opts={**opts, "dt": groups[0][0].dt},  # its grid
-                        verb="validate the models on") if validate else None)
+                        verb="validate the models on", elsewhere=[session],
+                        min_states=smallest) if validate else None)
     if "pasts" in lazy or "futures" in lazy:
         ident = groups[0] if val else holdout(groups)[0]
         # the default grid (and the memory it takes) only for what was not given

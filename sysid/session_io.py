@@ -47,10 +47,10 @@ import logging
 import math
 import os
 import re
-from collections.abc import Container, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
@@ -64,9 +64,10 @@ from sysid.preprocess import Stream, detrend_data, iodata_from_streams
 
 __all__ = ["AUTO", "MAX_SHOWN_NAME", "Channel", "PhaseRelative", "SessionFileError", "Window",
            "clock_offset", "load_experiments", "load_session", "load_sessions", "parse_window",
-           "read_metadata", "resolve_channels", "shown_name", "unique_name"]
+           "read_metadata", "resolve_channels", "session_window", "shown_name", "unique_name"]
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 @dataclass(frozen=True)
 class PhaseRelative:
@@ -439,27 +440,37 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
     return dict(open_session(path).meta)
 
 
+def session_window(path: str | os.PathLike[str], windows: Mapping[str, T], default: T) -> T:
+    """``path``'s own entry of ``windows`` (keyed by a session's path as given, or its file
+    name: the path's first), else ``default``: whose window a session is read with."""
+    return windows.get(str(path), windows.get(Path(path).name, default))
+
+
 def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
-                  windows: dict[str, Window] | None = None, **kwargs: Any) -> list[list[IOData]]:
+                  windows: dict[str, Window] | None = None,
+                  elsewhere: Sequence[str | os.PathLike[str]] = (),
+                  **kwargs: Any) -> list[list[IOData]]:
     """The experiments of each session (:func:`load_experiments`; never joined end to end),
     one list per session, all on one grid period: with ``dt`` None, the first session's
     logged period when every session's is within :data:`PERIOD_MATCH` of it (else one-line
     :class:`~sysid.errors.DataError`). ``windows`` maps a session (its path as given, or its
-    file name) to its own window; the others use ``window``; other ``kwargs`` as
-    :func:`load_experiments`."""
+    file name) to its own window; the others use ``window``. ``elsewhere``: the caller's other
+    sessions, read by another call (validation sessions beside the identification ones), whose
+    windows ``windows`` may hold too; a window for a session in neither is refused. Other
+    ``kwargs`` as :func:`load_experiments`."""
     if not paths:
         raise DataError("no session files given; pass at least one")
     windows = dict(windows or {})
-    unknown = sorted(set(windows) - {str(p) for p in paths} - {Path(p).name for p in paths})
+    every = [*paths, *elsewhere]
+    unknown = sorted(set(windows) - {str(p) for p in every} - {Path(p).name for p in every})
     if unknown:
         raise ParameterError(f"window for {unknown}: no such session among "
-                             f"{[str(p) for p in paths]}")
-    for p in paths:
+                             f"{[str(p) for p in every]}")
+    for p in every:
         if str(p) != Path(p).name and str(p) in windows and Path(p).name in windows:
             raise ParameterError(f"two windows for session {p}: one given for its path, one "
                                  f"for its name {Path(p).name!r}; give one")
-    each = [{**kwargs, "window": windows.get(str(p), windows.get(Path(p).name,
-                                                                  kwargs.get("window", AUTO)))}
+    each = [{**kwargs, "window": session_window(p, windows, kwargs.get("window", AUTO))}
             for p in paths]
     out = [load_experiments(p, **kw) for p, kw in zip(paths, each, strict=True)]
     return out if kwargs.get("dt") is not None else _common_grid(paths, out, each=each)

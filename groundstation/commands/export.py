@@ -27,7 +27,9 @@
   ``csv``; needs ``pyarrow``.
 
 Names that are no MATLAB identifier (``stateEstimate.z``) become one (``stateEstimate_z``;
-ASCII, at most 63 characters, ``_2``, ``_3``, ... when that name is taken).
+ASCII, at most 63 characters, ``_2``, ``_3``, ... when that name is taken). An imported log's
+``host_time`` holds the firmware's clock (it has no host's): every format names that column
+``fw_time`` (``fw_time [s]``), a flown session's keep ``host_time``.
 A damaged or crash-truncated session is exported as far as it reads, and each of its problems
 (those ``groundstation info`` lists) is logged as a warning naming the file. Each file is
 written beside its name and renamed onto it when complete (:func:`cfcommon.cli.whole_file`):
@@ -79,6 +81,25 @@ def _columns(session: Session, name: str) -> dict[str, list[Any] | np.ndarray]:
         else:
             out[f] = col
     return out
+
+
+#: What an imported log's ``host_time`` is exported as: it holds the firmware's seconds (the log
+#: has no host clock; docs/session-format.md, "Times").
+FIRMWARE_TIME = "fw_time"
+
+
+def _labels(session: Session, fields: Any) -> dict[str, str]:
+    """``{field: its name in the export}``: the session's own, except an imported log's
+    ``host_time``, which is :data:`FIRMWARE_TIME` (named by what it holds; ``_2``, ... if a
+    field already has that name). A flown session's columns keep their names."""
+    fields = list(fields)
+    labels = {f: f for f in fields}
+    if session.imported and "host_time" in labels:
+        name, k = FIRMWARE_TIME, 2
+        while name in labels:
+            name, k = f"{FIRMWARE_TIME}_{k}", k + 1
+        labels["host_time"] = name
+    return labels
 
 
 def _metadata(session: Session) -> dict[str, Any]:
@@ -143,7 +164,9 @@ def export_csv(session: Session, folder: Path) -> list[Path]:
     names = _file_names(session.streams, ".csv")
     for name, stream in session.streams.items():
         cols = _columns(session, name)
-        header = [f"{f} [{stream.units[f]}]" if stream.units.get(f) else f for f in cols]
+        labels = _labels(session, cols)
+        header = [f"{labels[f]} [{stream.units[f]}]" if stream.units.get(f) else labels[f]
+                  for f in cols]
         path = folder / names[name]
         with whole_file(path) as part, part.open("w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
@@ -239,7 +262,9 @@ def export_mat(session: Session, path: Path, *, inputs: list[str], outputs: list
     stream_ids = _identifiers(session.streams)
     for name, stream in session.streams.items():
         cols = _columns(session, name)
-        field_ids = _identifiers(cols)
+        labels = _labels(session, cols)
+        ids = _identifiers(labels.values())
+        field_ids = {f: ids[labels[f]] for f in cols}
         streams[stream_ids[name]] = {
             field_ids[f]: (_cell(c).T if isinstance(c, list) else
                            np.asarray(c, dtype=float).reshape(-1, 1))
@@ -295,8 +320,10 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
     names = _file_names(session.streams, ".parquet")
     for name, stream in session.streams.items():
         cols = _columns(session, name)
-        fields = [pa.field(f, pa.string() if isinstance(c, list) else pa.from_numpy_dtype(
-            c.dtype), metadata={"unit": stream.units.get(f, "")}) for f, c in cols.items()]
+        labels = _labels(session, cols)
+        fields = [pa.field(labels[f], pa.string() if isinstance(c, list) else
+                           pa.from_numpy_dtype(c.dtype), metadata={"unit": stream.units.get(f, "")})
+                  for f, c in cols.items()]
         table = pa.Table.from_arrays([pa.array(c) for c in cols.values()],
                                      schema=pa.schema(fields, metadata={
                                          "stream": name, "kind": stream.kind}))

@@ -47,7 +47,7 @@ def describe(session: Session) -> dict[str, Any]:
             entry["dropped"] = sum(g.missing for g in s.gaps())
             entry["gaps"] = len(s.gaps())
         streams[name] = entry
-    imported = str(session.meta.get("time_base", "")).startswith("imported")
+    imported = session.imported
     first = min((float(np.nanmin(st.time)) for st in session.streams.values() if len(st)),
                 default=0.0)
     return {

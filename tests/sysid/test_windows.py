@@ -388,3 +388,50 @@ def test_a_log_stream_without_firmware_time_is_one_line(files, tmp_path) -> None
     assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
     assert ("untimed.h5: log stream(s) ['gyro'] have no firmware time (field 'fw_time_ms')"
             in res.output)
+
+
+def _no_search(*args, **kwargs):
+    raise AssertionError("the search ran")
+
+
+def test_a_sessions_window_too_short_to_score_is_refused_before_the_search(files, monkeypatch
+                                                                            ) -> None:
+    """A 15-sample window on the validating session ran the whole selection (the score's
+    tolerance fell back, a warning only); refused in one line naming the session and the
+    window, before any search: identify's held-out session, sweep's --validate."""
+    monkeypatch.setattr("sysid.cli_identify.choose", _no_search)
+    monkeypatch.setattr("sysid.cli_sweep.choose", _no_search)
+    rec, imp = str(files["recorded"]), str(files["imported"])
+    for args in (["identify", rec, imp], ["sweep", rec, "--validate", imp]):
+        res = CliRunner().invoke(main, [*args, "--window", "imp.h5=airborne-1@0:0.3"])
+        err = " ".join(res.stderr.split())
+        assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1, res.output
+        assert err.startswith("error: imp.h5: --window imp.h5=airborne-1@0:0.3 holds 15 "
+                              "samples (0.3 s at dt 0.02 s), fewer than the 20"), err
+        assert "give imp.h5 a window of 0.4 s at least" in err
+
+
+def test_a_per_session_window_may_name_a_validate_session(files, monkeypatch, caplog) -> None:
+    """`sweep A --validate V --window V=...` said "no such session among ['A']": the
+    --validate sessions are the command's too (identify's as well); a name that is neither
+    is still refused."""
+    rec, imp = str(files["recorded"]), str(files["imported"])
+    seen = {}
+
+    def record(groups, *, validation, **kwargs):
+        seen["validation"] = [(d.source, d.n_samples) for d in validation]
+        raise DataError("stop here")
+
+    monkeypatch.setattr("sysid.cli_sweep.choose", record)
+    res = CliRunner().invoke(main, ["sweep", rec, "--validate", imp, "--window",
+                                    "imp.h5=airborne-1@0:5"])
+    assert "stop here" in res.stderr and [n for _, n in seen["validation"]] == [250], \
+        res.output
+    res = CliRunner().invoke(main, ["identify", rec, "--order", "4", "--past", "10", "--future",
+                                    "5", "--validate", imp, "--window", "imp.h5=airborne-1@0:0.3"])
+    assert res.exit_code == 0, res.output  # the window reached the validation session:
+    assert "validation not scored: imp.h5 has 15 samples in its window" in caplog.text
+    for args in (["sweep", rec, "--validate", imp], ["identify", rec, "--validate", imp]):
+        res = CliRunner().invoke(main, [*args, "--window", "other.h5=all"])
+        assert res.exit_code == 2 and "window for ['other.h5']: no such session among " \
+            f"[{rec!r}, {imp!r}]" in " ".join(res.stderr.split()), res.output
