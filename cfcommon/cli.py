@@ -466,6 +466,12 @@ class OneLineErrorGroup(click.Group):
             if isinstance(exc, click.exceptions.NoArgsIsHelpError):
                 return None
             where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
+            if isinstance(exc, click.NoSuchOption) and exc.ctx is not None \
+                    and exc.ctx.command is not self and exc.option_name in {
+                        o for p in self.params for o in p.opts}:  # -v after the command
+                return (f"{exc.option_name} is an option of '{ctx.command_path}', given before "
+                        f"the command: {ctx.command_path} {exc.option_name} "
+                        f"{exc.ctx.info_name} ...")
             # click puts a required choice's values on lines of their own ("Missing option
             # '--format'. Choose from:\n\tjson,\n\tmat"): one line, as every error here
             return f"{' '.join(exc.format_message().split())} (see '{where} -h')"

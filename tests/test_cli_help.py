@@ -49,3 +49,15 @@ def test_usage_errors_are_one_line_exit_2_on_both_clis(main, args, where):
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and f"(see '{where}')" in lines[0]
     assert "Usage:" not in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize(("main", "args", "line"), [
+    (sysid_main, ["identify", "f.h5", "-v"],
+     "error: -v is an option of 'sysid', given before the command: sysid -v identify ..."),
+    (gs_main, ["info", "f.h5", "--verbose"], "error: --verbose is an option of 'groundstation', "
+                                             "given before the command: groundstation "
+                                             "--verbose info ..."),
+])
+def test_a_group_option_after_the_command_says_where_it_goes(main, args, line):
+    res = CliRunner().invoke(main, args, prog_name=line.split()[-4])
+    assert res.exit_code == 2 and res.stderr.strip() == line, res.output
