@@ -63,11 +63,11 @@ def test_the_choice_does_not_depend_on_the_sample_time() -> None:
     samples (they were 2 s: 2000 samples at 1 ms, 30 at 1 s, and 5 of 8 such twins of a
     helper's stress cases chose differently, by up to 1.7 points on the true system)."""
     meth = get_method("iem")
-    fast = _hover(1, n=4000, dt=0.001)
+    fast = _hover(1, n=2000, dt=0.001)  # 4000 took 1.4 times as long: the same 264 models
     slow = sysid.IOData(u=fast.u, y=fast.y, dt=1.0)
     chose = [select([[d]], method=meth, options=meth.options()) for d in (fast, slow)]
     assert chose[0].window_s / fast.dt == pytest.approx(chose[1].window_s / slow.dt)
-    assert chose[0].window_s / fast.dt < 1200  # windows, not the whole held-out record
+    assert chose[0].window_s / fast.dt < 600  # windows (96), not the whole held-out record
     assert chose[0].grid == chose[1].grid
     scores = [np.array([r.score for r in c.result.rows]) for c in chose]
     np.testing.assert_allclose(scores[0], scores[1], rtol=1e-6, atol=1e-6)

@@ -40,11 +40,12 @@ def test_a_system_beyond_the_default_orders_is_followed(monkeypatch) -> None:
     """Fourteen lightly damped states seen through two outputs: the default grid stops at
     order 12 with the score still rising there. Without growth the choice is order 12 and a
     warning says the best may lie beyond; with it the grid grows, the true order is chosen
-    and the model simulates the noise-free held-out output better (96.1 / 97.1 -> 99.99 %)."""
+    and the model simulates the noise-free held-out output better (96.5 -> 99.98 %; on 4000
+    samples, which took half as long again, 96.6 -> 99.98 %)."""
     rng = np.random.default_rng(5)
     system = random_stable_system(n_states=14, n_inputs=1, n_outputs=2, rng=rng,
                                   radius=(0.85, 0.97))
-    exp = open_loop(system, n_samples=4000, rng=rng, noise_std=0.02)
+    exp = open_loop(system, n_samples=2500, rng=rng, noise_std=0.02)
     truth = open_loop(system, n_samples=2000, rng=rng, noise_std=0.0).data
     iem = get_method("iem")
     monkeypatch.setattr(growth, "MAX_ROUNDS", 0)

@@ -92,13 +92,16 @@ def test_records_too_short_for_past_2_future_2_are_still_refused() -> None:
 
 
 def _step_experiment(*, held: bool, seed: int = 1) -> sysid.IOData:
-    """A PRBS for 1000 samples, then 500 more with the input held (``held``) or still moving."""
+    """A PRBS for 400 samples, then 200 more with the input held (``held``) or still moving:
+    the held-out 30 % (the last 180) hold it. (1000 + 500 samples took three times as long;
+    seeds 1-5 warn alike, the held input's rms 0 against 0.98-1.0 on the identification data,
+    and the best held-out score of seed 1 is 0.8 %, under the 10 % of "explain little".)"""
     rng = np.random.default_rng(seed)
     system = random_stable_system(n_states=3, n_inputs=1, n_outputs=2, rng=rng, dt=1.0)
-    u = np.repeat(rng.choice([-1.0, 1.0], size=(150, 1)), 10, axis=0)
+    u = np.repeat(rng.choice([-1.0, 1.0], size=(60, 1)), 10, axis=0)
     if held:
-        u[1000:] = u[999]
-    y = system.simulate(u) + 0.05 * rng.standard_normal((1500, 2))
+        u[400:] = u[399]
+    y = system.simulate(u) + 0.05 * rng.standard_normal((600, 2))
     return sysid.IOData(u=u, y=y, dt=0.1, input_names=["cmd"])
 
 
