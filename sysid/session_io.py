@@ -277,7 +277,7 @@ def _anti_alias(stream: Stream, *, period: float, dt: float) -> Stream:
 
 
 def load_experiments(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | Session,
     *,
     inputs: Sequence[str] = ("motors",),
     outputs: Sequence[str] = ("acc", "gyro"),
@@ -291,7 +291,7 @@ def load_experiments(
     phase) when the window selects several experiments.
 
     Args:
-        path: the session file.
+        path: the session file (or the :class:`~cfsession.Session` read from it).
         inputs, outputs: channel selections (streams, ``stream.field`` or ``group.variable``).
         window: see :data:`Window`; ``"auto"`` (default) is every excitation phase, else
             every airborne segment, each its own experiment.
@@ -306,7 +306,7 @@ def load_experiments(
         raise ParameterError(f"detrend={detrend!r}; use 'mean', 'linear' or None")
     if dt is not None and not dt > 0:
         raise ParameterError(f"dt={dt}; pass the grid period in seconds (> 0)")
-    session = open_session(path)
+    session = path if isinstance(path, Session) else open_session(path)
     warn_problems(session, log)  # the one place sysid reads sessions: damage is never silent
     summary = session.json_meta("summary", None)
     if isinstance(summary, dict) and summary.get("aborted") is True:
@@ -407,7 +407,7 @@ def load_experiments(
             data, _ = detrend_data(data, kind=detrend)
         log.info("%s [%s]: %d samples, firmware window [%.3f, %.3f] s, host - firmware %.4f s",
                  session.path, label, data.n_samples, start, stop, offset)
-        source = str(Path(path)) if len(spans) == 1 else f"{Path(path)}#{label}"
+        source = str(session.path) if len(spans) == 1 else f"{session.path}#{label}"
         out.append(dataclasses.replace(data, source=source))
     return out
 
@@ -470,10 +470,15 @@ def load_sessions(paths: Sequence[str | os.PathLike[str]], *,
         if str(p) != Path(p).name and str(p) in windows and Path(p).name in windows:
             raise ParameterError(f"two windows for session {p}: one given for its path, one "
                                  f"for its name {Path(p).name!r}; give one")
-    each = [{**kwargs, "window": session_window(p, windows, kwargs.get("window", AUTO))}
-            for p in paths]
-    out = [load_experiments(p, **kw) for p, kw in zip(paths, each, strict=True)]
-    return out if kwargs.get("dt") is not None else _common_grid(paths, out, each=each)
+    out: list[list[IOData]] = []
+    for p in paths:
+        own = {**kwargs, "window": session_window(p, windows, kwargs.get("window", AUTO))}
+        if out and own.get("dt") is None:  # the first session's grid, when the periods match
+            session = open_session(p)
+            own["dt"] = _first_period(session, first=(paths[0], out[0][0].dt), **own)
+            p = session
+        out.append(load_experiments(p, **own))
+    return out
 
 
 PERIOD_MATCH = 0.01
@@ -483,33 +488,28 @@ differ by parts per million; each session is resampled on its own timestamps, so
 exact). Beyond it a grid period must be given."""
 
 
-def _common_grid(paths: Sequence[str | os.PathLike[str]], loaded: list[list[IOData]], *,
-                 each: list[dict[str, Any]]) -> list[list[IOData]]:
-    """``loaded`` (each session at its logged period, read with the arguments in ``each``)
-    with every session on the first one's grid period when the periods match to
-    :data:`PERIOD_MATCH`; else one line naming them."""
-    periods = [group[0].dt for group in loaded]
-    dt = periods[0]
-    if all(abs(q - dt) <= 1e-9 * dt for q in periods):
-        return loaded
-    if max(periods) > (1 + PERIOD_MATCH) * min(periods):
-        listed = ", ".join(f"{Path(p).name} {q:g} s" for p, q in zip(paths, periods, strict=True))
-        raise DataError(f"the sessions are logged at different periods ({listed}); pass one "
-                        "grid period for all (dt= in Python, --dt on the command line)")
-    log.info("logged periods %g to %g s: every session gridded at %g s", min(periods),
-             max(periods), dt)
-    quiet = _Quiet()  # each session's problems were said when it was first read
-    log.addFilter(quiet)
+def _first_period(session: Session, *, first: tuple[str | os.PathLike[str], float],
+                  inputs: Sequence[str] = ("motors",), outputs: Sequence[str] = ("acc", "gyro"),
+                  **_: Any) -> float | None:
+    """The grid period for ``session`` read after the ``first`` session (its path and period):
+    that period when ``session``'s logged period (of the channels selected) is within
+    :data:`PERIOD_MATCH` of it; else one-line :class:`~sysid.errors.DataError` naming both.
+    None (its own, as :func:`load_experiments` then says why) when the channels do not
+    resolve or the period is unknown."""
     try:
-        return [group if abs(q - dt) <= 1e-9 * dt else load_experiments(p, **{**kw, "dt": dt})
-                for p, group, q, kw in zip(paths, loaded, periods, each, strict=True)]
-    finally:
-        log.removeFilter(quiet)
-
-
-class _Quiet(logging.Filter):
-    """Drops warnings (a session read again says nothing new)."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return record.levelno < logging.WARNING
+        chans = [*resolve_channels(session, inputs, role="input"),
+                 *resolve_channels(session, outputs, role="output")]
+    except DataError:
+        return None
+    own = max((_stream_period(session, c.stream) for c in chans), default=0.0)
+    path, dt = first
+    if not own > 0 or abs(own - dt) <= 1e-9 * dt:
+        return None
+    if max(own, dt) > (1 + PERIOD_MATCH) * min(own, dt):
+        raise DataError(f"the sessions are logged at different periods ({Path(path).name} "
+                        f"{dt:g} s, {session.path.name} {own:g} s); pass one grid period for "
+                        "all (dt= in Python, --dt on the command line)")
+    log.info("%s: logged period %g s, gridded at the first session's %g s", session.path, own,
+             dt)
+    return dt
 
