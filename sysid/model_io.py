@@ -392,13 +392,11 @@ def _refuse_unread(problems: list[str], left_out: list[str], *, path: Path, wher
     """One line for the first attribute in ``left_out`` (those the guard did not read: too
     large, of another type, unreadable) that a model needs; the guard's ``problems`` say
     "skipped", but a model is not read without one of these."""
-    for name in left_out:
-        if name not in _MODEL_ATTRS:
-            continue
-        said = next((p.removeprefix(f"{where}: ") for p in problems
-                     if f"attribute {name!r} " in p), f"attribute {name!r} unreadable ()")
-        head, _, why = said.replace(" skipped (", " unreadable (", 1).partition(" unreadable (")
-        raise _unreadable(path, f"{head} cannot be read: {why.removesuffix(')') or 'unknown'}")
+    for name in (n for n in left_out if n in _MODEL_ATTRS):
+        said = next((p for p in problems if f"attribute {name!r} " in p), "")
+        # "WHERE: attribute 'X' skipped (WHY)" or "... unreadable (WHY)"
+        why = said.partition(f"attribute {name!r} ")[2].partition(" (")[2].removesuffix(")")
+        raise _unreadable(path, f"attribute {name!r} cannot be read: {why or 'unknown'}")
 
 
 def _within(path: Path, what: str, size: int, limit: tuple[int, str], instead: str) -> None:
