@@ -184,6 +184,14 @@ def _private_copy(path: Path, size: int, stored_eof: int) -> tuple[_Image, Cut |
 _GCOL_MIN = 4096  # HDF5's smallest global heap collection (H5HG_MINSIZE)
 
 
+def _heap_object(head: bytes) -> tuple[int, int]:
+    """``(index, bytes taken)`` of a global heap object from its 16-byte header: index 0 is
+    the collection's free space, its size the whole; any other, the header and its data
+    padded to 8 bytes."""
+    idx, size = int.from_bytes(head[0:2], "little"), int.from_bytes(head[8:16], "little")
+    return idx, size if idx == 0 else 16 + (size + 7) // 8 * 8
+
+
 def _seal_heaps(data: bytearray, cut: int) -> None:
     """Make each text heap (global heap collection) that runs past ``cut`` end there: its
     objects lying wholly before the cut are kept, the rest of it becomes free space (HDF5
@@ -197,9 +205,7 @@ def _seal_heaps(data: bytearray, cut: int) -> None:
                 and at + 16 <= cut < end <= len(data)):
             p = at + 16
             while p + 16 <= cut:
-                idx = int.from_bytes(data[p:p + 2], "little")
-                obj = int.from_bytes(data[p + 8:p + 16], "little")
-                need = obj if idx == 0 else 16 + (obj + 7) // 8 * 8
+                idx, need = _heap_object(data[p:p + 16])
                 if idx == 0 or need == 0 or p + need > cut:
                     break
                 p += need
@@ -233,9 +239,7 @@ def _heap_loop(raw: FileBytes) -> int | None:
                 if len(buf) < 16:  # cut short since it was opened
                     break
             head = buf[p - buf_at:p - buf_at + 16]
-            idx = int.from_bytes(head[0:2], "little")
-            obj = int.from_bytes(head[8:16], "little")
-            need = obj if idx == 0 else 16 + (obj + 7) // 8 * 8
+            _, need = _heap_object(head)
             if need == 0 or need >= 1 << 62:
                 return at
             p += need
