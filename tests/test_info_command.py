@@ -104,3 +104,22 @@ def test_the_phase_table_lists_at_most_max_phase_rows(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert "hover-2" in res.output and "hover-3" not in res.output
     assert "... 2 more phases (--json lists them)" in res.output
+
+
+def test_several_files_are_each_described_and_a_bad_one_is_its_line(session, tmp_path):
+    """``info sessions/*.h5``: every readable file described, each unreadable one its error
+    line in its place, exit 2; with --json a list of the readable ones."""
+    import json
+
+    bad = tmp_path / "notes.h5"
+    bad.write_text("not a session")
+    runner = CliRunner()
+    res = runner.invoke(gs, ["info", str(session), str(bad), str(session), "--width", "120"])
+    assert res.exit_code == 2
+    assert res.stdout.count(f"{session} schema") == 2
+    errors = res.stderr.splitlines()
+    assert len(errors) == 2 and str(bad) in errors[0]
+    assert errors[1] == "error: 1 of 3 files could not be read (above)"
+    res = runner.invoke(gs, ["info", str(session), str(session), "--json"])
+    assert res.exit_code == 0
+    assert [d["path"] for d in json.loads(res.stdout)] == [str(session)] * 2

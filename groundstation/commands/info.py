@@ -1,4 +1,4 @@
-"""``groundstation info SESSION``: what a session file holds."""
+"""``groundstation info SESSION...``: what session files hold."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import numpy as np
 from rich.measure import Measurement
 from rich.table import Table
 
-from cfcommon.cli import output_console, output_table, shown_markup
-from cfsession import Session, open_session
+from cfcommon.cli import output_console, output_table, shown_markup, shown_text
+from cfsession import Session, SessionError, open_session
 
 __all__ = ["command", "describe", "live_id"]
 
@@ -185,20 +185,50 @@ def _fmt(x: float | None, spec: str = ".2f") -> str:
 
 
 @click.command("info")
-@click.argument("session", type=click.Path(path_type=Path))
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 @click.option("--events", "show_events", is_flag=True, help="Also list every event.")
 @click.option("--width", type=click.IntRange(40, 1000), default=None,
               help="Line width [default: the terminal's; piped: as long as a line needs].")
-def command(session: Path, as_json: bool, show_events: bool, width: int | None) -> None:
-    """Show what a session file holds: streams, rates, dropped packets, phases.
+def command(sessions: tuple[Path, ...], as_json: bool, show_events: bool,
+            width: int | None) -> None:
+    """Show what session files hold: streams, rates, dropped packets, phases.
+
+    Several files are described one after the other (with --json: a list); a file that cannot
+    be read is its one-line error in its place, the others are still described, and the exit
+    status is then 2.
 
     \b
     Example:
       groundstation info sessions/prbs-3axis-20261122T100000Z.h5
+      groundstation info sessions/*.h5
       groundstation info flight.h5 --json | jq .streams.gyro.dropped
     """
-    s = open_session(session)
+    if len(sessions) == 1:  # its error is the command's own line
+        _show(open_session(sessions[0]), as_json=as_json, show_events=show_events, width=width)
+        return
+    failed, described = 0, []
+    for n, path in enumerate(sessions):
+        try:
+            s = open_session(path)
+        except SessionError as exc:
+            failed += 1
+            click.echo(f"error: {shown_text(exc)}", err=True)
+            continue
+        if as_json:
+            described.append(describe(s))
+            continue
+        if n:
+            click.echo()
+        _show(s, as_json=False, show_events=show_events, width=width)
+    if as_json:
+        click.echo(json.dumps(described, indent=2))
+    if failed:
+        raise SessionError(f"{failed} of {len(sessions)} files could not be read (above)")
+
+
+def _show(s: Session, *, as_json: bool, show_events: bool, width: int | None) -> None:
+    """One session's description on standard output, as text or JSON."""
     d = describe(s)
     if as_json:
         click.echo(json.dumps(d, indent=2))
