@@ -115,7 +115,8 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
          chosen by validation on its last 30 % (--order 8 --past 60 --future 17: the thesis),
          motors -> acc.x, acc.y, acc.z and gyro as in the thesis (sysid identify's defaults
          are acc.z and gyro, and it tries PARSIM-K too: its model can differ)
-      4. print the poles and the fits on flight 2: 2 s windowed simulation and k-step prediction
+      4. print the poles and the fits on flight 2: windowed simulation (2 s, as sysid compare by
+         default) and k-step prediction
 
     \b
     Examples (then a session by the name the demo printed: each run records new ones):
@@ -129,6 +130,7 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
     from sysid.errors import SysIdError, first_line
     from sysid.methods import get_method
     from sysid.session_io import load_session
+    from sysid.validate import default_window
 
     folder = out or Path(tempfile.mkdtemp(prefix="cf-demo-"))
     _check_out(folder, force=force)
@@ -179,8 +181,11 @@ def command(out: Path | None, speed: float, order: int | None, past: int | None,
     names = list(val.output_names)
     table = output_table("validation on flight 2", *names, console=console,
                          title="fit % (NRMSE, MATLAB compare)")
+    window = default_window(model, n_samples=val.n_samples)  # as sysid compare's default
+    simulated = (f"simulation, {window:g} s windows" if window is not None
+                 else "simulation (the whole flight)")
     with console.status("validating on flight 2 ..."):
-        rows = [("simulation, 2 s windows", compare(model, val, window=2.0)),
+        rows = [(simulated, compare(model, val, window=window)),
                 ("1-step prediction", compare(model, val, horizon=1)),
                 ("10-step prediction (0.2 s)", compare(model, val, horizon=10))]
     for label, result in rows:
