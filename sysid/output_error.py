@@ -142,11 +142,12 @@ def _responses(a: np.ndarray, c: np.ndarray, u: np.ndarray
         block = u[start:start + CHUNK]
         resp = np.empty((block.shape[0], c.shape[0], n, m))
         free = np.empty((block.shape[0], c.shape[0], n))
-        for k, uk in enumerate(block):
-            resp[k] = np.einsum("on,jni->oij", c, xs)
-            free[k] = c @ power
-            xs = a @ xs + eye[None] * uk[:, None, None]
-            power = a @ power
+        with np.errstate(over="ignore", invalid="ignore"):  # growing rows: left out below
+            for k, uk in enumerate(block):
+                resp[k] = np.einsum("on,jni->oij", c, xs)
+                free[k] = c @ power
+                xs = a @ xs + eye[None] * uk[:, None, None]
+                power = a @ power
         yield start, resp, free
 
 
