@@ -72,7 +72,8 @@ T = TypeVar("T")
 @dataclass(frozen=True)
 class PhaseRelative:
     """Seconds ``[t0, t1)`` from the start of the first phase named (or of kind) ``phase``;
-    ``t1=None`` runs to that phase's end."""
+    ``t1=None`` runs to that phase's end, and so does a ``t1`` beyond it (cut there, with a
+    warning: what follows the phase, a hover or the landing, is not in it). ``t0 >= 0``."""
 
     phase: str
     t0: float
@@ -193,9 +194,23 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
         return [("all", None)]
     if isinstance(window, PhaseRelative):
         start, end = _phase(session, window.phase)
+        label = f"{window.phase}@{window.t0:g}:{'' if window.t1 is None else f'{window.t1:g}'}"
+        length = end - start
+        if window.t0 < 0:
+            raise ParameterError(f"{session.path}: window {label}: T0 is seconds from the phase "
+                                 "start, at least "
+                                 "0; for time before the phase give T0:T1 seconds of the record "
+                                 f"(the phase starts at {start:.2f} s)")
+        if window.t0 >= length:
+            raise DataError(f"{session.path}: window {label} starts after the phase "
+                            f"{window.phase!r} ends (it lasts {length:.2f} s); give T0 < "
+                            f"{length:.2f}")
         t1 = end if window.t1 is None else start + window.t1
-        return [(f"{window.phase}@{window.t0:g}:{'' if window.t1 is None else f'{window.t1:g}'}",
-                 (start + window.t0, t1))]
+        if t1 > end:  # seconds *of the phase*: what lies after it (a hover, the landing) is not
+            log.warning("%s: window %s ends %.2f s after the phase %r (it lasts %.2f s): cut "
+                        "at its end", session.path, label, t1 - end, window.phase, length)
+            t1 = end
+        return [(label, (start + window.t0, t1))]
     if isinstance(window, str):
         if window != AUTO:
             hits = [p for p in session.phases() if window in (p.name, p.kind)]

@@ -130,6 +130,23 @@ def test_a_window_outside_the_data_says_where_the_data_are(files) -> None:
         load_experiments(files["recorded"], window=(500.0, 600.0))
 
 
+def test_a_phase_relative_window_stays_within_its_phase(files, caplog) -> None:
+    """``airborne-1@10:30`` (the phase lasts 18 s) took the ground and the next segment's
+    take-off after it, silently; a negative T0 took the ground before it."""
+    with caplog.at_level(logging.WARNING, logger="sysid.session_io"):
+        cut = load_session(files["imported"], window=PhaseRelative("airborne-1", 10.0, 30.0))
+    assert cut.n_samples == load_session(
+        files["imported"], window=PhaseRelative("airborne-1", 10.0)).n_samples
+    assert any("ends 12.00 s after the phase 'airborne-1' (it lasts 18.00 s): cut at its end"
+               in r.getMessage() for r in caplog.records)
+    with pytest.raises(ParameterError, match=r"T0 is seconds from the phase start, at least 0; "
+                                             r".* \(the phase starts at 4\.00 s\)"):
+        load_session(files["imported"], window=PhaseRelative("airborne-1", -1.0, 5.0))
+    with pytest.raises(DataError, match=r"airborne-1@20: starts after the phase 'airborne-1' "
+                                        r"ends \(it lasts 18\.00 s\); give T0 < 18\.00"):
+        load_session(files["imported"], window=PhaseRelative("airborne-1", 20.0))
+
+
 def test_phase_relative_and_per_session_windows(files) -> None:
     rel = load_session(files["imported"], window=PhaseRelative("airborne-2", 2.0, 12.0))
     absolute = load_session(files["imported"], window=(28.0, 38.0))
