@@ -245,8 +245,10 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
     lines = [f"  live id {lid['updates']} updates ({lid['skipped']} skipped, {lid['failed']} "
              f"failed), order {lid['order']}, past {lid['past']}, future {lid['future']}"]
     if lid.get("span_s") is not None:
+        over = (f" over the last {lid['fit_window_s']:g} s (mean of the outputs; sysid "
+                "compare scores the whole flight)" if lid.get("fit_window_s") else "")
         lines.append(f"    final model on {lid['span_s']:.1f} s of data: one-step fit "
-                     f"{lid['fit_pct']:.1f} %, max |pole| {lid['max_pole']:.4f}, "
+                     f"{lid['fit_pct']:.1f} %{over}, max |pole| {lid['max_pole']:.4f}, "
                      f"saved as {lid['model_file'] or '(not saved)'}")
     if cut:
         planned = float(summary.get("setpoints", {}).get("planned", 0)) * float(

@@ -246,6 +246,7 @@ class LiveIdListener:
             "final_t_s": None if f is None else round(f.t, 3),
             "span_s": None if f is None else round(f.span_s, 3),
             "fit_pct": None if f is None else round(f.fit_pct, 2),
+            "fit_window_s": self.fit_window_s,
             "max_pole": None if f is None else round(float(np.abs(f.poles).max()), 6),
             "converged_at_s": self.converged_at, "model_file": model_file, "error": self.error,
             "convergence": None if self.convergence is None else {

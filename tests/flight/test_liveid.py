@@ -274,6 +274,10 @@ def test_the_summary_prints_the_flight_time_saved(sim_uri, tmp_path, cli_in_step
     assert res.exit_code == 0, res.output
     assert "s of flight saved (" in res.stdout and "live id" in res.stdout
     assert "| live id" in res.stderr  # the plain progress line carries the status
+    # the final fit is over the last seconds only: the line says so (a yaw step there read
+    # as -66 % for a model that fitted the rolls 73 %)
+    assert re.search(r"one-step fit -?\d+\.\d % over the last 5 s \(mean of the outputs",
+                     res.stdout), res.stdout
 
 
 def test_a_flight_that_never_converges_says_so(sim_uri, tmp_path, cli_in_step):
