@@ -123,3 +123,18 @@ def test_several_files_are_each_described_and_a_bad_one_is_its_line(session, tmp
     res = runner.invoke(gs, ["info", str(session), str(session), "--json"])
     assert res.exit_code == 0
     assert [d["path"] for d in json.loads(res.stdout)] == [str(session)] * 2
+
+
+def test_a_file_not_closed_says_it_may_still_be_recording(session, tmp_path):
+    """A flight still recording read as "writer died" to an engineer who ran info on it."""
+    import shutil
+
+    import h5py
+
+    live = tmp_path / "live.h5"
+    shutil.copy(session, live)
+    with h5py.File(live, "r+") as f:
+        f.attrs["closed_cleanly"] = 0
+    res = CliRunner().invoke(gs, ["info", str(live), "--width", "200"])
+    assert res.exit_code == 0, res.output
+    assert "NOT closed cleanly (still being written, or its writer died)" in res.stdout

@@ -234,7 +234,8 @@ def _show(s: Session, *, as_json: bool, show_events: bool, width: int | None) ->
         click.echo(json.dumps(d, indent=2))
         return
     out = output_console(width=width)
-    state = "closed cleanly" if d["closed_cleanly"] else "NOT closed cleanly (writer died)"
+    state = "closed cleanly" if d["closed_cleanly"] else \
+        "NOT closed cleanly (still being written, or its writer died)"
     if isinstance(d.get("summary"), dict) and d["summary"].get("aborted"):
         state += ", flight ABORTED (its cause is under the flight summary)"
     out.print(f"[bold]{shown_markup(d['path'])}[/] schema {d['schema_version']}, {state}")
