@@ -168,12 +168,14 @@ def resample_streams(
     start: float | None = None,
     stop: float | None = None,
     max_hold: float | None = None,
+    source: str = "",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold every stream onto one uniform grid (thesis section 4.3.1).
 
     Returns ``(grid (M,), values (M, len(streams)))``, columns in the order of ``streams``.
     If ``max_hold`` (seconds) is given, a warning is logged for each stream that holds a value
-    longer than that (a gap in the log: dropped packets), with the number of affected instants.
+    longer than that (a gap in the log: dropped packets), with the number of affected instants,
+    after ``source`` (where the streams come from, e.g. a file) when given.
     """
     grid = uniform_grid(streams=streams, dt=dt, start=start, stop=stop)
     out = np.empty((grid.size, len(streams)))
@@ -185,8 +187,8 @@ def resample_streams(
             n_stale = int(np.count_nonzero(age > max_hold))
             if n_stale:
                 log.warning(
-                    "stream %r: %d grid instants hold a sample older than %.3f s (log gaps)",
-                    s.name, n_stale, max_hold,
+                    "%sstream %r: %d grid instants hold a sample older than %.3f s (log gaps)",
+                    f"{source}: " if source else "", s.name, n_stale, max_hold,
                 )
     return grid, out
 
@@ -200,11 +202,13 @@ def iodata_from_streams(
     start: float | None = None,
     stop: float | None = None,
     max_hold: float | None = None,
+    source: str = "",
 ) -> IOData:
     """Build an :class:`IOData` from named streams: ZOH onto one grid, inputs then outputs.
 
     ``inputs`` and ``outputs`` name streams (in the column order wanted); names and units are
     carried into the IOData. ``start``/``stop`` (seconds, stream time) trim the window.
+    ``max_hold`` and ``source``: as :func:`resample_streams`; ``source`` is also the IOData's.
     """
     by_name = {s.name: s for s in streams}
     missing = [n for n in (*inputs, *outputs) if n not in by_name]
@@ -214,7 +218,7 @@ def iodata_from_streams(
         raise DataError("name at least one input and one output stream")
     chosen = [by_name[n] for n in (*inputs, *outputs)]
     _, values = resample_streams(
-        streams=chosen, dt=dt, start=start, stop=stop, max_hold=max_hold
+        streams=chosen, dt=dt, start=start, stop=stop, max_hold=max_hold, source=source
     )
     m = len(inputs)
     return IOData(
@@ -225,6 +229,7 @@ def iodata_from_streams(
         output_names=list(outputs),
         input_units=[by_name[n].unit for n in inputs],
         output_units=[by_name[n].unit for n in outputs],
+        source=source,
     )
 
 

@@ -42,7 +42,6 @@ sessions through.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import os
@@ -415,15 +414,15 @@ def load_experiments(
             raise DataError(f"{session.path}: {span} holds less than one {dt:g} s step where "
                             f"every channel has data (session seconds {first + offset:.1f} to "
                             f"{last + offset:.1f}); pick a window within them")
+        source = str(session.path) if len(spans) == 1 else f"{session.path}#{label}"
         data = iodata_from_streams(
             streams=streams, inputs=[c.label for c in ins], outputs=[c.label for c in outs],
-            dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, slowest))
+            dt=dt, start=start, stop=stop, max_hold=3.0 * max(dt, slowest), source=source)
         if detrend is not None:
             data, _ = detrend_data(data, kind=detrend)
         log.info("%s [%s]: %d samples, firmware window [%.3f, %.3f] s, host - firmware %.4f s",
                  session.path, label, data.n_samples, start, stop, offset)
-        source = str(session.path) if len(spans) == 1 else f"{session.path}#{label}"
-        out.append(dataclasses.replace(data, source=source))
+        out.append(data)
     return out
 
 

@@ -74,7 +74,7 @@ def test_a_defective_a_whose_responses_overflow_is_fitted_without_numpy_warnings
     import warnings
 
     a = np.array([[1.3, 1.0], [0.0, 1.3]])  # a Jordan block: 1.3^k overflows near k = 2700
-    b, c = np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]])
+    c = np.array([[1.0, 0.0]])
     u = np.random.default_rng(1).normal(size=(3000, 1))
     y = np.random.default_rng(2).normal(size=(3000, 1))
     with warnings.catch_warnings():

@@ -78,6 +78,14 @@ def test_resample_warns_about_log_gaps(caplog: pytest.LogCaptureFixture) -> None
     with caplog.at_level("WARNING", logger="sysid.preprocess"):
         resample_streams(streams=[s], dt=0.02, max_hold=0.05)
     assert "gyro" in caplog.text and "log gaps" in caplog.text
+    caplog.clear()  # from a file: the line names it (8 such lines of a batch named none)
+    with caplog.at_level("WARNING", logger="sysid.preprocess"):
+        u = Stream("u", np.arange(0, 3, 0.01), np.arange(300.0))
+        data = iodata_from_streams(streams=[s, u], inputs=["u"],
+                                   outputs=["gyro"], dt=0.02, max_hold=0.05, source="f.h5")
+    assert caplog.messages == ["f.h5: stream 'gyro': 48 grid instants hold a sample older "
+                               "than 0.050 s (log gaps)"]
+    assert data.source == "f.h5"
 
 
 def test_uniform_grid_rejects_start_before_data_and_bad_dt() -> None:
