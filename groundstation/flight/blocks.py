@@ -24,10 +24,13 @@ __all__ = [
     "BLOCK_PERIOD_S",
     "FLIGHT_BLOCKS",
     "LOG_MAX_BYTES",
+    "LOW_POWER",
+    "PM_STATE",
     "BlockPlan",
     "altitude_block_period",
     "flight_blocks",
     "plan_blocks",
+    "positions",
 ]
 
 LOG_MAX_BYTES = 26
@@ -41,6 +44,13 @@ FLIGHT_BLOCKS: dict[str, tuple[str, ...]] = {
 """The thesis' three 50 Hz blocks (section 4.2.2): motor commands, accelerometer, gyro."""
 BATTERY_BLOCK = ("battery", ("pm.vbat",), 0.5)
 """A slow block (name, variables, period s) for the take-off check and the battery's sag."""
+PM_STATE = "pm.state"
+"""The power management's state (``pm_stm32f4.c``), logged in the battery block where the TOC
+has it: :data:`LOW_POWER` in flight is the battery running out (below ``pm.lowVoltage``, 3.2 V
+by default, for 5 s; below ``pm.criticalLowVoltage``, 3.0 V, for 5 s the firmware shuts down,
+in the air too)."""
+LOW_POWER = 3
+"""``pm.state`` lowPower (0 battery, 1 charging, 2 charged, 3 lowPower, 4 shutdown)."""
 SUPERVISOR_INFO = "supervisor.info"
 """The supervisor's state bits (``supervisor.c``), logged in the battery block where the TOC
 has it, for the take-off check."""
@@ -118,14 +128,15 @@ def flight_blocks(*, toc_type: TocType, altitude_variable: str | None,
                   setpoint_period_s: float, warn: Callable[[str], None] = lambda _: None,
                   ) -> list[BlockPlan]:
     """Every block a flight logs, checked by :func:`plan_blocks`: :data:`FLIGHT_BLOCKS`, the
-    battery with :data:`SUPERVISOR_INFO` where the TOC has it (left out, with ``warn``, when
-    the TOC has no ``pm.vbat``: e.g. CrazySim's unpatched SITL; :data:`SUPERVISOR_INFO` is
-    then logged with the attitude) and the attitude, and
+    battery with :data:`PM_STATE` and :data:`SUPERVISOR_INFO` where the TOC has them (left
+    out, with ``warn``, when the TOC has no ``pm.vbat``: e.g. CrazySim's unpatched SITL;
+    :data:`SUPERVISOR_INFO` is then logged with the attitude) and the attitude, and
     ``altitude_variable`` (a plan's altitude hold) at :func:`altitude_block_period`."""
     blocks = plan_blocks(toc_type=toc_type, blocks=FLIGHT_BLOCKS, period_s=BLOCK_PERIOD_S)
     info = (SUPERVISOR_INFO,) if toc_type(SUPERVISOR_INFO) is not None else ()
+    state = (PM_STATE,) if toc_type(PM_STATE) is not None else ()
     name, variables, period = BATTERY_BLOCK
-    slow = [(name, (*variables, *info), period), ATTITUDE_BLOCK]
+    slow = [(name, (*variables, *state, *info), period), ATTITUDE_BLOCK]
     if toc_type(BATTERY_BLOCK[1][0]) is None:  # supervisor.info with the attitude instead
         a_name, a_variables, a_period = ATTITUDE_BLOCK
         slow = [(a_name, (*a_variables, *info), a_period)]
@@ -137,3 +148,9 @@ def flight_blocks(*, toc_type: TocType, altitude_variable: str | None,
         blocks += plan_blocks(toc_type=toc_type, blocks={ALTITUDE_BLOCK: (altitude_variable,)},
                               period_s=altitude_block_period(setpoint_period_s))
     return blocks
+
+
+def positions(blocks: Sequence[BlockPlan], variable: str) -> dict[str, int]:
+    """``{block name: index of variable in its values}`` for the blocks that log ``variable``."""
+    return {b.name: [v for v, _ in b.variables].index(variable) for b in blocks
+            if any(v == variable for v, _ in b.variables)}

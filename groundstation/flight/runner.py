@@ -79,10 +79,13 @@ from groundstation.flight.blocks import (
     CAN_FLY_BIT,
     CRASHED_BIT,
     LOCKED_BIT,
+    LOW_POWER,
+    PM_STATE,
     SUPERVISOR_INFO,
     TUMBLED_BIT,
     altitude_block_period,
     flight_blocks,
+    positions,
 )
 from groundstation.flight.clock import clock_for_uri
 from groundstation.flight.commander import SETPOINT_LATE_S, Commander, finite
@@ -174,6 +177,12 @@ class _Runner:
         if vbat is not None and vbat < v.min_vbat:
             journal.cause(f"battery {vbat:.2f} V below vehicle.min_vbat = {v.min_vbat:g} V: "
                           "refusing to take off; charge or swap the battery")
+            return False
+        if telemetry.pm_state == LOW_POWER:
+            battery = "" if vbat is None else f"battery {vbat:.2f} V, "
+            journal.cause(f"the Crazyflie reports low power (pm.state 3: {battery}below "
+                          "pm.lowVoltage for 5 s): refusing to take off; charge or swap the "
+                          "battery")
             return False
         if bits is not None and bits & LOCKED_BIT:  # it would "fly" with its motors at 0
             journal.cause(f"the Crazyflie is locked (supervisor.info 0x{bits:04x}): its "
@@ -323,9 +332,8 @@ class _Runner:
                                    altitude_variable=hold.variable if hold else None,
                                    warn=lambda text: journal.event(text, level="warning"))
             self.block_periods = {b.name: b.period_s for b in blocks}
-            self.telemetry.supervisor_at = {
-                b.name: [v for v, _ in b.variables].index(SUPERVISOR_INFO) for b in blocks
-                if any(v == SUPERVISOR_INFO for v, _ in b.variables)}
+            self.telemetry.supervisor_at = positions(blocks, SUPERVISOR_INFO)
+            self.telemetry.pm_state_at = positions(blocks, PM_STATE)
             changes = check_parameters(link.cf, self.plan.parameters)  # before any file
             meta = {**link.metadata(), **self._plan_metadata(),
                     **({"plan_parameters": {c.name: {"value": c.value, "was": c.old}

@@ -8,7 +8,8 @@ each block's packets and firmware times for the summary; it keeps the last batte
 take-off check) and altitude (the altitude hold).
 
 **Watches** (while flying): a measured rate beyond :class:`RateLimits` for its number of
-consecutive samples, and silence: no log packet for :data:`LINK_SILENCE_S` of flight time is link
+consecutive samples, the firmware's power management reporting low power (``pm.state``: the
+battery running out), and silence: no log packet for :data:`LINK_SILENCE_S` of flight time is link
 loss, after cflib's threads got :data:`_SILENCE_GRACE_S` of wall time to deliver what has already
 arrived. Each is a cause in the journal; the runner aborts.
 """
@@ -21,7 +22,7 @@ import time
 from collections import defaultdict
 from collections.abc import Sequence
 
-from groundstation.flight.blocks import ALTITUDE_BLOCK, BATTERY_BLOCK
+from groundstation.flight.blocks import ALTITUDE_BLOCK, BATTERY_BLOCK, LOW_POWER
 from groundstation.flight.journal import Journal
 from groundstation.flight.safety import RateLimits
 
@@ -48,6 +49,8 @@ class Telemetry:
         self.supervisor: int | None = None  # supervisor.info where a block logs it
         self.supervisor_t = -math.inf  # ... flight time it arrived
         self.supervisor_at: dict[str, int] = {}  # block -> index of supervisor.info in it
+        self.pm_state: int | None = None  # pm.state where the battery block logs it
+        self.pm_state_at: dict[str, int] = {}  # block -> index of pm.state in it
         self.altitude_m: float | None = None  # last logged altitude for the altitude hold
         self.over_limit_runs = [0, 0, 0]  # consecutive packets beyond the rate limit, per axis
         self.console = ""
@@ -83,6 +86,8 @@ class Telemetry:
                 if block in self.supervisor_at:  # the battery's, or the attitude's
                     self.supervisor = int(values[self.supervisor_at[block]])
                     self.supervisor_t = t
+                if block in self.pm_state_at:
+                    self._check_power(int(values[self.pm_state_at[block]]))
             elif kind == "console":
                 self.console += item[2]
                 *lines, self.console = self.console.split("\n")
@@ -109,6 +114,20 @@ class Telemetry:
             if runs[i] == lim.samples and not self.journal.causes:
                 self.journal.cause(f"limit: gyro.{'xyz'[i]} = {v:.0f} deg/s beyond "
                                    f"{lim.max_rate_deg_s:g} deg/s for {lim.samples} samples")
+
+    def _check_power(self, state: int) -> None:
+        """The firmware's power management says low power while flying: the battery is
+        running out, and below ``pm.criticalLowVoltage`` for 5 s the firmware shuts down in
+        the air; land now, while it can."""
+        if state == LOW_POWER and self.pm_state != LOW_POWER:
+            self.journal.event("the Crazyflie reports low power (pm.state 3)", level="warning",
+                               source="safety")
+        self.pm_state = state
+        if state == LOW_POWER and self.flying and not self.journal.causes:
+            self.journal.cause("battery low in flight: the Crazyflie's power management reports "
+                               "low power (pm.state 3: below pm.lowVoltage, 3.2 V by default, "
+                               "for 5 s; below pm.criticalLowVoltage, 3.0 V, for 5 s it shuts "
+                               "down in the air): landing; charge or swap the battery")
 
     def wait(self, t: float) -> None:
         """Sleep until ``t`` on the flight clock (absolute), then take in what arrived."""

@@ -49,6 +49,7 @@ log = logging.getLogger(__name__)
 
 _DT_S = 0.001          # physics / stabilizer tick
 _PID_DT_S = 0.002      # attitude and rate loops, 500 Hz
+PM_LOW_TIMEOUT_S = 5.0  # DEFAULT_BAT_LOW_DURATION_TO_TRIGGER_SEC (platform_defaults_cf2.h)
 _KALMAN_PERIOD_MS = 10  # estimator_kalman.c PREDICT_RATE 100 Hz
 _KALMAN = 2             # stabilizer.estimator: 1 complementary, 2 Kalman
 
@@ -127,7 +128,7 @@ class SimVehicle:
         self._stop_param = False         # stabilizer.stop (a parameter: set back to 0, gone)
         self._stop_requested = False     # a CRTP emergency stop: until a restart
         self._stop_watchdog_ms = -1      # the emergency-stop watchdog's last notification
-        self._low_warned = False
+        self._low_s = 0.0                # seconds the battery has been below pm.lowVoltage
         self.stop_count = 0
         self._console: list[str] = [
             "SYS: ----------------------------\n",
@@ -224,9 +225,19 @@ class SimVehicle:
                          motor_thrust_n(pwm=out[1], vbat_v=vbat, c=c),
                          motor_thrust_n(pwm=out[2], vbat_v=vbat, c=c),
                          motor_thrust_n(pwm=out[3], vbat_v=vbat, c=c))
-        if not self._low_warned and vbat < self._params["pm.lowVoltage"] and not any(pwm):
-            self._low_warned = True
+        # the firmware's power management (pm_stm32f4.c): low power once the battery has been
+        # below pm.lowVoltage for PM_LOW_TIMEOUT_S without a break, flying or not; back to
+        # "battery" when it recovers (at rest after landing)
+        was_low = self.low_power
+        self._low_s = self._low_s + _PID_DT_S if vbat < self._params["pm.lowVoltage"] else 0.0
+        if self.low_power and not was_low:
             self._console.append(f"PM: Battery low ({vbat:.2f} V)\n")
+
+    @property
+    def low_power(self) -> bool:
+        """``pm.state`` is lowPower (3): the battery below ``pm.lowVoltage`` for
+        :data:`PM_LOW_TIMEOUT_S`, as the firmware's power management decides it."""
+        return self._low_s > PM_LOW_TIMEOUT_S
 
     # ----------------------------------------------------------------- commander
     def commander_rpyt(self, *, roll: float, pitch: float, yawrate: float, thrust: int) -> None:

@@ -105,7 +105,7 @@ def log_getters(v: Any) -> dict[str, Callable[[], float]]:
     g["controller.r_yaw"] = lambda: s.gz
     g["controller.accelz"] = lambda: s.az
     g["controller.actuatorThrust"] = lambda: v._control[0]
-    g["pm.state"] = lambda: 3.0 if v._low_warned else 0.0   # 0 battery, 3 low power
+    g["pm.state"] = lambda: 3.0 if v.low_power else 0.0   # 0 battery, 3 low power
     g["supervisor.info"] = lambda: float(v.supervisor_info())
     g["sys.canfly"] = lambda: float(v.supervisor.armed and not v.supervisor.locked)
     g["sys.isFlying"] = lambda: float(v.supervisor.is_flying)
