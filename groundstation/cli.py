@@ -24,7 +24,7 @@ _COMMANDS: dict[str, tuple[str, str]] = {
     "fly": ("fly", "Fly a flight plan and record it to a session file."),
     "plan": ("plan", "Validate and look at flight plans (flightplans/*.toml)."),
     "scan": ("scan", "List Crazyradios and Crazyflies."),
-    "info": ("info", "Show what a session file holds: streams, rates, dropped packets, phases."),
+    "info": ("info", "Show what session files hold: streams, rates, dropped packets, phases."),
     "replay": ("replay", "Show a recorded session in Rerun, or write it to .rrd."),
     "export": ("export", "Write a session as CSV files, a MATLAB .mat or Parquet."),
     "import": ("importer",
