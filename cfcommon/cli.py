@@ -3,8 +3,10 @@
 * :class:`FiniteFloat`: a click number type that refuses ``nan`` and ``inf`` (click's
   ``FloatRange`` lets ``nan`` through every bound, which would switch a safety limit off).
 * :func:`check_output`: the one rule for files a command writes. The suffix must be one the
-  command writes, the folder must exist and be writable, an input of the same command is never
-  written over, and an existing file is replaced only when the caller allows it.
+  command writes, the folder must be writable (a missing one is made when the file is written,
+  as ``groundstation import --out`` makes its folder: :func:`check_folder`), an input of the
+  same command is never written over, and an existing file is replaced only when the caller
+  allows it (``--force``).
 
 Both raise :class:`click.BadParameter`, so each CLI prints one line and exits with 2.
 
@@ -60,8 +62,8 @@ from rich.markup import escape
 from rich.table import Table
 
 __all__ = ["DEFAULT_INPUTS", "DEFAULT_OUTPUTS", "NO_ROOM", "READER_GONE", "FiniteFloat",
-           "OneLineErrorGroup", "check_output", "drop_failing_stdout", "end_reader_gone",
-           "names_a_file",
+           "OneLineErrorGroup", "check_folder", "check_output", "drop_failing_stdout",
+           "end_reader_gone", "names_a_file",
            "output_console", "output_gone", "output_table", "reader_gone", "same_file_pairs",
            "setup_logging", "shown_markup", "shown_text", "whole_file", "writing_stdout"]
 
@@ -368,7 +370,9 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
 
     ``suffixes`` are the allowed endings (``(".rrd",)``); ``inputs`` the files the command
     reads (never written over, whatever ``overwrite`` says); ``overwrite`` allows replacing an
-    existing output; ``force_flag`` names the flag that would allow it, for the message.
+    existing output; ``force_flag`` names the flag that would allow it, for the message. A
+    missing folder is not made here (a command that fails later leaves none behind): the
+    writer makes it (:func:`whole_file` does).
     """
     path = Path(path)
     if path.suffix.lower() not in {s.lower() for s in suffixes}:
@@ -378,12 +382,7 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
         if _same_file(path, Path(src)):
             raise click.BadParameter(f"{str(path)!r} is an input of this command; write the "
                                      "output to another file", param_hint=option)
-    folder = path.parent
-    if not folder.is_dir():
-        raise click.BadParameter(f"folder {str(folder)!r} does not exist; create it first",
-                                 param_hint=option)
-    if not os.access(folder, os.W_OK):
-        raise click.BadParameter(f"folder {str(folder)!r} is not writable", param_hint=option)
+    check_folder(path.parent, option=option)
     if path.is_dir():
         raise click.BadParameter(f"{str(path)!r} is a folder; give a file name",
                                  param_hint=option)
@@ -395,6 +394,31 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
         raise click.BadParameter(f"{str(path)!r} already exists; {how}choose another name",
                                  param_hint=option)
     return path
+
+
+def check_folder(folder: Path, *, option: str) -> Path:
+    """Return ``folder`` if a command may write into it, also when missing (its writer makes
+    it, as ``groundstation import --out`` makes its folder: :func:`whole_file`); otherwise
+    raise a one-line ``BadParameter``.
+
+    Nothing is made here: the folder's nearest existing ancestor must be a writable folder,
+    and no missing part of it may be named like a file (``--out pad.mat/x.mat``: a folder
+    ``pad.mat`` is a slip, which the next command would refuse)."""
+    folder = Path(folder)
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        if names_a_file(existing):
+            raise click.BadParameter(
+                f"folder {str(existing)!r} does not exist and is named like a file, so it is "
+                "not made; give the file name after an existing or plain folder name",
+                param_hint=option)
+        existing = existing.parent
+    if not existing.is_dir():
+        raise click.BadParameter(f"{str(existing)!r} is not a folder", param_hint=option)
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise click.BadParameter(f"folder {str(existing)!r} is not writable",
+                                 param_hint=option)
+    return folder
 
 
 #: Endings of the files the two command lines read and write: a folder option (``--out`` of
@@ -415,11 +439,13 @@ def names_a_file(folder: Path) -> bool:
 @contextlib.contextmanager
 def whole_file(path: Path) -> Iterator[Path]:
     """The name to write ``path``'s content to, beside it; renamed onto ``path`` once written,
-    removed if writing failed. The ``OSError`` then names ``path`` (the file the command
-    stopped at), whatever name failed underneath."""
+    removed if writing failed. A missing folder of ``path`` is made first (:func:`check_folder`
+    allowed it). The ``OSError`` then names ``path`` (the file the command stopped at),
+    whatever name failed underneath."""
     path = Path(path)
     part = path.with_name(f".{path.name}.{os.getpid()}.part")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         yield part
         os.replace(part, path)
     except OSError as exc:

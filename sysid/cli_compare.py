@@ -21,6 +21,7 @@ from sysid.cli_support import (
     DETREND_OPTION,
     JSON_OPTION,
     MAX_WINDOW_S,
+    RRD_FORCE_OPTION,
     RRD_OPTION,
     WINDOW_HELP,
     check_rrd,
@@ -38,7 +39,7 @@ from sysid.data import IOData
 from sysid.errors import DataError
 from sysid.model import StateSpaceModel
 from sysid.pole_format import pole_number
-from sysid.residuals import residuals
+from sysid.residuals import ResidualResult, residuals
 from sysid.validate import (
     MIN_WINDOW_SAMPLES,
     SAMPLES_PER_STATE,
@@ -47,7 +48,7 @@ from sysid.validate import (
     min_fit_samples,
 )
 
-__all__ = ["check_fit_samples", "compare_cmd", "resid"]
+__all__ = ["check_fit_samples", "compare_cmd", "echo_residuals", "resid"]
 
 log = logging.getLogger(__name__)
 
@@ -65,9 +66,10 @@ log = logging.getLogger(__name__)
               help="Also print the residual analysis (as `sysid resid`).")
 @JSON_OPTION
 @RRD_OPTION
+@RRD_FORCE_OPTION
 def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | None,
                 window_s: float | None, with_residuals: bool, as_json: bool, rrd: Path | None,
-                **opts: Any) -> None:
+                force: bool, **opts: Any) -> None:
     """Fit of a model on sessions: per channel and per session, in percent (NRMSE).
 
     The model's channel names select the session channels and its dt sets the grid. Without
@@ -85,7 +87,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     Example:
       sysid compare model.h5 val1.h5 val2.h5 --window-s 5 --horizon 10
     """
-    check_rrd(rrd, inputs=(model_path, *sessions))
+    check_rrd(rrd, inputs=(model_path, *sessions), force=force)
     model = load_model_arg(model_path, sessions, command="compare")
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                            outputs=model.output_names, verb="compare the model on")
@@ -135,7 +137,7 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     if not model.predictor_is_stable:
         con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
     if with_residuals:
-        click.echo(residuals(model, flights).summary())
+        echo_residuals(residuals(model, flights))
 
 
 def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
@@ -175,8 +177,9 @@ def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,
 @DETREND_OPTION
 @JSON_OPTION
 @RRD_OPTION
+@RRD_FORCE_OPTION
 def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence: float,
-          as_json: bool, rrd: Path | None, **opts: Any) -> None:
+          as_json: bool, rrd: Path | None, force: bool, **opts: Any) -> None:
     """Residual analysis: whiteness of the one-step errors and their correlation with inputs.
 
     Per output: the autocorrelation at lags 1..--max-lag against +-z/sqrt(N) and a Ljung-Box
@@ -188,7 +191,7 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
     Example:
       sysid resid model.h5 val1.h5 val2.h5 --max-lag 30
     """
-    check_rrd(rrd, inputs=(model_path, *sessions))
+    check_rrd(rrd, inputs=(model_path, *sessions), force=force)
     model = load_model_arg(model_path, sessions, command="resid")
     flights = load_flights(sessions, opts={**opts, "dt": model.dt}, inputs=model.input_names,
                            outputs=model.output_names, verb="analyse the residuals on")
@@ -198,4 +201,11 @@ def resid(model_path: Path, sessions: tuple[Path, ...], max_lag: int, confidence
     if as_json:
         click.echo(json.dumps({"model": str(model_path), **res.to_json()}, indent=1))
         return
+    echo_residuals(res)
+
+
+def echo_residuals(res: ResidualResult) -> None:
+    """The residual analysis as ``resid`` and ``compare --residuals`` print it: the table,
+    then the legend of its columns (:meth:`~sysid.residuals.ResidualResult.legend`)."""
     click.echo(res.summary())
+    click.echo(res.legend())

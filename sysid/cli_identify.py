@@ -120,7 +120,7 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=sessions,
                      overwrite=force, force_flag="--force")
         check_not_a_session(out)  # before the identification, not after it
-    check_rrd(rrd, inputs=(*sessions, *validate))
+    check_rrd(rrd, inputs=(*sessions, *validate), force=force)
     check_sessions_distinct(sessions, validate)
     meth, options = method_options(method, feedthrough=feedthrough, focus=focus,
                                    stability=stability)

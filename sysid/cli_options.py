@@ -92,6 +92,11 @@ STABILITY_OPTION = click.option(
          "inside; free: as estimated.")
 FORCE_OPTION = click.option("--force", is_flag=True,
                             help="Replace --out if it exists (never an input file).")
+#: ``--force`` of a command with both ``--out`` and ``--rrd`` (:func:`model_options`): one
+#: flag for both, as both are the same run's results (the model and its report): a rerun
+#: that replaces one replaces the other, and two flags would only add a second refusal.
+OUT_RRD_FORCE_OPTION = click.option(
+    "--force", is_flag=True, help="Replace --out and --rrd if they exist (never an input file).")
 
 
 def method_chosen() -> bool:
@@ -108,7 +113,7 @@ def model_options(*, out_help: str) -> Callable[[Callable], Callable]:
     out = click.option("--out", type=click.Path(dir_okay=False, path_type=Path), help=out_help)
 
     def decorate(func: Callable) -> Callable:
-        for option in (RRD_OPTION, JSON_OPTION, FORCE_OPTION, out, session_options,
+        for option in (RRD_OPTION, JSON_OPTION, OUT_RRD_FORCE_OPTION, out, session_options,
                        STABILITY_OPTION, FOCUS_OPTION):
             func = option(func)
         return func

@@ -60,6 +60,7 @@ __all__ = [
     "JSON_OPTION",
     "MAX_WINDOW_S",
     "MODEL_SUFFIXES",
+    "RRD_FORCE_OPTION",
     "RRD_OPTION",
     "SESSION_DEFAULTS",
     "Group",
@@ -411,12 +412,14 @@ def require_viz() -> Any:
                                      " drop --rrd") from None
 
 
-def check_rrd(rrd: Path | None, *, inputs: Sequence[Path]) -> Path | None:
+def check_rrd(rrd: Path | None, *, inputs: Sequence[Path], force: bool) -> Path | None:
     """Refuse a ``--rrd`` path before any work: it must end in .rrd, be no input of the
-    command, and its folder must exist and be writable (an existing .rrd is replaced)."""
+    command, its folder must be writable (a missing one is made when the file is written),
+    and an existing file is replaced only with ``force`` (``--force``), as every output is."""
     if rrd is None:
         return None
-    check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=inputs, overwrite=True)
+    check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=inputs, overwrite=force,
+                 force_flag="--force")
     require_viz()
     return rrd
 
@@ -447,7 +450,11 @@ def write_rrd(*, path: Path, name: str, model: StateSpaceModel,
 
 
 RRD_OPTION = click.option("--rrd", type=click.Path(dir_okay=False, path_type=Path),
-                    help="Also write the results to this Rerun recording (.rrd).")
+                          help="Also write the results to this Rerun recording (.rrd); an "
+                               "existing file needs --force.")
+#: ``--force`` of a command whose only output is ``--rrd`` (``compare``, ``resid``).
+RRD_FORCE_OPTION = click.option("--force", is_flag=True,
+                                help="Replace --rrd if it exists (never an input file).")
 JSON_OPTION = click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 
 

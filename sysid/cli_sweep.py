@@ -189,7 +189,7 @@ def sweep_command(*, session: Path, method: Method, options: Options, choose_foc
         check_output(out, option="--out", suffixes=MODEL_SUFFIXES, inputs=(session, *validate),
                      overwrite=force, force_flag="--force")
         check_not_a_session(out)  # before the sweep, not after it
-    check_rrd(rrd, inputs=(session, *validate))
+    check_rrd(rrd, inputs=(session, *validate), force=force)
     # the smallest candidate's order: a window too short to score it on is refused before the
     # sweep (one session without --validate is split, and its refusal says what the split
     # needs: sysid.holdout)

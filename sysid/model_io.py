@@ -36,6 +36,7 @@ Anything refused is one :class:`~sysid.errors.ModelFileError` line.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
@@ -90,30 +91,33 @@ def save(model: StateSpaceModel, path: str | os.PathLike[str]) -> Path:
     """Write ``model`` to ``path`` in the format its suffix names (one-line
     :class:`ModelFileError` when it cannot be written). It is written beside ``path`` and
     renamed onto it when complete: a model file is whole or absent (Ctrl-C, a full disk), and
-    one it replaces stays as it was until then."""
+    one it replaces stays as it was until then. A missing folder of ``path`` is made."""
     path = Path(path)
     suffix = path.suffix.lower()
     writers = {**dict.fromkeys(_H5, _save_h5), ".mat": _save_mat, ".json": _save_json}
     if suffix not in writers:
         raise ModelFileError(f"model file suffix {suffix!r} is unknown; use .h5, .json or .mat")
-    if not path.parent.is_dir():
-        raise ModelFileError(f"cannot write model file {str(path)!r}: folder "
-                             f"{str(path.parent)!r} does not exist; create it first")
     for count, what in ((model.n_states, "states"), (model.n_inputs, "inputs"),
                         (model.n_outputs, "outputs")):
         if count > MAX_DIMENSION:
             raise ModelFileError(f"cannot write model file {str(path)!r}: {count} {what}, more "
                                  f"than the {MAX_DIMENSION} that load reads (MAX_DIMENSION)")
+    above = next((p for p in path.parents if p.exists()), None)  # made below if missing
+    if above is not None and not above.is_dir():
+        raise ModelFileError(f"cannot write model file {str(path)!r}: {str(above)!r} is a "
+                             "file, not a folder")
     check_not_a_session(path)
     part = path.with_name(f".{path.name}.{os.getpid()}.part")  # whole or not at all
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)  # as a session's writer makes its folder
         writers[suffix](model, path, into=part)
         os.replace(part, path)
     except OSError as exc:
         raise ModelFileError(f"cannot write model file {str(path)!r}: "
                              f"{_os_reason(exc)}") from None
     finally:
-        part.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # no folder to hold it: the error above says why
+            part.unlink(missing_ok=True)
     log.info("saved %d-state model to %s", model.n_states, path)
     return path
 

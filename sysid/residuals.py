@@ -53,6 +53,7 @@ of lags outside the band is reported beside each.
 from __future__ import annotations
 
 import logging
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -139,6 +140,33 @@ class ResidualResult:
                             for i, (cell, w) in enumerate(zip(r, widths, strict=True))).rstrip()
                   for r in rows]
         return "\n".join(lines)
+
+    def legend(self) -> str:
+        """What the columns of :meth:`summary` mean and how to read p, a few lines under the
+        table: the text output of ``sysid resid`` and ``sysid compare --residuals`` (their
+        ``--json`` has no table, so no legend)."""
+        alpha = 1 - self.confidence
+        m = len(self.input_names)
+        each = f"{alpha / m:.2g} ({alpha:.2g}/{m})" if m > 1 else f"{alpha:.2g}"
+        lags = f"lags {self.first_lag}..{self.max_lag}"
+        rows = [("white", f"Ljung-Box test of the autocorrelation at lags 1..{self.max_lag}: "
+                          f"yes when p >= {alpha:.2g}"),
+                ("outside", f"share of those lags beyond ±{self.auto_bound:.3f} (about "
+                            f"{100 * alpha:g}% for a white residual)"),
+                ("Q, p", "the test's statistic and p-value"),
+                ("indep.", f"no correlation with past inputs ({lags}): yes when every "
+                           f"input's p >= {each}"),
+                ("outside", "largest share of those lags beyond an input's bounds"),
+                ("worst input (p)", "the input of the smallest p")]
+        width = max(len(key) for key, _ in rows)
+        advice = (f"reading p: over {self.n_samples} samples a tiny departure from whiteness "
+                  "gives p ~ 0 and NO (the bounds narrow as 1/sqrt(N) too); read the "
+                  "autocorrelation outside the bounds as well: a few lags just beyond them is a "
+                  "residual near white, many lags or far beyond them are dynamics the model "
+                  "misses (each lag: sysid resid --json or --rrd).")
+        return "\n".join([*(f"  {key.ljust(width)}  {text}" for key, text in rows),
+                          *textwrap.wrap(advice, width=96, initial_indent="  ",
+                                         subsequent_indent="  ")])
 
     def to_json(self) -> dict[str, object]:
         """The verdicts and correlations as plain lists (for ``--json``)."""

@@ -336,7 +336,7 @@ def export_parquet(session: Session, folder: Path) -> list[Path]:
 
 def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
     """The output (a .mat file or a folder), checked before any work."""
-    from cfcommon.cli import check_output, names_a_file
+    from cfcommon.cli import check_folder, check_output, names_a_file
 
     if to == "mat":
         path = out or session.with_suffix(".mat")
@@ -358,12 +358,11 @@ def _target(session: Path, to: Format, out: Path | None, force: bool) -> Path:
         raise click.BadParameter(f"{str(folder)!r} is not empty; pass --force to write "
                                  "over the files of the same names, or choose another "
                                  "folder", param_hint="--out")
-    if not folder.parent.is_dir():
-        raise click.BadParameter(f"folder {str(folder.parent)!r} does not exist; create it "
-                                 "first", param_hint="--out")
-    made = folder if folder.is_dir() else folder.parent  # where the files or the folder go
-    if not os.access(made, os.W_OK | os.X_OK):
-        raise _not_writable(made)
+    if folder.is_dir():  # the files go into it
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise _not_writable(folder)
+        return folder
+    check_folder(folder.parent, option="--out")  # made with its missing parents, as import's
     return folder
 
 
@@ -386,8 +385,8 @@ class _Choice(click.Choice):
               help="csv: one file per stream; mat: one file for MATLAB's iddata and every "
                    "stream; parquet: one file per stream (needs pyarrow).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="Output folder (csv, parquet) or .mat file [default: next to SESSION, "
-                   "SESSION-csv/, SESSION-parquet/ or SESSION.mat].")
+              help="Output folder (csv, parquet) or .mat file, its missing folders made "
+                   "[default: next to SESSION, SESSION-csv/, SESSION-parquet/ or SESSION.mat].")
 @click.option("--force", is_flag=True, help="Replace an existing output.")
 @click.option("--inputs", default=DEFAULT_INPUTS, show_default=True,
               help="mat: iddata inputs u (streams, stream.field or group.variable), as sysid.")

@@ -268,17 +268,21 @@ def check(plan: str, as_json: bool) -> None:
     "--height", type=click.IntRange(3, 50), default=5, show_default=True, help="Rows per axis."
 )
 @click.option("--rrd", type=click.Path(path_type=Path, dir_okay=False), default=None,
-              help="Write the setpoints and phases to this Rerun .rrd file instead.")
-def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | None) -> None:
+              help="Write the setpoints and phases to this Rerun .rrd file instead; an "
+                   "existing file needs --force.")
+@click.option("--force", is_flag=True, help="Replace the --rrd file if it exists.")
+def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | None,
+         force: bool) -> None:
     """Draw PLAN's setpoints per axis in the terminal, or dump them (--json).
 
     \b
     Example:
       groundstation plan show pitch-only --height 8
     """
-    if rrd is not None and not as_json:  # before any work; an existing .rrd is replaced
+    if rrd is not None and not as_json:  # before any work
         check_output(rrd, option="--rrd", suffixes=(".rrd",),
-                     inputs=[Path(plan)] if Path(plan).is_file() else [], overwrite=True)
+                     inputs=[Path(plan)] if Path(plan).is_file() else [], overwrite=force,
+                     force_flag="--force")
     loaded = load_plan(plan)
     schedule = loaded.compile()
     if as_json:

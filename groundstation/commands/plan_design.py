@@ -16,7 +16,13 @@ from typing import Any
 import click
 import numpy as np
 
-from cfcommon.cli import FiniteFloat, check_output, output_console, shown_markup
+from cfcommon.cli import (
+    FiniteFloat,
+    check_output,
+    output_console,
+    shown_markup,
+    whole_file,
+)
 from groundstation.errors import GroundStationError, PlanError
 from groundstation.plan import Plan, load_plan, parse_plan
 from groundstation.plan.aliasing import axis_shares
@@ -154,7 +160,8 @@ def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
     result = design_plan(base, facts, name=out.stem, flown=_flown_seeds([base, *flown_plans]),
                          saturation=share, max_saturation=max_saturation / 100,
                          aliasing=aliasing, firmware=_flown_firmware(flown), source=str(out))
-    out.write_text(result.plan.text, encoding="utf-8")
+    with whole_file(out) as part:  # its missing folder made, as every output's
+        part.write_text(result.plan.text, encoding="utf-8")
     console = output_console()
     for note in result.notes:
         console.print(shown_markup(note), highlight=False)

@@ -66,13 +66,16 @@ def _left_out(view: RerunView) -> str:
 @click.command("replay", short_help="Show a recorded session in Rerun, or write it to .rrd.")
 @click.argument("session", type=click.Path(path_type=Path))
 @click.option("--rrd", "rrd", type=click.Path(path_type=Path, dir_okay=False), default=None,
-              help="Write the view to this .rrd file (open it later with `rerun FILE`).")
+              help="Write the view to this .rrd file (open it later with `rerun FILE`); an "
+                   "existing file needs --force.")
+@click.option("--force", is_flag=True, help="Replace the --rrd file if it exists.")
 @click.option("--view", "mode", type=click.Choice(["rerun", "serve"]), default=None,
               help="rerun: native viewer (web viewer without a display); serve: web viewer "
                    "on 127.0.0.1. Default: rerun.")
 @click.option("--port", "web_port", type=click.IntRange(0, 65535), default=9090,
               show_default=True, help="Web viewer port on 127.0.0.1 (0: any free port).")
-def command(session: Path, rrd: Path | None, mode: str | None, web_port: int) -> None:
+def command(session: Path, rrd: Path | None, force: bool, mode: str | None,
+            web_port: int) -> None:
     """Show SESSION (an .h5 flight session) in Rerun as the live view showed it.
 
     \b
@@ -83,8 +86,9 @@ def command(session: Path, rrd: Path | None, mode: str | None, web_port: int) ->
     """
     if rrd is not None and mode is not None:
         raise click.UsageError("--rrd writes a file and --view shows a viewer; pass only one")
-    if rrd is not None:  # before any work: never the session itself, never a missing folder
-        check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=[session], overwrite=True)
+    if rrd is not None:  # before any work: never the session itself, nor a file, unforced
+        check_output(rrd, option="--rrd", suffixes=(".rrd",), inputs=[session], overwrite=force,
+                     force_flag="--force")
     s = open_session(session)
     warn_problems(s, log)  # replayed as far as it reads: say what is missing
     t0 = time.perf_counter()

@@ -8,7 +8,7 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from cfcommon.cli import FiniteFloat, check_output
+from cfcommon.cli import FiniteFloat, check_output, whole_file
 
 
 @click.command()
@@ -47,7 +47,8 @@ def test_check_output_rules(tmp_path) -> None:
         (session, {"suffixes": (".rrd",)}, "must end in .rrd"),
         (session, {"suffixes": (".h5",), "inputs": [session], "overwrite": True},
          "is an input of this command"),
-        (tmp_path / "no" / "v.rrd", {"suffixes": (".rrd",)}, "does not exist; create it"),
+        (tmp_path / "pad.mat" / "v.rrd", {"suffixes": (".rrd",)}, "named like a file"),
+        (session / "v.rrd", {"suffixes": (".rrd",)}, "is not a folder"),
         (tmp_path / "d.rrd", {"suffixes": (".rrd",)}, "is a folder"),
     ]
     (tmp_path / "d.rrd").mkdir()
@@ -66,6 +67,17 @@ def test_check_output_rules(tmp_path) -> None:
     assert session.read_bytes() == b"flight data"
 
 
+def test_a_missing_folder_is_made_by_the_writer_not_the_check(tmp_path) -> None:
+    """As ``groundstation import --out``: a missing folder is no refusal; the check makes
+    nothing (a command failing later leaves no empty folder), the file's writer makes it."""
+    out = tmp_path / "exp" / "deep" / "pad.mat"
+    assert check_output(out, option="--out", suffixes=(".mat",)) == out
+    assert not (tmp_path / "exp").exists()
+    with whole_file(out) as part:
+        part.write_bytes(b"mat")
+    assert out.read_bytes() == b"mat"
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
 def test_check_output_refuses_read_only_folder(tmp_path) -> None:
     ro = tmp_path / "ro"
@@ -73,6 +85,8 @@ def test_check_output_refuses_read_only_folder(tmp_path) -> None:
     ro.chmod(0o500)
     with pytest.raises(click.BadParameter, match="not writable"):
         check_output(ro / "v.rrd", option="--rrd", suffixes=(".rrd",))
+    with pytest.raises(click.BadParameter, match=f"{ro.name}' is not writable"):
+        check_output(ro / "new" / "v.rrd", option="--rrd", suffixes=(".rrd",))
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="Linux's always-full device")

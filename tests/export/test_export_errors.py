@@ -1,5 +1,5 @@
 """``groundstation export``'s user errors: one line saying what to do, the same for every
-format (an unwritable folder, a missing ``--to``)."""
+format (an unwritable folder, a missing ``--to``); a missing folder is made, as ``import``'s."""
 
 from __future__ import annotations
 
@@ -55,6 +55,28 @@ def test_an_unwritable_folder_is_one_line_the_same_for_every_format(session, rea
     line = _one_line(_run(session, "--to", to, "--out", read_only / out, *window))
     assert f"folder {str(read_only)!r} is not writable" in line and "-h" in line
     assert not any(read_only.iterdir())
+
+
+@pytest.mark.parametrize(("to", "out"), [("csv", "exp/deep/csv"), ("mat", "exp/deep/pad.mat")])
+def test_a_missing_folder_is_made_as_import_makes_its_own(session, tmp_path, to, out):
+    """``export --to mat --out exp/pad.mat`` refused "folder 'exp' does not exist; create it
+    first" while ``import --out`` makes its folder."""
+    res = _run(session, "--to", to, "--out", tmp_path / out)
+    assert res.exit_code == 0, res.output
+    made = tmp_path / out
+    assert (any(made.iterdir()) if to == "csv" else made.stat().st_size > 0)
+
+
+@pytest.mark.parametrize(("to", "out"), [("csv", "new/csv"), ("mat", "new/f.mat")])
+def test_a_missing_folder_under_an_unwritable_one_is_refused_first(session, read_only, to, out):
+    line = _one_line(_run(session, "--to", to, "--out", read_only / out))
+    assert f"folder {str(read_only)!r} is not writable" in line
+    assert not any(read_only.iterdir())
+
+
+def test_a_missing_folder_named_like_a_file_is_not_made(session, tmp_path):
+    line = _one_line(_run(session, "--to", "mat", "--out", tmp_path / "exp.mat" / "pad.mat"))
+    assert "named like a file" in line and not (tmp_path / "exp.mat").exists()
 
 
 @pytest.mark.parametrize("to", ["csv", "parquet"])

@@ -43,6 +43,35 @@ def test_resid_json_matches_the_api(setup) -> None:
     assert all(isinstance(o["white"], bool) for o in report["outputs"])
 
 
+LEGEND = ("white ", "Ljung-Box", "worst input (p)", "reading p:", "p ~ 0")
+
+
+@pytest.mark.parametrize("command", ["resid", "compare"])
+def test_the_table_is_explained_in_text_and_not_in_json(setup, command) -> None:
+    """The review: `compare --residuals` printed "99% bounds (auto ±0.036)", "white outside Q
+    p indep. outside worst input (p)" and no word on them. One legend, after the table, for
+    both commands; their --json has no table, so no legend."""
+    flights, model_path = setup
+    extra = ["--residuals"] if command == "compare" else []
+    res = run(command, model_path, *(f.path for f in flights), *extra)
+    assert res.exit_code == 0, res.output
+    text = res.stdout
+    table_at = text.index("output  white")
+    legend = text[text.index("\n  white ", table_at) + 1:]
+    assert all(word in legend for word in LEGEND), legend
+    n = re.search(r"residual analysis: (\d+) samples", text).group(1)  # where p is read
+    assert f"over {n} samples" in legend and "±" in legend
+    assert "p >= 0.01" in legend and "0.0025 (0.01/4)" in legend  # 99 %, Bonferroni over 4
+    assert len(legend.splitlines()) <= 12 and max(map(len, legend.splitlines())) <= 110
+    if command == "resid":  # the same text for both: one piece of code
+        other = run("compare", model_path, *(f.path for f in flights), "--residuals").stdout
+        assert other.endswith(legend)
+    res = run(command, model_path, *(f.path for f in flights), *extra, "--json")
+    assert res.exit_code == 0, res.output
+    json.loads(res.stdout)  # nothing but the JSON document
+    assert not any(word in res.stdout for word in ("Ljung-Box", "reading p"))
+
+
 def test_compare_residuals_prints_the_summary(setup) -> None:
     flights, model_path = setup
     res = run("compare", model_path, *(f.path for f in flights), "--residuals")

@@ -96,13 +96,37 @@ def test_export_force_replaces_its_output(files, tmp_path) -> None:
                    ".mat")
 
 
-def test_existing_rrd_view_is_replaced(files, tmp_path) -> None:
+@pytest.mark.parametrize("command", ["compare", "resid", "identify"])
+def test_an_existing_rrd_is_replaced_only_with_force(files, tmp_path, command) -> None:
+    """As every other output (was: replaced in silence); refused before any work (a session
+    that does not exist is not even read), on one line naming --force."""
     pytest.importorskip("sysid.viz")
     view = tmp_path / "view.rrd"
     view.write_bytes(b"old view")
-    res = run("compare", files["model"], files["session"], "--rrd", view)
+    head = ["identify"] if command == "identify" else [command, files["model"]]
+    tail = FAST if command == "identify" else []
+    for session in (tmp_path / "absent.h5", files["session"]):
+        one_line_error(run(*head, session, *tail, "--rrd", view), "--rrd",
+                       "already exists; pass --force to replace it")
+        assert view.read_bytes() == b"old view"
+    res = run(*head, files["session"], *tail, "--rrd", view, "--force")
     assert res.exit_code == 0, res.output
     assert view.read_bytes() != b"old view"
+
+
+def test_one_force_covers_out_and_rrd(files, tmp_path) -> None:
+    """identify's --force replaces both its outputs (its help says so)."""
+    pytest.importorskip("sysid.viz")
+    model, view = tmp_path / "m.h5", tmp_path / "v.rrd"
+    view.write_bytes(b"old view")
+    one_line_error(run("identify", files["session"], *FAST, "--out", model, "--rrd", view),
+                   "--rrd", "already exists")
+    assert not model.exists()  # refused before the identification
+    res = run("identify", files["session"], *FAST, "--out", model, "--rrd", view, "--force")
+    assert res.exit_code == 0, res.output
+    assert model.exists() and view.read_bytes() != b"old view"
+    assert "Replace --out and --rrd if they exist" in " ".join(run("identify", "--help")
+                                                              .output.split())
 
 
 # ------------------------------------------------------------------------------ no tracebacks
@@ -115,12 +139,12 @@ def test_existing_rrd_view_is_replaced(files, tmp_path) -> None:
     (["identify", "{session}", "--dt", "inf"], ["--dt"]),
     (["identify", "{session}", "--window", "nan:inf"], ["--window"]),
     (["compare", "{model}", "{session}", "--rrd", "/proc/x.rrd"], ["/proc"]),
-    (["export", "{model}", "--format", "mat", "--out", "/nonexist3/x.mat"],
-     ["/nonexist3", "does not exist"]),
-    (["identify", "{session}", *FAST, "--out", "/nonexist3/x.mat"],
-     ["/nonexist3", "does not exist"]),
-    (["identify", "{session}", *FAST, "--out", "/nonexist2/m.h5"],
-     ["/nonexist2", "does not exist"]),
+    (["export", "{model}", "--format", "mat", "--out", "{session}/x.mat"],
+     ["--out", "is not a folder"]),
+    (["identify", "{session}", *FAST, "--out", "{tmp}/pad.mat/x.mat"],
+     ["pad.mat", "named like a file"]),
+    (["identify", "{session}", *FAST, "--out", "{session}/m.h5"], ["is not a folder"]),
+    (["compare", "{model}", "{session}", "--rrd", "{session}/x.rrd"], ["is not a folder"]),
     (["identify", "{session}", *FAST, "--out", "{tmp}"], ["--out"]),
     (["identify", "{session}", "--future", "1"], ["--future"]),
 ])
@@ -133,8 +157,9 @@ def test_model_save_errors_are_plain(tmp_path) -> None:
     """Written through the API too: one plain line, not HDF5's internal text."""
     model = known_system()
     (tmp_path / "dir.h5").mkdir()
-    for path, words in [(tmp_path / "missing" / "m.h5", "does not exist"),
-                        (tmp_path / "missing" / "m.mat", "does not exist"),
+    (tmp_path / "file").write_text("a file")
+    for path, words in [(tmp_path / "file" / "m.h5", "is a file, not a folder"),
+                        (tmp_path / "file" / "sub" / "m.mat", "is a file, not a folder"),
                         (tmp_path / "dir.h5", "Is a directory")]:
         with pytest.raises(ModelFileError, match=words) as info:
             model_io.save(model, path)

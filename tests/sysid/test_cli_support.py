@@ -114,14 +114,17 @@ def test_default_compare_mode_simulates_integrators_over_windows():
 def test_check_rrd_refuses_before_any_work(tmp_path):
     data = tmp_path / "f.rrd"
     data.write_bytes(b"")
-    assert check_rrd(None, inputs=[]) is None
-    assert check_rrd(tmp_path / "out.rrd", inputs=[]) == tmp_path / "out.rrd"
-    assert check_rrd(data, inputs=[]) == data  # an existing .rrd is replaced
-    for path, inputs, words in ((tmp_path / "out.h5", [], "must end in .rrd"),
-                                (data, [data], "is an input of this command"),
-                                (tmp_path / "no" / "x.rrd", [], "does not exist")):
+    assert check_rrd(None, inputs=[], force=False) is None
+    assert check_rrd(tmp_path / "out.rrd", inputs=[], force=False) == tmp_path / "out.rrd"
+    # a missing folder is made when the file is written, as every output's
+    assert check_rrd(tmp_path / "no" / "x.rrd", inputs=[], force=False) == tmp_path / "no/x.rrd"
+    assert check_rrd(data, inputs=[], force=True) == data  # replaced with --force only
+    for path, inputs, force, words in (
+            (tmp_path / "out.h5", [], False, "must end in .rrd"),
+            (data, [data], True, "is an input of this command"),
+            (data, [], False, "already exists; pass --force to replace it")):
         with pytest.raises(click.BadParameter, match=words):
-            check_rrd(path, inputs=inputs)
+            check_rrd(path, inputs=inputs, force=force)
 
 
 def test_compare_result_json_names_channels():

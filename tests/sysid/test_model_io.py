@@ -58,8 +58,11 @@ def test_foreign_json_and_unknown_suffix(tmp_path):
     refused(tmp_path / "x.json", "not a sysid model file")
     with pytest.raises(ModelFileError, match=r"suffix '\.txt' is unknown"):
         save(sample_model(), tmp_path / "m.txt")
-    with pytest.raises(ModelFileError, match="does not exist"):
-        save(sample_model(), tmp_path / "no" / "m.h5")
+    (tmp_path / "f.txt").write_text("a file")
+    with pytest.raises(ModelFileError, match=r"f\.txt' is a file, not a folder"):
+        save(sample_model(), tmp_path / "f.txt" / "m.h5")
+    # a missing folder is made, as a session's writer makes its folder
+    assert load(save(sample_model(), tmp_path / "no" / "m.h5")).n_states == sample_model().n_states
 
 
 @pytest.mark.timeout(60)

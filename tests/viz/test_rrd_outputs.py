@@ -1,5 +1,6 @@
-"""``.rrd`` outputs of ``replay`` and ``plan show``: never an input, never a missing folder,
-checked before any work (one line, exit 2, inputs unchanged)."""
+"""``.rrd`` outputs of ``replay`` and ``plan show``: never an input, an existing file only with
+``--force``, a missing folder made, checked before any work (one line, exit 2, inputs
+unchanged)."""
 
 from __future__ import annotations
 
@@ -38,24 +39,39 @@ def test_replay_never_writes_over_the_session(tmp_path):
     assert "input" in res.output and _digest(session) == before
 
 
-def test_replay_rrd_refuses_a_missing_folder_and_wrong_suffix(tmp_path):
+def test_replay_rrd_makes_a_missing_folder_and_refuses_a_wrong_suffix(tmp_path):
     session = write_session(tmp_path / "flight.h5")
-    res = CliRunner().invoke(main, ["replay", str(session), "--rrd",
-                                    str(tmp_path / "nope" / "flight.rrd")])
-    _one_line_error(res)
-    assert "does not exist" in res.output and not (tmp_path / "nope").exists()
-    res = CliRunner().invoke(main, ["replay", str(session), "--rrd", str(tmp_path / "f.h5")])
-    _one_line_error(res)
-    assert ".rrd" in res.output and not (tmp_path / "f.h5").exists()
-
-
-def test_replay_replaces_an_existing_rrd(tmp_path):
-    session = write_session(tmp_path / "flight.h5")
-    out = tmp_path / "flight.rrd"
-    out.write_bytes(b"old")
+    out = tmp_path / "rrd" / "flight.rrd"  # made as import --out makes its folder
     res = CliRunner().invoke(main, ["replay", str(session), "--rrd", str(out)])
     assert res.exit_code == 0, res.output
-    assert out.read_bytes() != b"old"
+    assert out.stat().st_size > 0
+    res = CliRunner().invoke(main, ["replay", str(session), "--rrd",
+                                    str(tmp_path / "nope" / "f.h5")])
+    _one_line_error(res)
+    assert ".rrd" in res.output and not (tmp_path / "nope").exists()
+
+
+def test_an_existing_rrd_is_replaced_only_with_force(tmp_path):
+    """The review's case: replay wrote rrd/flight.rrd, then plan show --rrd on the same name
+    replaced it with the plan's (117 KB for 975 KB). Now every --rrd refuses it, on one line
+    naming --force, before any work (a session that does not exist is not even opened)."""
+    session = write_session(tmp_path / "flight.h5")
+    out = tmp_path / "rrd" / "flight.rrd"
+    assert CliRunner().invoke(main, ["replay", str(session), "--rrd", str(out)]).exit_code == 0
+    flight = _digest(out)
+    for args in (["plan", "show", "hover-check", "--rrd", str(out)],
+                 ["replay", str(session), "--rrd", str(out)],
+                 ["replay", str(tmp_path / "absent.h5"), "--rrd", str(out)]):
+        res = CliRunner().invoke(main, args)
+        _one_line_error(res)
+        assert "already exists; pass --force" in res.output, args
+        assert _digest(out) == flight
+    res = CliRunner().invoke(main, ["plan", "show", "hover-check", "--rrd", str(out), "--force"])
+    assert res.exit_code == 0, res.output
+    assert _digest(out) != flight
+    res = CliRunner().invoke(main, ["replay", str(session), "--rrd", str(out), "--force"])
+    assert res.exit_code == 0, res.output
+    assert out.stat().st_size > 0
 
 
 def test_plan_show_rrd_checks_the_output_first(tmp_path):
@@ -63,9 +79,9 @@ def test_plan_show_rrd_checks_the_output_first(tmp_path):
     res = CliRunner().invoke(main, ["plan", "show", "hover-check", "--json"])
     assert res.exit_code == 0
     res = CliRunner().invoke(main, ["plan", "show", "hover-check", "--rrd",
-                                    str(tmp_path / "missing" / "p.rrd")])
+                                    str(tmp_path / "pad.mat" / "p.rrd")])
     _one_line_error(res)
-    assert not (tmp_path / "missing").exists()
+    assert "named like a file" in res.output and not (tmp_path / "pad.mat").exists()
     plan.write_text("not a plan")
     before = _digest(plan)
     res = CliRunner().invoke(main, ["plan", "show", str(plan), "--rrd", str(plan)])
