@@ -43,7 +43,7 @@ from sysid.methods import Method, Options
 from sysid.session_io import SessionFileError, unique_name
 
 __all__ = ["GROUP_BY", "BatchRow", "GroupBy", "check_model_paths", "group_sessions", "model_path",
-           "run_batch", "write_summary"]
+           "name_list", "run_batch", "write_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -64,11 +64,13 @@ class BatchRow:
     method: str | None = None
     focus: str | None = None
     poles: list[complex] = field(default_factory=list)
+    outputs: list[str] = field(default_factory=list)
     fit: list[float] = field(default_factory=list)
     score: float | None = None
     stable: bool | None = None
     model: str | None = None
     error: str | None = None
+    warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
     def record(self) -> dict[str, Any]:
@@ -76,8 +78,9 @@ class BatchRow:
                 "past": self.past, "future": self.future, "order": self.order,
                 "method": self.method, "focus": self.focus,
                 "poles": [[float(p.real), float(p.imag)] for p in self.poles],
-                "validation_fit_percent": self.fit, "score_percent": self.score,
-                "stable": self.stable, "model": self.model, "error": self.error,
+                "outputs": self.outputs, "validation_fit_percent": self.fit,
+                "score_percent": self.score, "stable": self.stable, "model": self.model,
+                "error": self.error, "warnings": self.warnings,
                 "seconds": round(self.seconds, 3)}
 
 
@@ -142,7 +145,8 @@ def identify_group(groups: list[list[IOData]], *, method: Method, options: Optio
             "order": sel.best.order, "focus": sel.model.provenance.get("focus"),
             "method": sel.model.provenance.get("method"),
             "fit": [float(f) for f in sel.best.fit], "score": sel.best.score,
-            "stable": sel.model.is_stable}
+            "stable": sel.model.is_stable, "outputs": list(sel.model.output_names),
+            "warnings": list(sel.warnings)}
 
 
 def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
@@ -155,16 +159,17 @@ def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
     with tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["group", "sessions", "flights", "past", "future", "order", "method",
-                    "focus", "poles",
+                    "focus", "poles", "outputs",
                     "validation_fit_percent", "score_percent", "stable", "model", "error",
-                    "seconds"])
+                    "warnings", "seconds"])
         for r in rows:
             w.writerow([r.group, ";".join(r.sessions), r.flights, _cell(r.past),
                         _cell(r.future), _cell(r.order), r.method or "", r.focus or "",
                         ";".join(f"{p.real:.6g}{p.imag:+.6g}j" for p in r.poles),
-                        ";".join(f"{f:.3f}" for f in r.fit),
+                        ";".join(r.outputs), ";".join(f"{f:.3f}" for f in r.fit),
                         "" if r.score is None else f"{r.score:.3f}", _cell(r.stable),
-                        r.model or "", r.error or "", f"{r.seconds:.3f}"])
+                        r.model or "", r.error or "", " | ".join(r.warnings),
+                        f"{r.seconds:.3f}"])
     tmp.replace(out_dir / "summary.csv")
 
 
@@ -192,7 +197,8 @@ def _task_seconds(outcome: dict[str, Any] | BaseException) -> float:
     return float(outcome.get("seconds", 0.0))
 
 
-def _names(names: Sequence[str], shown: int = 5) -> str:
+def name_list(names: Sequence[str], shown: int = 5) -> str:
+    """``a, b, c, d, e and 3 more``: groups named in one line."""
     more = len(names) - shown
     return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
 
@@ -281,6 +287,7 @@ def run_batch(
             row.focus, row.method = outcome["focus"], outcome["method"]
             row.poles = list(np.sort_complex(outcome["model"].poles()))
             row.fit, row.score, row.stable = outcome["fit"], outcome["score"], outcome["stable"]
+            row.outputs, row.warnings = outcome["outputs"], outcome["warnings"]
             row.model = str(path)
         row.seconds = seconds + time.perf_counter() - t0
         done_rows[row.group] = row
@@ -331,7 +338,7 @@ def run_batch(
         kept = len(done_rows)  # the groups that ended, not the rows given (unreadable sessions)
         raise type(exc)(f"{exc}; {kept} finished group(s) kept in "
                         f"{out_dir / 'summary.json'} and {out_dir / 'summary.csv'}; "
-                        f"{len(not_run)} group(s) not run: {_names(not_run)}") from None
+                        f"{len(not_run)} group(s) not run: {name_list(not_run)}") from None
     except BaseException as exc:
         if futures:
             from sysid.cluster import cancel_quietly

@@ -24,6 +24,7 @@ from cfcommon.cli import (
     names_a_file,
     output_table,
     setup_logging,
+    shown_markup,
 )
 from sysid.batch import (
     GROUP_BY,
@@ -31,6 +32,7 @@ from sysid.batch import (
     check_model_paths,
     group_sessions,
     model_path,
+    name_list,
     run_batch,
 )
 from sysid.cli_compare import compare_cmd, resid
@@ -307,9 +309,13 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                              choose_focus=focus is None, choose_feedthrough="open-loop",
                              choose_method=method_chosen())
     except KeyboardInterrupt:
-        n = len(json.loads(summary.read_text())) if summary.exists() else 0
-        click.echo(f"interrupted: {n} finished group(s) kept in {summary} and "
-                   f"{out_dir / 'summary.csv'}", err=True)
+        finished = {r["group"] for r in json.loads(summary.read_text())} \
+            if summary.exists() else set()
+        left = [name for name in groups if name not in finished]
+        click.echo(f"interrupted: {len(finished)} finished group(s) kept in {summary} and "
+                   f"{out_dir / 'summary.csv'}"
+                   + (f"; {len(left)} group(s) not run: {name_list(left)} (batch their "
+                      "sessions into another --out)" if left else ""), err=True)
         sys.exit(130)
     failed = [r for r in rows if r.error is not None]
     if as_json:
@@ -328,6 +334,9 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                           "-" if r.stable is None else str(r.stable),
                           r.error or r.model or "")
         con.print(table)
+        for r in rows:  # what identify would print for the group
+            for w in r.warnings:
+                con.print(f"[yellow]warning:[/] {shown_markup(r.group)}: {shown_markup(w)}")
         con.print(f"summary: {out_dir / 'summary.csv'}, {summary}")
     if rows and len(failed) == len(rows):
         raise DataError(f"every one of the {len(rows)} group(s) failed; first: "

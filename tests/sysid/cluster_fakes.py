@@ -51,7 +51,7 @@ def fake_identify(groups: list[list[Any]], **_: Any) -> dict[str, Any]:
     model = known_system()
     return {"model": model, "past": 2, "future": 3, "order": model.n_states,
             "focus": "prediction", "method": "iem", "fit": [90.0], "score": 90.0,
-            "stable": True}
+            "stable": True, "outputs": ["gyro.x"], "warnings": []}
 
 
 def fake_past(*, past: int, first: int, die: int | None = None, data: Any = None,

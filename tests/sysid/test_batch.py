@@ -94,8 +94,14 @@ def test_batch_group_names_and_no_knobs_selection(sessions, tmp_path):
     chosen = json.loads(ident.stdout)
     assert [row[k] for k in ("past", "future", "order", "focus")] == [
         chosen[k] for k in ("past", "future", "order", "focus")]
+    # and what identify warns of, and the fits named by their outputs (batch gave neither)
+    assert row["warnings"] == chosen["selection"]["warnings"]
+    assert row["outputs"] == ["acc.z", "gyro.x", "gyro.y", "gyro.z"]  # the default outputs
+    assert len(row["validation_fit_percent"]) == len(row["outputs"])
     with (out / "summary.csv").open() as fh:
-        assert next(csv.DictReader(fh))["focus"] == row["focus"]
+        line = next(csv.DictReader(fh))
+    assert line["focus"] == row["focus"] and line["outputs"].split(";") == row["outputs"]
+    assert line["warnings"] == " | ".join(row["warnings"])
 
 
 def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
@@ -112,6 +118,7 @@ def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
     out = tmp_path / "stopped"
     res = run("batch", *paths[:3], "--out", out, *FAST)
     assert res.exit_code == 130 and "interrupted: 1 finished group" in res.stderr
+    assert "; 2 group(s) not run: a1, b0 (batch their sessions into another --out)" in res.stderr
     [row] = json.loads((out / "summary.json").read_text())
     assert row["group"] == "a0" and row["error"] is None and (out / "a0.h5").exists()
 
