@@ -37,6 +37,7 @@ from cfcommon.cli import (
     shown_text,
 )
 from cfsession.schema import StreamSpec
+from groundstation.commands.plan import summarize
 from groundstation.errors import GroundStationError, PlanError
 from groundstation.flight import FlightListener, FlightResult, RateLimits, fly_plan
 from groundstation.flight.link import DEFAULT_URI, check_uri
@@ -48,6 +49,7 @@ from groundstation.flight.liveid import (
     planned_streams,
 )
 from groundstation.plan import MAX_RATE_RANGE_DEG_S, LiveIdConfig, Plan, load_plan
+from groundstation.plan.toml import TomlSource
 from groundstation.plan.variants import advance_prbs, reseed_prbs
 from groundstation.recorder import check_folder, check_tag
 
@@ -90,7 +92,9 @@ def check_live_plan(plan: Plan) -> LiveIdConfig:
     from sysid.factor import min_samples  # the engine's own count: sysid loads only here
 
     config = plan.live_id or LiveIdConfig()
-    ins, outs, dt = check_live_id(config, streams=planned_streams(plan))
+    # the plan's [live_id] table: errors name its key and line; else the defaults, no line
+    source = None if plan.live_id is None else TomlSource(text=plan.text, source=plan.source)
+    ins, outs, dt = check_live_id(config, streams=planned_streams(plan), source=source)
     spans = [(p.start, p.start + p.duration) for p in plan.compile().phases
              if p.kind == "excitation"]
     if not spans:
@@ -100,11 +104,13 @@ def check_live_plan(plan: Plan) -> LiveIdConfig:
     have = int(span / dt + 1e-9)
     need = min_samples(past=config.past, future=config.future, n_channels=len(ins) + len(outs))
     if have < need:
-        raise PlanError(
-            f"live_id: past {config.past} + future {config.future} with {len(ins) + len(outs)} "
+        message = (
+            f"past {config.past} + future {config.future} with {len(ins) + len(outs)} "
             f"channels need {need} samples ({need * dt:.1f} s) of excitation for the first "
             f"update; the plan excites for {span:.1f} s ({have} samples at {1 / dt:g} Hz): "
             "lower past or future in [live_id], or lengthen the excitation")
+        raise (PlanError(f"live_id: {message}") if source is None
+               else source.error(("live_id", "past"), message))
     return config
 
 
@@ -372,6 +378,8 @@ def command(plan: str, uri: str, out: Path, tag: str, advance: int | None, seed:
     check_uri(uri)  # before any viewer opens; fly_plan checks the file name before connecting
     missing = [p for p in (out, *out.parents) if not p.exists()]  # folders we will create
     check_folder(out)
+    for warning in summarize(loaded, loaded.compile())["warnings"]:  # plan check's
+        click.echo(f"warning: {shown_text(warning)}", err=True)
     bus: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
     if emulated_radio:
         from groundstation.sim.crazyradio_usb import emulated_radio as emulated

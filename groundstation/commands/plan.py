@@ -1,9 +1,11 @@
 """``groundstation plan check PLAN`` and ``groundstation plan show PLAN``.
 
 ``check`` validates a plan (errors name key and line; exit 2) and prints the phase timeline, the
-duration, the setpoint count, and for each PRBS its period, clock period and order of persistent
-excitation; ``show`` draws the setpoints per axis in the terminal or dumps the schedule as JSON,
-and prints a designed plan's notes; ``design`` writes the next flight's plan from an identified
+duration, the setpoint count, for each PRBS its period, clock period and order of persistent
+excitation, the altitude hold and live identification the flight uses (defaults named), and
+warnings (:func:`groundstation.plan.checks.plan_warnings`, and the PRBS's own); ``show`` draws
+the setpoints per axis in the terminal or dumps the schedule as JSON, and prints a designed
+plan's notes; ``design`` writes the next flight's plan from an identified
 model (:mod:`groundstation.commands.plan_design`). PLAN is a path or the name of a shipped plan
 (``flightplans/NAME.toml``).
 """
@@ -11,6 +13,7 @@ model (:mod:`groundstation.commands.plan_design`). PLAN is a path or the name of
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +24,16 @@ from rich.table import Table
 
 from cfcommon.cli import check_output, output_console, shown_markup
 from groundstation.commands.plan_design import design
-from groundstation.plan import SETPOINT_CHANNELS, UNITS, Plan, Schedule, load_plan
+from groundstation.plan import (
+    SETPOINT_CHANNELS,
+    UNITS,
+    LiveIdConfig,
+    Plan,
+    Schedule,
+    load_plan,
+)
+from groundstation.plan.altitude import AltitudeHoldConfig
+from groundstation.plan.checks import plan_warnings
 from groundstation.plan.design import design_notes
 from groundstation.plan.excitation import prbs_shift
 
@@ -44,10 +56,27 @@ def _excitation_text(spec: Any, rate: float) -> str:
     return f"{spec.axis} {spec.signal} {spec.amplitude:g} {unit} at {spec.start / rate:g} s{width}"
 
 
+def _settings(plan: Plan) -> dict[str, Any]:
+    """``[altitude_hold]`` and ``[live_id]`` as the flight will use them: every value, which
+    were defaulted (``defaults``), and whether each acts (``active``): a plan without an
+    ``[altitude_hold]`` flies its thrust open loop; one without ``[live_id]`` identifies
+    nothing unless ``fly --live-id`` asks, with the defaults."""
+    raw = tomllib.loads(plan.text)
+    out: dict[str, Any] = {}
+    for key, config, default in (("altitude_hold", plan.altitude_hold, AltitudeHoldConfig()),
+                                 ("live_id", plan.live_id, LiveIdConfig())):
+        table = raw.get(key) if isinstance(raw.get(key), dict) else {}
+        values = {k: list(v) if isinstance(v, tuple) else v
+                  for k, v in vars(config or default).items()}
+        out[key] = {"active": config is not None,
+                    "defaults": sorted(k for k in values if k not in table)} | values
+    return out
+
+
 def summarize(plan: Plan, schedule: Schedule) -> dict[str, Any]:
     """Everything ``plan check`` reports, JSON-ready (times in s, thrust in PWM)."""
     rate = schedule.rate_hz
-    phases, prbs, warnings = [], [], []
+    phases, prbs, warnings = [], [], plan_warnings(plan)
     for spec, ph in zip(plan.phases, schedule.phases, strict=True):
         entry = ph.to_dict() | {"duration_s": ph.duration, "setpoints": ph.n_ticks}
         if spec.kind in ("takeoff", "landing"):
@@ -99,6 +128,7 @@ def summarize(plan: Plan, schedule: Schedule) -> dict[str, Any]:
         "vehicle": vars(plan.vehicle),
         "safety": vars(plan.safety),
         "parameters": dict(plan.parameters),
+        **_settings(plan),
         "phases": phases,
         "prbs": prbs,
         "warnings": warnings,
@@ -161,7 +191,7 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
         f"limits: |roll| <= {v['max_roll_deg']:g} deg, |pitch| <= "
         f"{v['max_pitch_deg']:g} deg, |yaw rate| <= {v['max_yaw_rate_deg_s']:g} deg/s,"
         f" thrust {v['thrust_min']}-{v['thrust_max']} PWM, take-off at >= "
-        f"{v['min_vbat']:g} V"
+        f"{v['min_vbat']:g} V; a battery flies {v['flight_time_s']:g} s"
     )
     abort = (
         f"descend {sf['descent_duration']:g} s at <= {sf['descent_thrust']} PWM, then stop"
@@ -169,11 +199,36 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
         else "stop the motors"
     )
     console.print(f"on abort: {abort}")
+    for line in _settings_lines(s):
+        console.print(shown_markup(line), highlight=False)
     if s["parameters"]:
         console.print("firmware parameters for the flight (restored after it): " + ", ".join(
             f"{shown_markup(k)} = {v:g}" for k, v in s["parameters"].items()))
     for w in s["warnings"]:
         console.print(f"[yellow]warning:[/] {shown_markup(w)}")
+
+
+def _settings_lines(s: dict[str, Any]) -> list[str]:
+    """``[altitude_hold]`` and ``[live_id]`` for the text of ``plan check`` (:func:`_settings`)."""
+    h, lid = s["altitude_hold"], s["live_id"]
+    if h["active"]:
+        hold = (f"altitude hold: {h['target_m']:g} m on {h['variable']} in "
+                f"{', '.join(h['kinds'])}; kp {h['kp']:g} PWM/m, ki {h['ki']:g} PWM/(m s), "
+                f"kd {h['kd']:g} PWM/(m/s), trim ±{h['max_trim']} PWM")
+        if h["defaults"]:
+            hold += f" (defaults: {', '.join(h['defaults'])})"
+    else:
+        hold = (f"altitude hold: none (no [altitude_hold] table): thrust open loop from "
+                f"hover_thrust {s['hover_thrust']} PWM, no height held")
+    live = (f"{', '.join(lid['inputs'])} -> {', '.join(lid['outputs'])}, order {lid['order']}, "
+            f"past {lid['past']}, future {lid['future']}, every {lid['update_period']:g} s")
+    if lid["active"]:
+        live = "live identification ([live_id]): " + live + (
+            f" (defaults: {', '.join(lid['defaults'])})" if lid["defaults"] else "")
+    else:
+        live = ("live identification: off (no [live_id] table); fly --live-id would use the "
+                f"defaults: {live}")
+    return [hold, live]
 
 
 def plot_lines(values: np.ndarray, *, width: int, height: int) -> list[str]:

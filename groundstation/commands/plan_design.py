@@ -21,6 +21,7 @@ from cfcommon.cli import (
     check_output,
     output_console,
     shown_markup,
+    shown_text,
     whole_file,
 )
 from groundstation.errors import GroundStationError, PlanError
@@ -146,6 +147,13 @@ def design(model_path: Path, from_plan: str, out: Path, flown: tuple[Path, ...],
                  overwrite=force, force_flag="--force")
     base = load_plan(from_plan)
     flown_plans = [_session_plan(p) for p in flown]
+    for path, other in zip(flown, flown_plans, strict=True):
+        if other.name != base.name:  # its seeds are still avoided: a warning, not a refusal
+            click.echo(shown_text(
+                f"warning: {path} flew plan '{other.name}', not '{base.name}' (--from): the "
+                "fits, motor-limit and motor-log checks measure that experiment, not this "
+                f"plan's; pass sessions flown with '{base.name}', or design --from the plan "
+                "they flew"), err=True)
     from sysid.errors import SysIdError
     from sysid.model_io import load  # the hardened loader of untrusted model files
 

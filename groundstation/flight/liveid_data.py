@@ -19,6 +19,7 @@ from cfsession.schema import StreamSpec
 from groundstation.errors import PlanError
 from groundstation.flight.blocks import flight_blocks
 from groundstation.plan import LiveIdConfig, Plan
+from groundstation.plan.toml import TomlSource
 
 __all__ = ["Channel", "ExcitationGrid", "Feed", "check_live_id", "planned_streams",
            "resolve_channels"]
@@ -35,44 +36,63 @@ def planned_streams(plan: Plan) -> list[StreamSpec]:
         setpoint_period_s=1.0 / plan.setpoint_rate_hz)]
 
 
+def _error(source: TomlSource | None, key: str, message: str) -> PlanError:
+    """``FILE:LINE: live_id.KEY: message`` with the plan's text, else ``live_id: message``
+    (``--live-id`` on a plan without the table: the defaults, no line to name)."""
+    if source is None:
+        return PlanError(f"live_id: {message}")
+    return source.error(("live_id", key), message)
+
+
 def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
-                     role: Literal["input", "output"]) -> list[Channel]:
+                     role: Literal["input", "output"], source: TomlSource | None = None
+                     ) -> list[Channel]:
     """The log variables ``names`` select, in order, by the rule of offline identification
     (:func:`cfsession.channels.resolve_channels`: a log stream, ``stream.field``, a logged
     variable such as ``motor.m1`` or a variable group such as ``gyro``). One-line
-    :class:`PlanError` otherwise."""
+    :class:`PlanError` otherwise, naming the key and its line in ``source`` (the plan's
+    text) when given."""
     try:
         return _resolve(names, streams=streams, role=role)
     except ChannelError as exc:
+        key = f"{role}s"
         if exc.problem == "unknown":
-            raise PlanError(f"live_id {role} {exc.name!r}: no such log stream or variable; the "
-                            f"flight logs {', '.join(exc.logged)} (name a stream, STREAM.FIELD, "
-                            "a variable or a variable group)") from None
-        raise PlanError(f"live_id: {exc}") from None
+            raise _error(source, key, f"{role} {exc.name!r}: no such log stream or variable; "
+                         f"the flight logs {', '.join(exc.logged)} (name a stream, "
+                         "STREAM.FIELD, a variable or a variable group)") from None
+        raise _error(source, key, str(exc)) from None
 
 
-def check_live_id(config: LiveIdConfig, *, streams: Sequence[StreamSpec]
+def check_live_id(config: LiveIdConfig, *, streams: Sequence[StreamSpec],
+                  source: TomlSource | None = None
                   ) -> tuple[list[Channel], list[Channel], float]:
     """Inputs, outputs and the grid period for ``config`` on these log streams; one-line
     :class:`PlanError` for a name logged nowhere, a channel selected twice, channels logged
-    at different rates or an order beyond the horizons' rank."""
-    ins = resolve_channels(config.inputs, streams=streams, role="input")
-    outs = resolve_channels(config.outputs, streams=streams, role="output")
+    at different rates or an order beyond the horizons' rank, naming the ``[live_id]`` key
+    and its line when ``source`` (a :class:`TomlSource` of the plan's text) is given."""
+    ins = resolve_channels(config.inputs, streams=streams, role="input", source=source)
+    outs = resolve_channels(config.outputs, streams=streams, role="output", source=source)
     labels = [c.label for c in ins + outs]
     twice = sorted({x for x in labels if labels.count(x) > 1})
     if twice:
-        raise PlanError(f"live_id: {twice} selected twice (inputs and outputs); name each once")
+        in_labels = [c.label for c in ins]
+        within = any(in_labels.count(x) > 1 for x in twice)
+        raise _error(source, "inputs" if within else "outputs",
+                     f"{twice} selected twice (inputs and outputs); name each once")
     periods = {s.name: s.period_s for s in streams if any(c.stream == s.name for c in ins + outs)}
     if len({round(p or 0.0, 9) for p in periods.values()}) != 1 or not all(periods.values()):
         rates = ", ".join(f"{n} every {1000 * (p or 0):g} ms" for n, p in sorted(periods.items()))
-        raise PlanError(f"live_id: the channels are logged at different rates ({rates}); live "
-                        "identification needs one rate (no anti-alias filter in flight)")
+        mixed_inputs = len({round(s.period_s or 0.0, 9) for s in streams
+                            if any(c.stream == s.name for c in ins)}) > 1
+        raise _error(source, "inputs" if mixed_inputs else "outputs",
+                     f"the channels are logged at different rates ({rates}); live "
+                     "identification needs one rate (no anti-alias filter in flight)")
     m, ell, c = len(ins), len(outs), config
     limit = min((c.future - 1) * ell, c.past * (m + ell))
     if c.order > limit:
-        raise PlanError(f"live_id: order {c.order} exceeds the rank available "
-                        f"(min((future - 1) x {ell} outputs, past x {m + ell} channels) = "
-                        f"{limit}); lower the order or raise the horizons")
+        raise _error(source, "order", f"order {c.order} exceeds the rank available "
+                     f"(min((future - 1) x {ell} outputs, past x {m + ell} channels) = "
+                     f"{limit}); lower the order or raise the horizons")
     return ins, outs, float(next(iter(periods.values())))
 
 

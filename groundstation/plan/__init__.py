@@ -269,6 +269,11 @@ def parse_plan(*, text: str, source: str = "<plan>", name: str = "plan") -> Plan
     except RecursionError:  # tomllib parses nested arrays and inline tables by recursion
         raise PlanError(f"{source}: invalid TOML: arrays or inline tables nested too deeply to "
                         "read; a plan nests them a few levels at most") from None
+    if not data:  # else "vehicle: missing required key", as if one table were forgotten
+        what = "is empty" if not text.strip() else "holds only comments and blank lines"
+        raise PlanError(f"{source}: the file {what}: no keys or tables, so no plan; start from "
+                        f"a shipped plan, e.g. copy {SHIPPED_PLANS_DIR / 'hover-check.toml'} "
+                        "(schema: docs/flightplans.md)")
     src = TomlSource(text=text, source=source)
     top = TomlTable(src, (), data).allow(set(_TOP_KEYS))
     plan_name = _plan_name(top, default=name)

@@ -3,7 +3,9 @@
 The roll/pitch/yaw-rate/thrust commander has no altitude loop: thrust is open loop, and a hover
 thrust error of 0.4 % integrates to metres within seconds while a ±25° PRBS tilts the thrust vector
 away from vertical. A pilot would hold the height by hand; :class:`AltitudeHold` does it from the
-vehicle's own altitude estimate (``stateEstimate.z`` by default), sampled at the setpoint rate:
+vehicle's own altitude estimate (``stateEstimate.z`` by default), logged at twice the setpoint
+rate (20 Hz at 10 Hz: :func:`groundstation.flight.blocks.altitude_block_period`), the newest
+sample taken at each setpoint:
 
 .. math::  e_k = z_\\text{ref} - z_k, \\qquad
            \\Delta T_k = \\operatorname{sat}_{\\pm\\Delta_\\max}\\Big(K_p e_k

@@ -116,6 +116,16 @@ def choose_seeds(*, register_length: int, n_axes: int, flown: set[tuple[int, int
                     "design a longer register")
 
 
+def _factor(x: float) -> str:
+    """A scale factor with the digits that tell it from 1 (``0.998``, not ``1.00``): a note
+    ``x1.00`` beside a value that changed reads as a contradiction."""
+    for digits in range(2, 7):
+        text = f"{x:.{digits}f}"
+        if x == 1 or float(text) != 1:
+            return text
+    return f"{x:.12g}"
+
+
 def _fmt(value: Any) -> str:
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
@@ -218,13 +228,14 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                         ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
                         f"{fit_text}, weakness {w:.2f}; inputs at their limits and "
                         f"{axes[worst][0]} explained worst (weakness {weak[worst]:.2f}): "
-                        f"x{gain:.2f} to leave it the motors' room"))
+                        f"x{_factor(gain)}, rounded down to 0.1, to leave it the motors' "
+                        "room"))
                 continue
             amp = math.floor(min(e.amplitude * (1 + w), LIMIT_SHARE * limit) * 10 + 1e-9) / 10
             if amp > e.amplitude:
                 changes.append(Change(
                     ("phase", i, e.axis, "amplitude"), amp, e.amplitude,
-                    f"{fit_text}, weakness {w:.2f}: x{1 + w:.2f}, at most "
+                    f"{fit_text}, weakness {w:.2f}: x{_factor(1 + w)}, at most "
                     f"{LIMIT_SHARE:g} x vehicle.{_LIMIT[e.axis]} = {LIMIT_SHARE * limit:g}"))
         if timing:
             clock, n, why_clock, why_reg = (timing.clock, timing.register_length,
@@ -246,9 +257,9 @@ def design_plan(plan: Plan, facts: ModelFacts, *, name: str, flown: set[tuple[in
                                       e.register_length, why_reg))
             far = (f">= {apart} chips from every flown start" if apart >= 0 else
                    f"no {n}-bit PRBS flown yet, and unlike every flown seed")
-            changes.append(Change((*base, "seed"), seed, e.seed,
-                                  f"{max(1, ((1 << n) - 1) // len(chains))} chips from the "
-                                  f"other axes; {far}"))
+            spacing = (f"{max(1, ((1 << n) - 1) // len(chains))} chips from the other axes"
+                       if len(chains) > 1 else "the phase's only PRBS axis")
+            changes.append(Change((*base, "seed"), seed, e.seed, f"{spacing}; {far}"))
     changes += [Change(*c) for c in d_term_changes(plan, aliasing=aliasing or {},
                                                    firmware=firmware or {})]
     changes = [replace(c, why=f"{c.why}; was {_fmt(c.old)}") for c in changes]

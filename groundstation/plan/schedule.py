@@ -23,8 +23,8 @@ import numpy as np
 from groundstation.errors import PlanError
 from groundstation.plan.altitude import AltitudeHoldConfig
 
-__all__ = ["MAX_RATE_RANGE_DEG_S", "SETPOINT_CHANNELS", "UNITS", "Phase", "Safety", "Schedule",
-           "VehicleLimits"]
+__all__ = ["BATTERY_FLIGHT_S", "MAX_RATE_RANGE_DEG_S", "SETPOINT_CHANNELS", "UNITS", "Phase",
+           "Safety", "Schedule", "VehicleLimits"]
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,13 @@ def _require_finite(obj: Any, table: str) -> None:
             raise PlanError(f"{table}.{key} = {value!r} is not a finite number")
 
 
+BATTERY_FLIGHT_S = 420.0
+"""Seconds a Crazyflie flies on one battery, ``vehicle.flight_time_s``'s default: about 7
+minutes, Bitcraze's figure for the Crazyflie 2.x on its stock 250 mAh battery and the thesis'
+for its Crazyflie (170 mAh; section 4.1, "Quadrotor Platform"), hovering: the excitation's
+tilt and a battery not quite full shorten it."""
+
+
 @dataclass(frozen=True)
 class VehicleLimits:
     """The plan's ``[vehicle]`` table: hard limits every setpoint must respect."""
@@ -50,6 +57,7 @@ class VehicleLimits:
     thrust_min: int  # PWM, 0-65535
     thrust_max: int  # PWM
     min_vbat: float  # V: battery voltage needed to take off
+    flight_time_s: float = BATTERY_FLIGHT_S  # s one battery flies; a longer plan is warned about
 
     def __post_init__(self) -> None:
         _require_finite(self, "vehicle")

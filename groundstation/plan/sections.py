@@ -18,6 +18,7 @@ import numpy as np
 import groundstation.plan.excitation as ex
 from groundstation.plan.altitude import AltitudeHoldConfig
 from groundstation.plan.schedule import (
+    BATTERY_FLIGHT_S,
     MAX_RATE_RANGE_DEG_S,
     SETPOINT_CHANNELS,
     UNITS,
@@ -140,6 +141,8 @@ def read_vehicle(t: TomlTable) -> VehicleLimits:
         thrust_min=thrust_min,
         thrust_max=thrust_max,
         min_vbat=t.number("min_vbat", lo=3.0, hi=4.2, unit="V"),
+        flight_time_s=t.number("flight_time_s", lo=0, hi=3600, unit="s", lo_open=True,
+                               default=BATTERY_FLIGHT_S),
     )
 
 
@@ -257,8 +260,13 @@ def read_signal(
     unit, at = UNITS[axis], (*t.path, "amplitude")
     amplitude = t.number("amplitude", lo=-65535, hi=65535, unit=unit)
     symmetric = signal in ("prbs", "chirp")
-    if amplitude == 0 or (amplitude < 0 and symmetric):
-        raise t.src.error(at, f"{amplitude:g} {unit} must be {'> 0' if symmetric else '!= 0'}")
+    if amplitude == 0:
+        raise t.src.error(at, f"0 {unit} excites nothing; give the {signal}'s size in {unit}"
+                          f"{', > 0' if symmetric else ' (negative: the other way first)'}")
+    if amplitude < 0 and symmetric:
+        label = "PRBS" if signal == "prbs" else "chirp"
+        raise t.src.error(at, f"{amplitude:g} {unit} must be > 0: a {label} is symmetric "
+                          f"(±amplitude); give the magnitude, amplitude = {-amplitude:g}")
     if axis in _AXIS_LIMIT:
         limit = getattr(vehicle, _AXIS_LIMIT[axis])
         if not abs(amplitude) <= limit:  # not `>`: refuse a nan too

@@ -118,9 +118,17 @@ def _children(node: Any, part: str | int) -> list[Any]:
 
 def did_you_mean(name: str, known: Iterable[str]) -> str:
     """``did you mean 'x'? `` for the one of ``known`` closest to ``name`` (a typo of a key, a
-    choice or a plan's name), ``""`` when none is close."""
-    near = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
-    return f"did you mean '{near[0]}'? " if near else ""
+    choice or a plan's name), ``""`` when none is close. Case is ignored (``"PRBS"`` finds
+    ``prbs`` and says that case matters)."""
+    by_lower: dict[str, str] = {}
+    for k in sorted(known):
+        by_lower.setdefault(k.lower(), k)
+    near = difflib.get_close_matches(name.lower(), list(by_lower), n=1, cutoff=0.5)
+    if not near:
+        return ""
+    match = by_lower[near[0]]
+    case = ", case matters" if name.lower() == match.lower() else ""
+    return f"did you mean '{match}'{case}? "
 
 
 _NOT_IN_COMMENTS = re.compile("[\x00-\x08\x0a-\x1f\x7f]")
@@ -239,9 +247,13 @@ class TomlSource:
         return None
 
     def error(self, path: tuple, message: str) -> PlanError:
+        return PlanError(self.note(path, message))
+
+    def note(self, path: tuple, message: str) -> str:
+        """``FILE:LINE: key.path: message``, as an error or a warning names the key."""
         line = self.line(path)
         where = f"{self.source}:{line}" if line else self.source
-        return PlanError(f"{where}: {dotted(path)}: {message}")
+        return f"{where}: {dotted(path)}: {message}"
 
     def ref(self, path: tuple) -> str:
         """``vehicle.max_roll_deg (line 9)``: how a message names a second key."""

@@ -394,3 +394,42 @@ def test_only_the_changed_values_differ_from_the_from_plan():
     for ch in design.changes:
         assert any(line.startswith(f"{ch.path[-1]} = ") and line.endswith(f"# design: {ch.why}\n")
                    for line in differ), ch
+
+
+def test_a_factor_that_changed_a_value_never_reads_one():
+    """'x1.00 ...; was 25.0' beside 25.0 -> 24.9 (review): the factor shows its digits."""
+    base = load_plan("prbs-3axis")
+    fits = {"gyro.x": 50.16, "gyro.y": 20.0, "gyro.z": 20.0}  # roll weakness 0.996, others 1
+    design = design_plan(base, _facts(fits=fits), name="a", flown=set(), saturation=0.126)
+    (roll,) = [c for c in design.changes if c.path[2:] == ("roll", "amplitude")]
+    assert (roll.old, roll.value) == (25.0, 24.9)
+    assert "x0.998, rounded down to 0.1" in roll.why and "x1.00" not in roll.why
+
+
+def test_a_single_axis_prbs_seed_note_names_no_other_axes():
+    base = load_plan("roll-only")
+    design = design_plan(base, _facts(fits={"gyro.x": 95.0}), name="a", flown=set())
+    (seed,) = [c for c in design.changes if c.path[-1] == "seed"]
+    assert "the phase's only PRBS axis" in seed.why and "other axes" not in seed.why
+    three = design_plan(load_plan("prbs-3axis"), _facts(fits=dict.fromkeys(GYROS, 95.0)),
+                        name="b", flown=set())
+    assert all(" chips from the other axes" in c.why
+               for c in three.changes if c.path[-1] == "seed")
+
+
+def test_a_session_of_another_plan_is_warned_about(tmp_path):
+    """--from roll-only --flown a prbs-3axis session: the motor checks measure the other
+    experiment; a warning naming both plans (its seeds are still avoided)."""
+    session = tmp_path / "flown.h5"
+    other = load_plan("prbs-3axis")
+    write_flight(session, system=known_system(), seed=1, n=800,
+                 metadata={"plan_text": other.text, "plan_name": other.name})
+    model = _model(tmp_path / "m.json", fits={})
+    res = _run("plan", "design", "--model", model, "--from", "roll-only", "--out",
+               tmp_path / "next.toml", "--flown", session)
+    assert res.exit_code == 0, res.output
+    assert (f"warning: {session} flew plan 'prbs-3axis', not 'roll-only' (--from)"
+            in res.stderr), res.stderr
+    same = _run("plan", "design", "--model", model, "--from", "prbs-3axis", "--out",
+                tmp_path / "same.toml", "--flown", session)
+    assert same.exit_code == 0 and "warning" not in same.stderr, same.stderr

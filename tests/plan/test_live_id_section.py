@@ -123,3 +123,29 @@ def test_channel_names_resolve_against_the_flight_log_blocks(base_text):
     hover = parse_plan(text=base_text)  # no altitude hold: no altitude block to select
     with pytest.raises(PlanError, match="'altitude'"):
         check_live_id(LiveIdConfig(outputs=("altitude",)), streams=planned_streams(hover))
+
+
+@pytest.mark.parametrize(("table", "key", "needle"), [
+    ("order = 80", "order", "order 80 exceeds the rank available"),
+    ('outputs = ["gyr"]', "outputs", "'gyr': no such log stream or variable"),
+    ('outputs = ["stabilizer.roll"]\norder = 2', "outputs", "logged at different rates"),
+    ('inputs = ["motors", "motor.m1"]', "inputs", "selected twice"),
+    ("past = 600", "past", "of excitation for the first update"),
+])
+def test_the_flights_checks_of_a_live_id_table_name_its_key_and_line(tmp_path, table, key,
+                                                                      needle):
+    """fly's checks against the log blocks and the excitation's length (which plan check runs)
+    said ``live_id: ...`` where the loader's own said ``FILE:LINE: live_id.KEY``: a user could
+    not tell which line of the table to change (review)."""
+    path = tmp_path / "p.toml"
+    text = _with(load_plan("pitch-only").text, table)  # 25.5 s of PRBS: too short for past 600
+    path.write_text(text, encoding="utf-8")
+    res = CliRunner().invoke(main, ["plan", "check", str(path)])
+    assert res.exit_code == 2 and res.stderr.count("\n") == 1, res.output
+    line = line_of(text, table.splitlines()[0])  # the key named first in the table
+    assert res.stderr.startswith(f"error: {path}:{line}: live_id.{key}: "), res.stderr
+    assert needle in res.stderr
+    # --live-id on a plan without the table flies the defaults: no key or line to name
+    with pytest.raises(PlanError, match=r"^live_id: output 'gyr': no such log stream"):
+        check_live_id(LiveIdConfig(outputs=("gyr",)), streams=planned_streams(load_plan(
+            "hover-check")))

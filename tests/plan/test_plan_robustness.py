@@ -34,6 +34,7 @@ max_yaw_rate_deg_s = 200.0  # @vehicle.max_yaw_rate_deg_s
 thrust_min = 10000  # @vehicle.thrust_min
 thrust_max = 60000  # @vehicle.thrust_max
 min_vbat = 3.8  # @vehicle.min_vbat
+flight_time_s = 420.0  # @vehicle.flight_time_s
 
 [safety]
 on_abort = "descend"
@@ -130,10 +131,11 @@ def with_value(key: str, value: str) -> tuple[str, int]:
 def test_the_full_plan_is_valid_and_covers_every_numeric_key():
     plan = parse_plan(text=FULL, source="full.toml")
     assert plan.compile().duration == pytest.approx(8.1)
-    assert len(set(KEYS)) == len(KEYS) == 40
+    assert len(set(KEYS)) == len(KEYS) == 41
     numeric = {  # docs/flightplans.md: every key typed number or integer
         "setpoint_rate_hz", "hover_thrust", "max_roll_deg", "max_pitch_deg",
-        "max_yaw_rate_deg_s", "thrust_min", "thrust_max", "min_vbat", "descent_duration",
+        "max_yaw_rate_deg_s", "thrust_min", "thrust_max", "min_vbat", "flight_time_s",
+        "descent_duration",
         "descent_thrust", "max_rate_deg_s", "target_m", "kp", "ki", "kd", "max_trim", "duration",
         "thrust_start", "thrust_end", "thrust", "amplitude", "register_length", "period",
         "clock_period", "seed", "width", "start", "f_start_hz", "f_end_hz",
