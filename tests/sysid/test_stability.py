@@ -51,6 +51,25 @@ def test_auto_moves_exactly_the_near_band(caplog):
     assert [r.getMessage()[:24] for r in caplog.records] == ["pole at |z| = 1.101 kept"]
 
 
+def test_two_poles_moved_onto_one_radius_stay_two_modes():
+    """1.0024 and 1.0725 (a no-knobs closed-loop model of a plant with one pole at 0.999) both
+    move onto 0.999. Scaling the Schur form's blocks kept their coupling and made a Jordan
+    block: a double integrator, the model's DC gain 4.6 times the plant's. Moved in the
+    eigenbasis they stay two modes (0.999 twice, two eigenvectors) and every eigenvector is
+    kept."""
+    a = np.array([[1.0024, 0.5, 0.2], [0.0, 1.0725, 0.3], [0.0, 0.0, 0.78]])
+    moved_a, moved = stabilize(a, mode="auto")
+    assert len(moved) == 2
+    np.testing.assert_allclose(_radii(moved_a), [0.78, MARGINAL_RADIUS, MARGINAL_RADIUS])
+    # geometric multiplicity 2: A' - 0.999 I has rank 1, not 2 (a Jordan block)
+    sv = np.linalg.svd(moved_a - MARGINAL_RADIUS * np.eye(3), compute_uv=False)
+    assert sv[1] < 1e-9 * sv[0], sv
+    _, vec = np.linalg.eig(a)
+    for v in vec.T:  # each of A's eigenvectors is one of A''s
+        w = moved_a @ v
+        assert np.linalg.norm(w - (v @ w) / (v @ v) * v) < 1e-9
+
+
 def test_stable_poles_are_left_alone_in_any_basis():
     """The move is made on A's real Schur form, so in a rotated basis too only the moved pole
     changes: the others keep their values to rounding, and an A with nothing to move is
