@@ -44,7 +44,7 @@ from sysid.holdout import ORDERS
 from sysid.model import StateSpaceModel
 from sysid.model_io import check_not_a_session
 from sysid.pole_format import pole_number
-from sysid.quirks import frozen_warnings
+from sysid.quirks import direction_warnings, frozen_warnings
 from sysid.refit import PROVENANCE_KEY
 from sysid.validate import below_mean_warning, compare, min_fit_samples
 
@@ -133,8 +133,10 @@ def identify(sessions: tuple[Path, ...], method: str, order: int | None, past: i
     flights = [e for g in groups for e in g]
     selection = None
     if fixed:
-        for warning in frozen_warnings(flights):  # the selection's cheapest check, said here
-            log.warning("%s", warning)  # (its outlier and drift checks cost more than this fit)
+        # the selection's cheapest checks, said here (its outlier and drift checks cost more
+        # than this fit)
+        for warning in [*frozen_warnings(flights), *direction_warnings(flights)]:
+            log.warning("%s", warning)
         with Console(stderr=True).status(f"identifying ({method}, n={order})"):
             model = meth.identify(flights, order=order, past=past, future=future,
                                   options=options)
