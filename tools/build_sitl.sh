@@ -19,7 +19,7 @@ BIN="$OUT/cf2"
 # The cache key: the snapshot (size and time, not read) and every patch (read: they are small).
 key() {
     stat -c '%s %Y' "$SRC/crazyflie-firmware-sitl.tar.xz" 2>/dev/null || echo none
-    cat "$SRC/stabilizer-ticktype.patch" "$HERE"/sitl-*.patch 2>/dev/null | cksum
+    cat "$SRC/stabilizer-ticktype.patch" "$HERE"/sitl-*.patch "$0" 2>/dev/null | cksum
 }
 if [ "${1:-}" = "--key" ]; then  # print the cache key (for the tests)
     key
@@ -66,8 +66,11 @@ echo "make sitl: building the firmware (log: $LOG)"
     cd "$WORK/crazyflie-firmware"
     patch -p1 < "$SRC/stabilizer-ticktype.patch"
     for extra in "$HERE"/sitl-*.patch; do patch -p1 < "$extra"; done
-    # version.c is generated from `git rev-parse HEAD`
+    # version.c is generated from `git rev-parse HEAD` and `git describe --tags`: tagged with
+    # the snapshot's commit (shared/sitl/README.md), the firmware reports that version (a
+    # session's `firmware`), not "NA"
     git init -q && git add -A && git -c user.name=sitl -c user.email=sitl@localhost commit -qm snapshot
+    git tag sitl.6a4d2d00+patches  # no "-": versionTemplate.py splits the tag at them
     mkdir -p sitl_make/build && cd sitl_make/build
     cmake .. && make -j"$JOBS" cf2
 ) > "$LOG" 2>&1 || { echo "make sitl: the firmware build failed; see $LOG" >&2; exit 1; }

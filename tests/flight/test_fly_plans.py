@@ -89,6 +89,8 @@ def test_shipped_plan_flies_and_records(name, flight_uri, tmp_path):
     assert s.meta["plan_name"] == plan.name and s.meta["uri"] == uri
     if not sitl:
         assert "simulated" in s.meta["firmware"] and int(s.meta["protocol_version"]) == 12
+    else:  # the snapshot's commit, as the build tags it (was "NA": no tag, no version)
+        assert s.meta["firmware"] == "sitl.6a4d2d00+patches", s.meta["firmware"]
     assert s.json_meta("summary")["blocks"]["gyro"]["received"] == len(s["gyro"])
 
 
