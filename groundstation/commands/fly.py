@@ -253,9 +253,11 @@ def _live_id_lines(summary: Mapping[str, Any]) -> list[str]:
     if lid.get("span_s") is not None:
         over = (f" over the last {lid['fit_window_s']:g} s (mean of the outputs; sysid "
                 "compare scores the whole flight)" if lid.get("fit_window_s") else "")
+        unstable = (" (unstable: it drifts off in any simulation; sysid identify on the "
+                    "session chooses and stabilises a model)" if lid["max_pole"] > 1.0 else "")
         lines.append(f"    final model on {lid['span_s']:.1f} s of data: one-step fit "
-                     f"{lid['fit_pct']:.1f} %{over}, max |pole| {lid['max_pole']:.4f}, "
-                     f"saved as {lid['model_file'] or '(not saved)'}")
+                     f"{lid['fit_pct']:.1f} %{over}, max |pole| {lid['max_pole']:.4f}"
+                     f"{unstable}, saved as {lid['model_file'] or '(not saved)'}")
     if cut:
         planned = float(summary.get("setpoints", {}).get("planned", 0)) * float(
             summary.get("setpoints", {}).get("period_s", 0.0))

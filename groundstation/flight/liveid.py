@@ -366,8 +366,9 @@ class LiveIdListener:
                       pole_move=move, update_s=elapsed, skipped=self.skipped, final=final,
                       fw_times=fw_times, host_times=fw_times + offset,
                       measured=yc[-new:], predicted=y_pred[-new:])
+        moved = "first" if np.isnan(move) else f"{move:.1e}"  # no earlier poles to move from
         self.status = (f"live id {self.updates} upd ({self.skipped} skipped)  n {c.order}  "
-                       f"max|p| {row[10]:.3f}  move {move:.1e}  "
+                       f"max|p| {row[10]:.3f}  move {moved}  "
                        f"innov {nvar:.3f}  fit {fit:.0f}%")
         if final:
             self.final, self.final_model = info, upd.model

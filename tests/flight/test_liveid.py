@@ -309,6 +309,21 @@ def test_an_aborted_or_failed_live_id_flight_is_not_called_not_converged():
         assert not any(said in line for line in _live_id_lines(summary))
 
 
+def test_an_unstable_final_live_model_is_said_so():
+    """A live model saved with a pole at 1.18 (an abort mid-excitation) read as any other."""
+    from groundstation.commands.fly import _live_id_lines
+
+    lid = {"updates": 3, "skipped": 0, "failed": 0, "order": 4, "past": 15, "future": 8,
+           "converged_at_s": None, "error": None, "convergence": None, "span_s": 12.0,
+           "fit_pct": 70.0, "fit_window_s": 5.0, "model_file": "x.live-model.json"}
+    [line] = [x for x in _live_id_lines({"live_id": {**lid, "max_pole": 1.1836}})
+              if "final model" in x]
+    assert "max |pole| 1.1836 (unstable: it drifts off in any simulation; sysid identify" in line
+    [line] = [x for x in _live_id_lines({"live_id": {**lid, "max_pole": 0.999}})
+              if "final model" in x]
+    assert "unstable" not in line
+
+
 def test_a_flat_out_simulator_keeps_the_live_identification_in_step(sim_uri, tmp_path):
     """``fly --uri 'sim://0?speed=inf' --until-converged`` (no test hook): the simulation
     waits for each update, so every due update is computed and the excitation is cut on
