@@ -121,6 +121,11 @@ def _coincide(t: np.ndarray) -> bool:
 
 #: Largest condition number of A's eigenvectors for moving its poles in the eigenbasis.
 _EIGEN_COND = 1e6
+#: Two poles moved onto one value whose eigenvectors are closer to parallel than this
+#: (|cos| of their angle) are one chain, nearly a Jordan block in the data already: a double
+#: integrator (rate and angle at 1.0004 and 1.0001: 0.989) keeps its coupling. The separate
+#: modes of the closed-loop models that motivated the eigenbasis read 0.14 to 0.95.
+_CHAIN_COS = 0.98
 
 
 def _new_radius(pole: complex, mode: str) -> float | None:
@@ -137,7 +142,9 @@ def _moved_in_eigenbasis(a: np.ndarray, mode: str) -> np.ndarray | None:
     ill-conditioned (a nearly defective A: the Schur form's scaling is used then). Used where
     moved poles coincide: scaling blocks of the Schur form keeps their coupling, so two poles
     moved onto one radius (1.0024 and 1.0725 both onto 0.999) became a Jordan block, a double
-    integrator the data never showed; the eigenbasis keeps them two modes. Elsewhere the Schur
+    integrator the data never showed; the eigenbasis keeps them two modes. Not where their
+    eigenvectors are nearly parallel (:data:`_CHAIN_COS`): there the data show one chain, and
+    the Schur form keeps it one. Elsewhere the Schur
     form's scaling stays (it changes A by no more than the poles move, whatever the
     eigenvectors' conditioning: moving every A in the eigenbasis cost DaISy dryer 0.6 points
     and flutter's no-knobs model 134)."""
@@ -149,4 +156,8 @@ def _moved_in_eigenbasis(a: np.ndarray, mode: str) -> np.ndarray | None:
         radius = _new_radius(complex(pole), mode)
         if radius is not None:
             new[i] = pole * (radius / abs(pole))
+    unit = vec / np.linalg.norm(vec, axis=0)
+    for i, j in zip(*np.triu_indices(lam.size, k=1), strict=True):
+        if abs(new[i] - new[j]) <= 1e-9 and abs(np.vdot(unit[:, i], unit[:, j])) > _CHAIN_COS:
+            return None  # one chain the data show (rate and angle): its coupling is kept
     return np.ascontiguousarray(((vec * new) @ np.linalg.inv(vec)).real)
