@@ -72,7 +72,8 @@ T = TypeVar("T")
 class PhaseRelative:
     """Seconds ``[t0, t1)`` from the start of the first phase named (or of kind) ``phase``;
     ``t1=None`` runs to that phase's end, and so does a ``t1`` beyond it (cut there, with a
-    warning: what follows the phase, a hover or the landing, is not in it). ``t0 >= 0``."""
+    warning: what follows the phase, a hover, the landing, the next phase of that kind, is not
+    in it). ``t0 >= 0``."""
 
     phase: str
     t0: float
@@ -192,7 +193,9 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
     if window is None:
         return [("all", None)]
     if isinstance(window, PhaseRelative):
-        start, end = _phase(session, window.phase)
+        _phase(session, window.phase)  # none of that name or kind: the refusal names them
+        first = next(p for p in session.phases() if window.phase in (p.name, p.kind))
+        start, end = first.start_s, first.end_s  # that phase's own (not to the last match's end)
         label = f"{window.phase}@{window.t0:g}:{'' if window.t1 is None else f'{window.t1:g}'}"
         length = end - start
         if window.t0 < 0:
@@ -202,8 +205,9 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
                                  f"(the phase starts at {start:.2f} s)")
         if window.t0 >= length:
             raise DataError(f"{session.path}: window {label} starts after the phase "
-                            f"{window.phase!r} ends (it lasts {length:.2f} s); give T0 < "
-                            f"{length:.2f}")
+                            f"{window.phase!r} ends (it lasts {length:.2f} s)"
+                            + (f"; give T0 < {length:.2f}" if length > 0 else
+                               "; choose another phase"))
         t1 = end if window.t1 is None else start + window.t1
         if t1 > end:  # seconds *of the phase*: what lies after it (a hover, the landing) is not
             log.warning("%s: window %s ends %.2f s after the phase %r (it lasts %.2f s): cut "

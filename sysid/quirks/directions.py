@@ -12,7 +12,7 @@ With each input's deviations from its record's mean scaled by its pooled standar
 stacked inputs measure the spread along each independent direction. A direction whose
 :math:`\sigma_i / \sigma_1` is below :data:`DIRECTION_RATIO` (its variance under 1 % of the
 strongest direction's) is named with its largest components. Measured: the simulator's
-roll-only PRBS flight 1, 0.30, 0.115, 0.046 (the weakest: yaw); its three-axis PRBS 1, 1.00,
+roll-only PRBS flight 1, 0.30, 0.115, 0.045 (the weakest: yaw); its three-axis PRBS 1, 1.00,
 0.56, 0.42; the real CrazyPAD hover flights (controller commands) 1, 0.93, 0.85, 0.78.
 """
 
@@ -83,13 +83,15 @@ def direction_warnings(flights: Sequence[IOData]) -> list[str]:
     weak = find_weak_directions(flights)
     if not weak:
         return []
-    m = as_flights(flights)[0].n_inputs
+    m = len(weak[0].weights)  # the inputs that move (those that do not are named elsewhere)
     listed = "; ".join(f"{_direction_text(d)} ({d.ratio:.3f} of the strongest's spread)"
                        for d in reversed(weak))
-    verb = "moves" if len(weak) == 1 else "move"
-    return [f"the {m} inputs move along {m - len(weak)} of {m} independent directions: "
+    verb, them = ("moves", "it") if len(weak) == 1 else ("move", "them")
+    k = m - len(weak)
+    return [f"the {m} moving inputs move along {k} independent direction{'s' * (k != 1)}: "
             f"{listed} barely {verb} (under {DIRECTION_RATIO:g} of the strongest direction's "
-            "spread, inputs scaled by their standard deviations), so the response to it is "
+            f"spread, inputs scaled by their standard deviations), so the response to {them} is "
             "fitted to noise and can cost the fit of every output; excite every direction the "
-            "inputs span (a PRBS on every axis: prbs-3axis), or give inputs the record does "
-            "excite (--inputs: for a roll-only flight an imported log's controller.cmd_roll)"]
+            "inputs span (a flight: a PRBS on every axis, prbs-3axis), or identify from inputs "
+            "the record does excite (sysid --inputs; a roll-only flight's imported log: "
+            "controller.cmd_roll)"]

@@ -37,7 +37,7 @@ def test_a_roll_only_excitation_names_the_yaw_direction_of_the_motors() -> None:
     signs = dict((name, np.sign(w)) for name, w in weak.weights)
     assert signs["motor.m1"] == signs["motor.m3"] == -signs["motor.m2"] == -signs["motor.m4"]
     [line] = direction_warnings([_data(u)])
-    assert line.startswith("the 4 inputs move along 3 of 4 independent directions: ")
+    assert line.startswith("the 4 moving inputs move along 3 independent directions: ")
     assert "+motor.m1 -motor.m2 +motor.m3 -motor.m4 (0.0" in line and "barely moves" in line
 
 
@@ -46,6 +46,16 @@ def test_a_three_axis_excitation_one_input_or_units_apart_are_not_named() -> Non
     assert not find_weak_directions([_data(_motors((0.0, 1000.0, 0.0, 0.0))[:, :1])])
     u = np.random.default_rng(3).normal(size=(2000, 2)) * [1e-3, 1e4]  # units never decide
     assert not find_weak_directions([_data(u)])
+
+
+def test_an_input_that_does_not_move_is_not_counted_as_a_direction() -> None:
+    """[a, b, a + b + noise, constant]: 3 moving inputs along 2 directions (review: "4 inputs
+    along 3 of 4")."""
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(2, 2000))
+    u = np.column_stack([a, b, a + b + 0.01 * rng.normal(size=2000), np.full(2000, 3.0)])
+    [line] = direction_warnings([_data(u)])
+    assert line.startswith("the 3 moving inputs move along 2 independent directions: ")
 
 
 def test_two_inputs_that_move_together_are_a_warning_of_the_selection() -> None:
@@ -58,6 +68,7 @@ def test_two_inputs_that_move_together_are_a_warning_of_the_selection() -> None:
     u = np.hstack([first, 0.5 * first + 0.005 * rng.normal(size=(3000, 1))])
     y = system.simulate(u) + 0.05 * rng.normal(size=(3000, 1))
     data = sysid.IOData(u=u, y=y, dt=system.dt)
-    assert any("inputs move along 1 of 2 independent directions" in w
+    assert any("the 2 moving inputs move along 1 independent direction: " in w
                for w in data_warnings([data]))
-    assert any("1 of 2 independent directions" in w for w in sysid.identify(data).warnings)
+    assert any("move along 1 independent direction: " in w
+               for w in sysid.identify(data).warnings)

@@ -75,6 +75,7 @@ def test_a_chain_the_data_show_keeps_its_coupling():
     the rate: 5e-14 after 1 s from a unit rate, against 1.13 before the move; review)."""
     a = np.array([[1.0004, 0.0], [0.002, 1.0001]])
     moved_a, moved = stabilize(a, mode="auto")
+    assert len(moved) == 2
     np.testing.assert_allclose(_radii(moved_a), [MARGINAL_RADIUS, MARGINAL_RADIUS])
     angle = np.linalg.matrix_power(moved_a, 500) @ [1.0, 0.0]
     assert angle[1] > 0.5, angle  # the angle still integrates the rate

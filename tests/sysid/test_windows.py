@@ -145,6 +145,10 @@ def test_a_phase_relative_window_stays_within_its_phase(files, caplog) -> None:
     with pytest.raises(DataError, match=r"airborne-1@20: starts after the phase 'airborne-1' "
                                         r"ends \(it lasts 18\.00 s\); give T0 < 18\.00"):
         load_session(files["imported"], window=PhaseRelative("airborne-1", 20.0))
+    # a kind that several phases have: the first one's own span, not to the last one's end
+    kind = load_session(files["imported"], window=PhaseRelative("airborne", 10.0))
+    assert kind.n_samples == load_session(
+        files["imported"], window=PhaseRelative("airborne-1", 10.0)).n_samples
 
 
 def test_phase_relative_and_per_session_windows(files) -> None:
