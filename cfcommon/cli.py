@@ -371,8 +371,8 @@ def check_output(path: Path, *, option: str, suffixes: Sequence[str],
     ``suffixes`` are the allowed endings (``(".rrd",)``); ``inputs`` the files the command
     reads (never written over, whatever ``overwrite`` says); ``overwrite`` allows replacing an
     existing output; ``force_flag`` names the flag that would allow it, for the message. A
-    missing folder is not made here (a command that fails later leaves none behind): the
-    writer makes it (:func:`whole_file` does).
+    missing folder is not made here (a command refused later leaves none behind): the writer
+    makes it (:func:`whole_file` does), just before it writes.
     """
     path = Path(path)
     if path.suffix.lower() not in {s.lower() for s in suffixes}:

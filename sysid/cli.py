@@ -309,7 +309,9 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                              choose_focus=focus is None, choose_feedthrough="open-loop",
                              choose_method=method_chosen())
     except KeyboardInterrupt:
-        finished = {r["group"] for r in json.loads(summary.read_text())} \
+        unread = {r.group for r in bad}  # rows from the start: they did not run
+        finished = {r["group"] for r in json.loads(summary.read_text())
+                    if r["group"] in groups and r["group"] not in unread} \
             if summary.exists() else set()
         left = [name for name in groups if name not in finished]
         click.echo(f"interrupted: {len(finished)} finished group(s) kept in {summary} and "

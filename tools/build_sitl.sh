@@ -19,7 +19,8 @@ BIN="$OUT/cf2"
 # The cache key: the snapshot (size and time, not read) and every patch (read: they are small).
 key() {
     stat -c '%s %Y' "$SRC/crazyflie-firmware-sitl.tar.xz" 2>/dev/null || echo none
-    cat "$SRC/stabilizer-ticktype.patch" "$HERE"/sitl-*.patch "$0" 2>/dev/null | cksum
+    cat "$SRC/stabilizer-ticktype.patch" "$HERE"/sitl-*.patch "$HERE/build_sitl.sh" 2>/dev/null \
+        | cksum
 }
 if [ "${1:-}" = "--key" ]; then  # print the cache key (for the tests)
     key

@@ -48,6 +48,7 @@ from groundstation.flight.liveid import (
     check_live_id,
     planned_streams,
 )
+from groundstation.flight.liveid_data import live_id_error
 from groundstation.plan import MAX_RATE_RANGE_DEG_S, LiveIdConfig, Plan, load_plan
 from groundstation.plan.toml import TomlSource
 from groundstation.plan.variants import advance_prbs, reseed_prbs
@@ -109,8 +110,7 @@ def check_live_plan(plan: Plan) -> LiveIdConfig:
             f"channels need {need} samples ({need * dt:.1f} s) of excitation for the first "
             f"update; the plan excites for {span:.1f} s ({have} samples at {1 / dt:g} Hz): "
             "lower past or future in [live_id], or lengthen the excitation")
-        raise (PlanError(f"live_id: {message}") if source is None
-               else source.error(("live_id", "past"), message))
+        raise live_id_error(source, "past", message)
     return config
 
 

@@ -21,8 +21,8 @@ from groundstation.flight.blocks import flight_blocks
 from groundstation.plan import LiveIdConfig, Plan
 from groundstation.plan.toml import TomlSource
 
-__all__ = ["Channel", "ExcitationGrid", "Feed", "check_live_id", "planned_streams",
-           "resolve_channels"]
+__all__ = ["Channel", "ExcitationGrid", "Feed", "check_live_id", "live_id_error",
+           "planned_streams", "resolve_channels"]
 
 _WRAP = 1 << 24  # log packets carry a 24-bit millisecond tick
 
@@ -36,7 +36,7 @@ def planned_streams(plan: Plan) -> list[StreamSpec]:
         setpoint_period_s=1.0 / plan.setpoint_rate_hz)]
 
 
-def _error(source: TomlSource | None, key: str, message: str) -> PlanError:
+def live_id_error(source: TomlSource | None, key: str, message: str) -> PlanError:
     """``FILE:LINE: live_id.KEY: message`` with the plan's text, else ``live_id: message``
     (``--live-id`` on a plan without the table: the defaults, no line to name)."""
     if source is None:
@@ -57,10 +57,10 @@ def resolve_channels(names: Sequence[str], *, streams: Sequence[StreamSpec],
     except ChannelError as exc:
         key = f"{role}s"
         if exc.problem == "unknown":
-            raise _error(source, key, f"{role} {exc.name!r}: no such log stream or variable; "
-                         f"the flight logs {', '.join(exc.logged)} (name a stream, "
-                         "STREAM.FIELD, a variable or a variable group)") from None
-        raise _error(source, key, str(exc)) from None
+            raise live_id_error(source, key, f"{role} {exc.name!r}: no such log stream or "
+                                f"variable; the flight logs {', '.join(exc.logged)} (name a "
+                                "stream, STREAM.FIELD, a variable or a variable group)") from None
+        raise live_id_error(source, key, str(exc)) from None
 
 
 def check_live_id(config: LiveIdConfig, *, streams: Sequence[StreamSpec],
@@ -77,22 +77,22 @@ def check_live_id(config: LiveIdConfig, *, streams: Sequence[StreamSpec],
     if twice:
         in_labels = [c.label for c in ins]
         within = any(in_labels.count(x) > 1 for x in twice)
-        raise _error(source, "inputs" if within else "outputs",
-                     f"{twice} selected twice (inputs and outputs); name each once")
+        raise live_id_error(source, "inputs" if within else "outputs",
+                            f"{twice} selected twice (inputs and outputs); name each once")
     periods = {s.name: s.period_s for s in streams if any(c.stream == s.name for c in ins + outs)}
     if len({round(p or 0.0, 9) for p in periods.values()}) != 1 or not all(periods.values()):
         rates = ", ".join(f"{n} every {1000 * (p or 0):g} ms" for n, p in sorted(periods.items()))
         mixed_inputs = len({round(s.period_s or 0.0, 9) for s in streams
                             if any(c.stream == s.name for c in ins)}) > 1
-        raise _error(source, "inputs" if mixed_inputs else "outputs",
-                     f"the channels are logged at different rates ({rates}); live "
-                     "identification needs one rate (no anti-alias filter in flight)")
+        raise live_id_error(source, "inputs" if mixed_inputs else "outputs",
+                            f"the channels are logged at different rates ({rates}); live "
+                            "identification needs one rate (no anti-alias filter in flight)")
     m, ell, c = len(ins), len(outs), config
     limit = min((c.future - 1) * ell, c.past * (m + ell))
     if c.order > limit:
-        raise _error(source, "order", f"order {c.order} exceeds the rank available "
-                     f"(min((future - 1) x {ell} outputs, past x {m + ell} channels) = "
-                     f"{limit}); lower the order or raise the horizons")
+        raise live_id_error(source, "order", f"order {c.order} exceeds the rank available "
+                            f"(min((future - 1) x {ell} outputs, past x {m + ell} channels) = "
+                            f"{limit}); lower the order or raise the horizons")
     return ins, outs, float(next(iter(periods.values())))
 
 
