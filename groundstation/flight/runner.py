@@ -292,6 +292,7 @@ class _Runner:
             if ph.id != current:
                 current = ph.id
                 journal.phase(phase_id=ph.id, name=ph.name, kind=ph.kind, planned_s=ph.duration)
+                telemetry.landing = ph.kind == "landing"  # low power there: land as planned
             sp = self._trimmed(s.setpoint(k), kind=ph.kind)
             if not finite(sp):
                 journal.cause(f"setpoint {k} (phase {ph.name}) is not finite "

@@ -55,6 +55,7 @@ class Telemetry:
         self.over_limit_runs = [0, 0, 0]  # consecutive packets beyond the rate limit, per axis
         self.console = ""
         self.flying = False  # the watches are on
+        self.landing = False  # in the plan's landing phase (low power: no abort, it lands)
         self.silent = False  # link loss found by the silence watch
         self.stop_t = math.inf  # flight time the stop setpoint went out (Commander.stop)
         self.stop_seen = False  # the motors logged at 0 after it: the vehicle has it
@@ -118,12 +119,14 @@ class Telemetry:
     def _check_power(self, state: int) -> None:
         """The firmware's power management says low power while flying: the battery is
         running out, and below ``pm.criticalLowVoltage`` for 5 s the firmware shuts down in
-        the air; land now, while it can."""
+        the air; land now, while it can (in the plan's landing phase it already does: an
+        event, no abort)."""
         if state == LOW_POWER and self.pm_state != LOW_POWER:
-            self.journal.event("the Crazyflie reports low power (pm.state 3)", level="warning",
-                               source="safety")
+            during = "; it is landing as planned" if self.flying and self.landing else ""
+            self.journal.event(f"the Crazyflie reports low power (pm.state 3){during}",
+                               level="warning", source="safety")
         self.pm_state = state
-        if state == LOW_POWER and self.flying and not self.journal.causes:
+        if state == LOW_POWER and self.flying and not self.landing and not self.journal.causes:
             self.journal.cause("battery low in flight: the Crazyflie's power management reports "
                                "low power (pm.state 3: below pm.lowVoltage, 3.2 V by default, "
                                "for 5 s; below pm.criticalLowVoltage, 3.0 V, for 5 s it shuts "

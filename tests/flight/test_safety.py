@@ -116,6 +116,23 @@ def test_a_battery_running_out_in_flight_lands_before_the_firmware_shuts_down(fl
     check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
 
 
+def test_low_power_during_the_planned_landing_lands_as_planned(sim_uri, tmp_path):
+    """The report arriving in the landing phase: the vehicle is already landing, so no abort
+    (the session would read "aborted" for a plan flown through), one warning event."""
+    uri = sim_uri()
+
+    def drain(k: int) -> None:
+        if k == 25:  # low power 5 s later: in the landing (7-10 s)
+            _battery_of(uri).charge = 0.3
+
+    result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, tick_hook=drain)
+    assert not result.aborted, result.cause
+    s = check_closed_with_stop(result)
+    assert any(e.text == "the Crazyflie reports low power (pm.state 3); it is landing as planned"
+               for e in safety_events(s))
+    assert (s["battery"].data["state"] == 3).any()
+
+
 def test_stop_policy_stops_at_once(flight_uri, tmp_path):
     plan = plan_variant("hover-check", **{'on_abort = "descend"': 'on_abort = "stop"'})
     uri = flight_uri()
