@@ -125,8 +125,11 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
     names = sel.model.output_names
     rows = sel.top(top)
     shown = min(top, len(sel.result.ranked()))
+    # the progress counted every model identified: each focus's grid, PARSIM-K's orders
+    of = (" with the chosen focus (the progress counted both focuses' grids)"
+          if len(sel.focus_scores or {}) > 1 else "")
     _candidates(con, rows, names=names, chosen=sel.best,
-                title=f"best {shown} candidates of {len(sel.result.rows)}"
+                title=f"best {shown} candidates of {len(sel.result.rows)}{of}"
                       + ("" if len(rows) == shown else
                          f" and the chosen one (last, {sel.model.provenance.get('method')})")
                       + f" (fit [%], {sel.scoring} of held-out data)")

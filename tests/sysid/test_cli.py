@@ -294,6 +294,12 @@ def test_sweep_reports_the_best_candidates_and_the_grid_edge(flights) -> None:
     assert ("warning: order 3 is the largest tried: the best may lie beyond; extend --orders "
             "beyond 3") in text  # the values given: the option to extend
     assert "futures [10], orders [2, 3]" in text  # the orders swept, not a range of them
+    assert "progress counted" not in text  # one focus given: one grid
+    both = run("sweep", flights[0].path, "--pasts", "10,20", "--futures", "10", "--orders",
+               "2,3", "--top", "3", "--method", "iem")  # the focus chosen: both grids run
+    assert both.exit_code == 0, both.output
+    assert ("best 3 candidates of 4 with the chosen focus (the progress counted both focuses' "
+            "grids)") in " ".join(both.stdout.split())
 
 
 def test_export_round_trip(flights, tmp_path) -> None:
