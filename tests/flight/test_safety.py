@@ -116,6 +116,27 @@ def test_a_battery_running_out_in_flight_lands_before_the_firmware_shuts_down(fl
     check_descent(s, thrust_ceiling=34000, n=20, slack_s=wall_slack_s(uri))
 
 
+def test_a_vehicle_reporting_low_power_refuses_to_take_off(sim_uri, tmp_path):
+    """A battery that read low for 5 s at rest (3.10 V, above a plan's min_vbat of 3.0): the
+    firmware's own judgement refuses the take-off, whatever min_vbat allows."""
+    import time
+
+    uri = sim_uri()
+    sim = gsim.simulator_for_uri(uri)  # powered on before anything connects
+    sim.vehicle.battery.charge = 0.1
+    deadline = time.monotonic() + 60.0
+    while not sim.vehicle.low_power and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert sim.vehicle.low_power
+    plan = plan_variant("hover-check", **{"min_vbat = 3.8 ": "min_vbat = 3.0 "})
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri)
+    assert result.cause.startswith("the Crazyflie reports low power (pm.state 3: battery 3.1"), \
+        result.cause
+    assert result.cause.endswith("refusing to take off; charge or swap the battery")
+    s = check_closed_with_stop(result)
+    assert (s["setpoints"].data["thrust"] == 0).all() and s["motors"].values().max() == 0
+
+
 def test_low_power_during_the_planned_landing_lands_as_planned(sim_uri, tmp_path):
     """The report arriving in the landing phase: the vehicle is already landing, so no abort
     (the session would read "aborted" for a plan flown through), one warning event."""
