@@ -74,5 +74,5 @@ def offset_warnings(flights: Sequence[IOData]) -> list[str]:
     return [f"{len(found)} channel(s) sit far from zero against their spread: {listed}; the "
             "methods fit no constant, so an offset is fitted as dynamics (a pole at or near "
             "z = 1 and a transient in every simulation): remove the means (sysid identify "
-            "--detrend mean, the default; sysid.preprocess.detrend_data) unless the offsets are "
-            "part of the response"]
+            "--detrend mean, the command line's default; in Python "
+            "sysid.preprocess.detrend_data) unless the offsets are part of the response"]
