@@ -117,16 +117,18 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
     results = [(label, compare(model, flights, warn=False, **kw)) for label, kw in modes]
     if below := below_mean_warning(results, data=", ".join(p.name for p in sessions)):
         log.warning("%s", below)
+    analysis = residuals(model, flights) if with_residuals else None
     if rrd is not None:
         write_rrd(path=rrd, name=f"compare {model_path.name}", model=model,
-                   comparisons=[r for _, r in results])
+                   comparisons=[r for _, r in results], residuals=analysis)
     if as_json:
         click.echo(json.dumps({"model": str(model_path), "modes": [{
             "mode": label, "overall": fits_json(res), "sessions": [
                 {"path": d.source, "fit_percent": fits_json(res, fits)}
                 for d, fits in zip(flights, res.fits, strict=True)]}
             for label, res in results],
-            "stable": model.is_stable, "predictor_stable": model.predictor_is_stable},
+            "stable": model.is_stable, "predictor_stable": model.predictor_is_stable,
+            **({} if analysis is None else {"residuals": analysis.to_json()})},
             indent=1))
         return
     con = console()
@@ -136,8 +138,8 @@ def compare_cmd(model_path: Path, sessions: tuple[Path, ...], horizon: int | Non
                              rows=[*rows, ("all", res.fit)] if len(rows) > 1 else rows))
     if not model.predictor_is_stable:
         con.print("[yellow]predictor A - KC is unstable: predictions may diverge[/]")
-    if with_residuals:
-        echo_residuals(residuals(model, flights))
+    if analysis is not None:
+        echo_residuals(analysis)
 
 
 def check_fit_samples(model: StateSpaceModel, flights: list[IOData], *,

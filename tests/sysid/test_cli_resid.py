@@ -68,8 +68,13 @@ def test_the_table_is_explained_in_text_and_not_in_json(setup, command) -> None:
         assert other.endswith(legend)
     res = run(command, model_path, *(f.path for f in flights), *extra, "--json")
     assert res.exit_code == 0, res.output
-    json.loads(res.stdout)  # nothing but the JSON document
+    doc = json.loads(res.stdout)  # nothing but the JSON document
     assert not any(word in res.stdout for word in ("Ljung-Box", "reading p"))
+    # compare --residuals --json carries the analysis as resid --json gives it (it left it out)
+    analysis = doc["residuals"] if command == "compare" else doc
+    resid_doc = json.loads(run("resid", model_path, *(f.path for f in flights), "--json").stdout)
+    assert {k: v for k, v in analysis.items() if k != "model"} == {
+        k: v for k, v in resid_doc.items() if k != "model"}
 
 
 def test_compare_residuals_prints_the_summary(setup) -> None:
@@ -122,3 +127,13 @@ def test_order_prints_information_criteria(setup) -> None:
     assert ic["orders"] == list(range(1, 9)) and ic["chosen"]["bic"] == 4
     table = run("order", flights[0].path, "--past", "20", "--future", "10", "--show", "8")
     assert "AIC picks" in table.stdout and "*" in table.stdout
+
+
+def test_compare_records_the_residuals_it_prints(setup, tmp_path) -> None:
+    """`compare --residuals --rrd` wrote the fits and left the residual panels out."""
+    flights, model_path = setup
+    rrd = tmp_path / "c.rrd"
+    res = run("compare", model_path, flights[1].path, "--residuals", "--rrd", rrd)
+    assert res.exit_code == 0, res.output
+    y = sysid.load_model(model_path).output_names[0]
+    assert load(rrd, sort_by="lag")[f"/sysid/residuals/{y}/autocorr/value"].scalars().size
