@@ -334,20 +334,21 @@ def show(plan: str, as_json: bool, width: int | None, height: int, rrd: Path | N
     Example:
       groundstation plan show pitch-only --height 8
     """
-    if rrd is not None and not as_json:  # before any work
+    if rrd is not None:  # before any work
         check_output(rrd, option="--rrd", suffixes=(".rrd",),
                      inputs=[Path(plan)] if Path(plan).is_file() else [], overwrite=force,
                      force_flag="--force")
     loaded = load_plan(plan)
     schedule = loaded.compile()
+    if rrd is not None:  # with --json too (it was ignored there)
+        from groundstation.live import open_view, plot_plan  # Rerun only when asked for
+
+        plot_plan(schedule=schedule, view=open_view(mode="save", name=schedule.name, rrd_path=rrd))
+        click.echo(f"wrote {rrd}", err=as_json)  # standard output keeps the JSON alone
     if as_json:
         click.echo(json.dumps(schedule.to_dict()))
         return
     if rrd is not None:
-        from groundstation.live import open_view, plot_plan  # Rerun only when asked for
-
-        plot_plan(schedule=schedule, view=open_view(mode="save", name=schedule.name, rrd_path=rrd))
-        click.echo(f"wrote {rrd}")
         return
     console = output_console(width=None if width is None else width + 12)
     if width is None:  # the terminal's width, or 100 columns when piped

@@ -91,3 +91,15 @@ def test_plan_show_rrd_checks_the_output_first(tmp_path):
     res = CliRunner().invoke(main, ["plan", "show", "hover-check", "--rrd", str(session)])
     _one_line_error(res)
     assert session.read_bytes()[:4] == b"\x89HDF"
+
+
+def test_plan_show_json_with_rrd_writes_both(tmp_path):
+    """--json beside --rrd ignored the recording in silence: both now, the JSON alone on
+    standard output."""
+    import json
+
+    out = tmp_path / "plan.rrd"
+    res = CliRunner().invoke(main, ["plan", "show", "hover-check", "--json", "--rrd", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["name"] == "hover-check"
+    assert res.stderr.strip() == f"wrote {out}" and out.stat().st_size > 0
