@@ -317,10 +317,15 @@ class LiveIdListener:
 
     def _maybe_update(self) -> None:
         (start, stop), latest = self._grid.window, self._grid.latest
-        if start is not None and stop is None and not self.updates and not self.failed:
+        if start is not None and not self.updates and not self.failed:
             n, need = self.ident.n_samples, self.ident.min_samples
-            self.status = (f"live id: excitation on, {n}/{need} samples for the first update"
-                           if n < need else "live id: first update running")
+            if stop is not None:  # ended (an abort, or a short excitation) before an update
+                self.status = (f"live id: the excitation ended after {n}/{need} samples, "
+                               "too few for an update" if n < need else
+                               "live id: the excitation ended; final update")
+            else:
+                self.status = (f"live id: excitation on, {n}/{need} samples for the first "
+                               "update" if n < need else "live id: first update running")
         if start is None or stop is not None or self.ident.n_samples < self.ident.min_samples:
             return
         period = self.config.update_period

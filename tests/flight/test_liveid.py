@@ -460,6 +460,24 @@ def test_an_abort_in_the_excitation_ends_it_with_a_final_update_and_the_stop(sim
     assert result.summary["live_id"]["model_file"]
 
 
+def test_an_abort_before_the_first_update_says_so_in_the_status(sim_uri, tmp_path):
+    """The progress line read "excitation on, 561/615 samples" through the descent after an
+    abort (review): it says the excitation ended, with too few samples for an update."""
+    plan = _plan(30.0, SMALL)
+    lid = live_id_listener(plan)
+    start = next(p for p in plan.compile().phases if p.kind == "excitation").start_tick
+
+    def hook(k: int) -> None:
+        if k == start + 5:  # 0.5 s into the PRBS: far from the first update's samples
+            raise RuntimeError("injected fault")
+
+    uri = sim_uri(speed="inf")
+    result = fly_plan(plan=plan, out=tmp_path, uri=uri, listeners=[lid], tick_hook=hook)
+    assert result.aborted and lid.updates == 0
+    assert re.fullmatch(r"live id: the excitation ended after \d+/\d+ samples, too few for an "
+                        r"update", lid.status), lid.status
+
+
 @pytest.mark.parametrize("flight_uri", ["radio", "sitl"], indirect=True)
 def test_live_id_over_the_emulated_radio(flight_uri, tmp_path):
     """The same listener over cflib's radio driver (emulated dongle, 20x) and against the real
