@@ -182,8 +182,13 @@ def _print_check(console: Console, s: dict[str, Any]) -> None:
         lags = [
             f"{f['axis']}-{k} {v}" for f in s["prbs"] for k, v in f.get("lag_ticks", {}).items()
         ]
+        from groundstation.flight.blocks import BLOCK_PERIOD_S  # the flight's log rate
+
+        per_tick = round(1.0 / (s["rate_hz"] * BLOCK_PERIOD_S))
         console.print(
-            "(period, clock and PE order in setpoint ticks)"
+            f"(period, clock and PE order in setpoint ticks of {1 / s['rate_hz']:g} s; sysid's "
+            f"past and future count log samples, {per_tick} per tick at "
+            f"{1 / BLOCK_PERIOD_S:g} Hz)"
             + (f"; lags between PRBS axes: {', '.join(lags)} ticks" if lags else "")
         )
     v, sf = s["vehicle"], s["safety"]

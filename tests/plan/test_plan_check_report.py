@@ -161,3 +161,12 @@ def test_the_shipped_plans_state_the_altitude_rate_a_flight_logs(name):
     (altitude,) = [s for s in planned_streams(plan) if s.name == "altitude"]
     line = next(x for x in plan.text.splitlines() if x.startswith("variable = "))
     assert f"logged at {1 / altitude.period_s:g} Hz" in line
+
+
+def test_the_prbs_table_relates_ticks_to_sysids_samples():
+    """PE order in setpoint ticks beside sysid's horizons in log samples, nothing relating them
+    (review): the note under the table says how many log samples a tick is."""
+    res = CliRunner().invoke(main, ["plan", "check", "prbs-3axis"])
+    assert res.exit_code == 0, res.output
+    assert ("(period, clock and PE order in setpoint ticks of 0.1 s; sysid's past and future "
+            "count log samples, 5 per tick at 50 Hz)") in " ".join(res.stdout.split())
