@@ -64,9 +64,10 @@ def plan_warnings(plan: Plan) -> list[str]:
             if abs(e.amplitude) < floor:
                 unit = "deg" if e.axis != "yaw_rate" else "deg/s"
                 rad = "rad" if e.axis != "yaw_rate" else "rad/s"
+                sign = "" if e.signal == "step" else "±"  # a step goes one way
                 out.append(src.note(
                     ("phase", i, e.axis, "amplitude"),
-                    f"±{abs(e.amplitude):g} {unit} is below {floor:.3g} {unit}, "
+                    f"{sign}{abs(e.amplitude):g} {unit} is below {floor:.3g} {unit}, "
                     f"vehicle.{_LIMIT[e.axis]} = {limit:g} {unit} taken as {rad}: what an "
                     f"amplitude meant in {rad} looks like ({abs(e.amplitude):g} {rad} = "
                     f"{math.degrees(abs(e.amplitude)):.3g} {unit}), and too small to excite "

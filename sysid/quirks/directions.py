@@ -92,6 +92,6 @@ def direction_warnings(flights: Sequence[IOData]) -> list[str]:
             f"{listed} barely {verb} (under {DIRECTION_RATIO:g} of the strongest direction's "
             f"spread, inputs scaled by their standard deviations), so the response to {them} is "
             "fitted to noise and can cost the fit of every output; excite every direction the "
-            "inputs span (a flight: a PRBS on every axis, prbs-3axis), or identify from inputs "
-            "the record does excite (sysid --inputs; a roll-only flight's imported log: "
+            "inputs span (a flight: a PRBS on every axis), or identify from inputs the record "
+            "does excite (fewer inputs; for a roll-only flight's imported log: "
             "controller.cmd_roll)"]

@@ -110,6 +110,9 @@ def test_an_amplitude_typed_in_radians_warns(tmp_path):
     yaw = _shipped("yaw-only").replace("amplitude = 50.0 ", "amplitude = 0.87 ", 1)
     (w,) = plan_warnings(parse_plan(text=yaw, source="yaw.toml"))
     assert "phase[2].yaw_rate.amplitude: ±0.87 deg/s is below 3.49 deg/s" in w
+    step = _shipped("yaw-only").replace("amplitude = 40.0 ", "amplitude = 0.7 ", 1)
+    (w,) = plan_warnings(parse_plan(text=step, source="step.toml"))
+    assert "yaw_rate.amplitude: 0.7 deg/s is below" in w  # a step goes one way: no ±
 
 
 def test_fly_prints_the_plans_warnings_before_flying(tmp_path):
