@@ -193,9 +193,10 @@ def host_windows(session: Session, window: Window, *, verb: str = "identify from
     if window is None:
         return [("all", None)]
     if isinstance(window, PhaseRelative):
-        _phase(session, window.phase)  # none of that name or kind: the refusal names them
-        first = next(p for p in session.phases() if window.phase in (p.name, p.kind))
-        start, end = first.start_s, first.end_s  # that phase's own (not to the last match's end)
+        hits = [p for p in session.phases() if window.phase in (p.name, p.kind)]
+        if not hits:
+            _phase(session, window.phase)  # the refusal, naming the phases there are
+        start, end = hits[0].start_s, hits[0].end_s  # the first one's own, not to the last's end
         label = f"{window.phase}@{window.t0:g}:{'' if window.t1 is None else f'{window.t1:g}'}"
         length = end - start
         if window.t0 < 0:

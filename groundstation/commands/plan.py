@@ -13,7 +13,6 @@ model (:mod:`groundstation.commands.plan_design`). PLAN is a path or the name of
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +35,7 @@ from groundstation.plan.altitude import AltitudeHoldConfig
 from groundstation.plan.checks import plan_warnings
 from groundstation.plan.design import design_notes
 from groundstation.plan.excitation import prbs_shift
+from groundstation.plan.toml import TomlSource
 
 __all__ = ["command", "plot_lines", "summarize"]
 
@@ -61,15 +61,14 @@ def _settings(plan: Plan) -> dict[str, Any]:
     were defaulted (``defaults``), and whether each acts (``active``): a plan without an
     ``[altitude_hold]`` flies its thrust open loop; one without ``[live_id]`` identifies
     nothing unless ``fly --live-id`` asks, with the defaults."""
-    raw = tomllib.loads(plan.text)
+    given = TomlSource(text=plan.text, source=plan.source).lines  # the keys the file names
     out: dict[str, Any] = {}
     for key, config, default in (("altitude_hold", plan.altitude_hold, AltitudeHoldConfig()),
                                  ("live_id", plan.live_id, LiveIdConfig())):
-        table = raw.get(key) if isinstance(raw.get(key), dict) else {}
         values = {k: list(v) if isinstance(v, tuple) else v
                   for k, v in vars(config or default).items()}
         out[key] = {"active": config is not None,
-                    "defaults": sorted(k for k in values if k not in table)} | values
+                    "defaults": sorted(k for k in values if (key, k) not in given)} | values
     return out
 
 
