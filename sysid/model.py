@@ -152,6 +152,8 @@ class StateSpaceModel:
         """Deterministic response ``y (N, l)`` to inputs ``u (N, m)`` from state ``x0 (n,)``.
 
         ``x(k+1) = A x(k) + B u(k)``, ``y(k) = C x(k) + D u(k)``; ``x0`` defaults to zero.
+        An unstable model's response may overflow: its samples are then ``inf`` or ``nan``
+        (what callers read as diverged), without numpy's overflow warnings.
         """
         u = np.asarray(u, dtype=float)
         if u.ndim == 1 and self.n_inputs == 1:
@@ -164,10 +166,11 @@ class StateSpaceModel:
         states = np.empty((u.shape[0], self.n_states))
         bu = u @ self.B.T
         a_t = np.ascontiguousarray(self.A.T)
-        for k in range(u.shape[0]):
-            states[k] = x
-            x = x @ a_t + bu[k]
-        return states @ self.C.T + u @ self.D.T
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(u.shape[0]):
+                states[k] = x
+                x = x @ a_t + bu[k]
+            return states @ self.C.T + u @ self.D.T
 
     # ---- export ----------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

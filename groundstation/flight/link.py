@@ -45,6 +45,7 @@ from groundstation.flight.blocks import (
 from groundstation.flight.clock import Clock
 from groundstation.flight.drivers import install_drivers, toc_cache_dir
 from groundstation.flight.params import typed_value
+from groundstation.flight.thread_errors import log_cflib_thread_errors
 from groundstation.flight.uri import DEFAULT_URI, URI_SCHEMES, check_uri, connect_advice
 
 __all__ = [
@@ -340,6 +341,7 @@ def open_link(*, uri: str, clock: Clock, post: Post, timeout_s: float = 10.0,
     """
     check_uri(uri)
     install_drivers()
+    log_cflib_thread_errors()  # a dying link's cflib threads: one line, not a traceback
     check_dongle(uri)  # no dongle, too old a firmware: one line with the fix
     from cflib.crazyflie import Crazyflie
 

@@ -6,6 +6,7 @@ dongle, old firmware, wrong channel, unplugged). Noise: ``test_radio_noise.py`` 
 from __future__ import annotations
 
 import errno
+import logging
 import time
 
 import pytest
@@ -79,7 +80,10 @@ def test_no_dongle_old_firmware_and_wrong_channel_are_one_line(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
-def test_unplugged_mid_flight_aborts_and_the_watchdog_stops_the_vehicle(bus, tmp_path):
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+def test_unplugged_mid_flight_aborts_and_the_watchdog_stops_the_vehicle(bus, tmp_path, caplog):
+    """... and cflib's threads that die with the link (its ping thread joins itself) are one
+    log line each, not a traceback on stderr."""
     def unplug(k: int) -> None:
         if k == 40:
             bus.dongles[0].unplug()
@@ -94,3 +98,6 @@ def test_unplugged_mid_flight_aborts_and_the_watchdog_stops_the_vehicle(bus, tmp
     s = open_session(result.path)
     assert s.closed_cleanly and any("watchdog" in e.text for e in s.events())
     assert 40 <= s["setpoints"].data["tick"].max() < 60
+    for r in caplog.records:
+        if r.name == "groundstation.flight.thread_errors" and r.levelno >= logging.WARNING:
+            assert r.exc_info is None and "\n" not in r.getMessage()

@@ -97,6 +97,7 @@ def test_prediction_focus_keeps_the_closed_loop_predictor_consistent():
     assert err_pred < err_sim, (err_pred, err_sim)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # no numpy warning leaks to the user
 def test_an_unstable_plant_identified_in_closed_loop_is_kept_by_default_and_reflected_on_request():
     a = np.array([[1.25, 0.0], [0.0, 0.6]])
     plant = sysid.StateSpaceModel(A=a, B=[[1.0], [0.5]], C=[[1.0, 1.0]], K=[[0.5], [0.2]],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -84,3 +85,11 @@ def test_to_control_matches_frequency_response() -> None:
     g = m.C @ np.linalg.solve(z * np.eye(4) - m.A, m.B) + m.D
     assert np.allclose(control.evalfr(ss, z), g)
     assert ss.dt == m.dt
+
+
+def test_an_unstable_models_response_overflows_without_numpy_warnings():
+    model = sysid.StateSpaceModel(A=[[1.5]], B=[[1.0]], C=[[1.0]], dt=0.02)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's overflow warning would raise here
+        y = model.simulate(np.ones((3000, 1)))
+    assert np.isfinite(y[:100]).all() and not np.isfinite(y[-1]).all()

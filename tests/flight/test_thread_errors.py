@@ -1,0 +1,43 @@
+"""An exception that ends one of cflib's threads is one log line (its traceback at debug level);
+every other thread's exception still reaches the hook that was there before."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import pytest
+from cflib.crtp.crtpstack import CRTPPacket
+
+from groundstation.flight.thread_errors import log_cflib_thread_errors
+
+
+def _run(target, *args) -> None:
+    t = threading.Thread(target=target, args=args, name="worker")
+    t.start()
+    t.join()
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+def test_a_cflib_thread_that_raises_is_one_warning_line(caplog):
+    log_cflib_thread_errors()
+    log_cflib_thread_errors()  # idempotent: one hook, one line
+    with caplog.at_level(logging.DEBUG, logger="groundstation.flight.thread_errors"):
+        _run(CRTPPacket, "not a header")  # cflib's own code raises in the thread
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1
+    text = warnings[0].getMessage()
+    assert text.startswith("cflib's worker thread ended: TypeError") and "\n" not in text
+    assert any(r.levelno == logging.DEBUG and r.exc_info for r in caplog.records)
+
+
+def test_other_threads_exceptions_reach_the_previous_hook(monkeypatch):
+    seen = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: seen.append(args.exc_type))
+    log_cflib_thread_errors()
+
+    def ours() -> None:
+        raise ValueError("not cflib's")
+
+    _run(ours)
+    assert seen == [ValueError]
