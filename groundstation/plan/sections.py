@@ -162,6 +162,13 @@ def check_thrust(
         )
 
 
+def _hover(src: TomlSource, hover_thrust: int) -> str:
+    """``hover_thrust 58000 (line 7)``: the other term of a sum checked against the limits
+    (the error is on the line of the term it is raised for)."""
+    line = src.line(("hover_thrust",))
+    return f"hover_thrust {hover_thrust}" + (f" (line {line})" if line else "")
+
+
 def read_safety(t: TomlTable, *, vehicle: VehicleLimits, rate_hz: float) -> Safety:
     t.allow({"on_abort", "descent_duration", "descent_thrust", "max_rate_deg_s"})
     max_rate = t.get("max_rate_deg_s", float, default=None, unit="deg/s")
@@ -204,7 +211,7 @@ def read_altitude_hold(t: TomlTable, *, vehicle: VehicleLimits, hover_thrust: in
     )
     for value in (hover_thrust + cfg.max_trim, hover_thrust - cfg.max_trim):
         check_thrust(t.src, path=(*t.path, "max_trim"), value=value, vehicle=vehicle,
-                     what=f"hover_thrust {hover_thrust} ± max_trim {cfg.max_trim}")
+                     what=f"{_hover(t.src, hover_thrust)} ± max_trim {cfg.max_trim}")
     return cfg
 
 
@@ -280,7 +287,7 @@ def read_signal(
         reach = (amplitude,) if signal == "step" else (abs(amplitude), -abs(amplitude))
         for value in reach:
             check_thrust(t.src, path=at, value=hover_thrust + value, vehicle=vehicle,
-                         what=f"hover_thrust {hover_thrust} {value:+g}")
+                         what=f"{_hover(t.src, hover_thrust)} {value:+g}")
     spec: dict[str, Any] = {"axis": axis, "signal": signal, "amplitude": amplitude}
     if signal == "prbs":
         spec.update(read_prbs(t, n_ticks=n_ticks))

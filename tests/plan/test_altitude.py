@@ -86,3 +86,16 @@ def test_safety_max_rate_is_read_and_bounded():
     assert load_plan("roll-only").compile().safety.max_rate_deg_s is None  # runner default
     with pytest.raises(PlanError, match="max_rate_deg_s"):
         parse_plan(text=text.replace("[safety]\n", "[safety]\nmax_rate_deg_s = 1\n", 1))
+
+
+def test_a_hover_thrust_beyond_the_trim_range_names_both_terms_lines():
+    """The sum is refused on max_trim's line and names hover_thrust's, the term a user who
+    measured a heavier vehicle's hover thrust just changed."""
+    text = load_plan("hover-check").text
+    hover_line = next(i for i, s in enumerate(text.splitlines(), 1)
+                      if s.startswith("hover_thrust ="))
+    bad = text.replace("\nhover_thrust = 39000 ", "\nhover_thrust = 58000 ", 1)
+    with pytest.raises(PlanError) as info:
+        parse_plan(text=bad, source="p.toml")
+    assert f"hover_thrust 58000 (line {hover_line}) ± max_trim 12000 = 70000 PWM" in str(
+        info.value)
