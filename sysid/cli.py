@@ -33,7 +33,9 @@ from sysid.batch import (
     group_sessions,
     model_path,
     name_list,
+    resumable,
     run_batch,
+    write_config,
 )
 from sysid.cli_compare import compare_cmd, resid
 from sysid.cli_identify import identify
@@ -62,7 +64,7 @@ from sysid.cli_support import (
     session_options,
 )
 from sysid.cli_sweep import sweep_command
-from sysid.errors import DataError, ParameterError
+from sysid.errors import ClusterError, DataError, ParameterError
 from sysid.model import load_model
 from sysid.session_io import read_metadata
 
@@ -258,11 +260,14 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
 @STABILITY_OPTION
 @session_options
 @FORCE_OPTION
+@click.option("--resume", is_flag=True,
+              help="Finish an interrupted batch in --out: run only the groups its summary does "
+                   "not hold (same sessions and options; finished groups kept).")
 @JSON_OPTION
 def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: str,
           order: int | None, past: int | None, future: int | None, workers: int,
           scheduler: str | None, focus: str | None, stability: str, force: bool,
-          as_json: bool, **opts: Any) -> None:
+          resume: bool, as_json: bool, **opts: Any) -> None:
     """Identify one model per group of sessions, all with one configuration.
 
     Groups come from the sessions' metadata (--group-by; docs/sysid.md names them). Each
@@ -272,52 +277,68 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     IEM's prediction-focus model from all the data instead. A group that fails is a row with
     its reason; the batch goes on, and exits with 1 when some groups failed (2 when all did).
     The summary is rewritten as each group finishes: Ctrl-C keeps the finished groups, and so
-    does a --scheduler cluster that fails mid-run (one line names the groups not run).
+    does a --scheduler cluster that fails mid-run (one line names the groups not run); the
+    same command with --resume then runs only those.
 
     \b
     Examples:
       sysid batch logs/*.h5 --out models --group-by vehicle
       sysid batch logs/*.h5 --out models --scheduler tcp://10.0.0.5:8786
+      sysid batch logs/*.h5 --out models --group-by vehicle --resume
     """
     if names_a_file(out_dir):
         raise ParameterError(f"--out {out_dir}: names a model file, but batch writes one model "
                              "per group (and its summary) into a folder; give a folder, e.g. "
                              f"--out {out_dir.with_suffix('')}")
+    if resume and force:
+        raise ParameterError("--resume keeps the finished groups, --force replaces them; "
+                             "give one of them")
     summary = out_dir / "summary.json"
-    if summary.exists() and not force:
-        raise ParameterError(f"--out {out_dir}: holds a batch summary already; "
-                             "pass --force to replace it or choose another folder")
+    if summary.exists() and not (force or resume):
+        raise ParameterError(f"--out {out_dir}: holds a batch summary already; pass --resume "
+                             "to finish it, --force to replace it, or choose another folder")
     meth, options = method_options(method, focus=focus, stability=stability)
     grid = {k: [v] for k, v in (("pasts", past), ("futures", future), ("orders", order))
             if v is not None}
     groups, bad = group_sessions(list(sessions), by=group_by,
                                  read_meta=read_metadata)
     check_model_paths(groups, out_dir=out_dir, rows=bad)  # never over an input session
+    config = {"group_by": group_by, "method": None if method_chosen() else method,
+              "order": order, "past": past, "future": future, "focus": focus,
+              "stability": stability, **opts}
+    finished = resumable(out_dir, groups, config) if resume else {}
+    if resume:
+        log.info("resuming %s: %d of %d group(s) finished", out_dir, len(finished), len(groups))
     taken = [model_path(out_dir, name) for name in groups if model_path(out_dir, name).exists()]
-    if taken and not force:
+    if taken and not (force or resume):
         more = f" (and {len(taken) - 1} more model file(s))" if len(taken) > 1 else ""
         raise ParameterError(f"--out {out_dir}: {taken[0].name} exists{more}; pass --force to "
                              "replace the models or choose another folder")
+    write_config(out_dir, config)
     rows: list[Any] = []
     try:
         with scheduler_client(scheduler) as client, \
-                progress("batch", total=len(groups), quiet=as_json) as update:
-            rows = run_batch(groups, out_dir=out_dir, rows=bad,
+                progress("batch", total=len(groups) - len(finished), quiet=as_json) as update:
+            rows = run_batch(groups, out_dir=out_dir, rows=bad, finished=finished,
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
                              client=client, progress=update,
                              choose_focus=focus is None, choose_feedthrough="open-loop",
                              choose_method=method_chosen())
+    except ClusterError as exc:
+        if "not run:" not in str(exc):
+            raise
+        raise type(exc)(f"{exc} (the same command with --resume runs them)") from None
     except KeyboardInterrupt:
         unread = {r.group for r in bad}  # rows from the start: they did not run
-        finished = {r["group"] for r in json.loads(summary.read_text())
+        ended = {r["group"] for r in json.loads(summary.read_text())
                     if r["group"] in groups and r["group"] not in unread} \
             if summary.exists() else set()
-        left = [name for name in groups if name not in finished]
-        click.echo(f"interrupted: {len(finished)} finished group(s) kept in {summary} and "
+        left = [name for name in groups if name not in ended]
+        click.echo(f"interrupted: {len(ended)} finished group(s) kept in {summary} and "
                    f"{out_dir / 'summary.csv'}"
-                   + (f"; {len(left)} group(s) not run: {name_list(left)} (batch their "
-                      "sessions into another --out)" if left else ""), err=True)
+                   + (f"; {len(left)} group(s) not run: {name_list(left)} (the same "
+                      "command with --resume runs them)" if left else ""), err=True)
         sys.exit(130)
     failed = [r for r in rows if r.error is not None]
     if as_json:

@@ -118,9 +118,68 @@ def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
     out = tmp_path / "stopped"
     res = run("batch", *paths[:3], "--out", out, *FAST)
     assert res.exit_code == 130 and "interrupted: 1 finished group" in res.stderr
-    assert "; 2 group(s) not run: a1, b0 (batch their sessions into another --out)" in res.stderr
+    assert "; 2 group(s) not run: a1, b0 (the same command with --resume runs them)" in res.stderr
     [row] = json.loads((out / "summary.json").read_text())
     assert row["group"] == "a0" and row["error"] is None and (out / "a0.h5").exists()
+
+    # the same command again is refused (it would replace a0), --resume runs a1 and b0 only
+    again = run("batch", *paths[:3], "--out", out, *FAST)
+    assert again.exit_code != 0 and "pass --resume to finish it" in again.stderr
+    a0_model = (out / "a0.h5").read_bytes()
+    monkeypatch.setattr(sysid.batch, "identify_group", real)
+    counted = _count_groups(monkeypatch)
+    res = run("batch", *paths[:3], "--out", out, *FAST, "--resume", "--json")
+    assert res.exit_code == 0, res.output
+    assert len(counted) == 2  # a0 kept as it was
+    rows = json.loads((out / "summary.json").read_text())
+    assert [r["group"] for r in rows] == ["a0", "a1", "b0"]
+    assert rows[0] == row and (out / "a0.h5").read_bytes() == a0_model
+    assert all(r["error"] is None and (out / f"{r['group']}.h5").exists() for r in rows)
+    assert [g["group"] for g in json.loads(res.stdout)["groups"]] == ["a0", "a1", "b0"]
+
+
+def test_resume_refuses_other_settings_and_reruns_a_changed_or_missing_group(sessions, tmp_path,
+                                                                         monkeypatch):
+    paths, _ = sessions
+    out = tmp_path / "m"
+    assert run("batch", *paths[:2], "--out", out, *FAST).exit_code == 0
+    other = run("batch", *paths[:2], "--out", out, "--order", "3", "--past", "20", "--future",
+                "10", "--resume")
+    assert other.exit_code != 0 and "\n" not in other.stderr.strip()
+    assert "--resume: the batch in" in other.stderr and "--order 4 then, 3 now" in other.stderr
+    both = run("batch", *paths[:2], "--out", out, *FAST, "--resume", "--force")
+    assert both.exit_code != 0 and "give one of them" in both.stderr
+    none = run("batch", *paths[:2], "--out", tmp_path / "new", *FAST, "--resume")
+    assert none.exit_code != 0 and "holds no batch to resume" in none.stderr
+
+    # a deleted model is made again, the others kept
+    (out / "a1.h5").unlink()
+    before = json.loads((out / "summary.json").read_text())
+    counted = _count_groups(monkeypatch)
+    res = run("batch", *paths[:2], "--out", out, *FAST, "--resume")
+    assert res.exit_code == 0, res.output
+    after = json.loads((out / "summary.json").read_text())
+    assert len(counted) == 1 and after[0] == before[0] and (out / "a1.h5").exists()
+
+    # by vehicle: a group whose sessions changed (a second flight of A) runs again, B is kept
+    out = tmp_path / "by-vehicle"
+    assert run("batch", paths[0], paths[2], "--out", out, "--group-by", "vehicle",
+               *FAST).exit_code == 0
+    before = {r["sessions"][0]: r for r in json.loads((out / "summary.json").read_text())}
+    counted.clear()
+    res = run("batch", *paths[:3], "--out", out, "--group-by", "vehicle", *FAST, "--resume")
+    assert res.exit_code == 0, res.output
+    after = json.loads((out / "summary.json").read_text())
+    assert len(counted) == 1 and after[0]["sessions"] == [str(p) for p in paths[:2]]
+    assert after[1] == before[str(paths[2])]
+
+
+def _count_groups(monkeypatch) -> list[int]:
+    """Count the groups identified from here on."""
+    real, counted = sysid.batch.identify_group, []
+    monkeypatch.setattr(sysid.batch, "identify_group",
+                        lambda *a, **k: counted.append(1) or real(*a, **k))
+    return counted
 
 
 def test_an_unexpected_failure_is_a_row_and_the_batch_goes_on(sessions, tmp_path, monkeypatch,
@@ -208,3 +267,21 @@ def test_flights_counts_sessions_not_the_experiments_in_them(tmp_path):
     assert res.exit_code == 0, res.output
     [row] = json.loads((tmp_path / "m" / "summary.json").read_text())
     assert row["flights"] == 1 and row["error"] in (None, "")
+
+
+@pytest.mark.parametrize("damage", [
+    lambda rows: [{**rows[0], "flights": "many"}],
+    lambda rows: [{**rows[0], "poles": [[1.0]]}],
+    lambda rows: [5],
+    lambda rows: {"rows": rows},
+])
+def test_resume_reads_a_damaged_summary_as_one_line(sessions, tmp_path, damage):
+    paths, _ = sessions
+    out = tmp_path / "m"
+    assert run("batch", paths[0], "--out", out, *FAST).exit_code == 0
+    summary = out / "summary.json"
+    summary.write_text(json.dumps(damage(json.loads(summary.read_text()))))
+    res = run("batch", paths[0], "--out", out, *FAST, "--resume")
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
+    [line] = res.stderr.strip().splitlines()
+    assert "batch.json or summary.json cannot be read" in line and "--force" in line

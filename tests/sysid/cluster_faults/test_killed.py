@@ -61,10 +61,15 @@ def test_scheduler_killed_mid_batch_is_one_line_keeping_finished_groups(
     assert lines[-1] == (
         f"error: --scheduler {address}: lost the connection to the scheduler; 1 finished "
         f"group(s) kept in {out / 'summary.json'} and {out / 'summary.csv'}; 2 group(s) not "
-        "run: b_block, c_block"), stderr
+        "run: b_block, c_block (the same command with --resume runs them)"), stderr
     assert batch.returncode == 2
     assert not any("100 %" in line or "done" in line for line in lines)
     assert summary(out) == ["a_0"]
+    # here, without the cluster: the scheduler is no setting of the models
+    resumed = subprocess.run([*cmd[:cmd.index("--scheduler")], "--resume"], cwd=ROOT, env=env(),
+                             capture_output=True, text=True, timeout=DEADLINE_S)
+    assert resumed.returncode == 0, resumed.stderr
+    assert summary(out) == ["a_0", "b_block", "c_block"]
 
 
 def test_scheduler_killed_mid_sweep_is_scheduler_lost(
