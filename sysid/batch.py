@@ -20,11 +20,7 @@ the default grid) with the given past/future/order fixing those axes. A group th
 the batch goes on. The summary (``summary.csv`` and ``summary.json``) is rewritten as each
 group finishes, so an interrupted batch keeps every finished group.
 
-**Resuming.** ``batch.json`` in the folder holds the batch's configuration (grouping, method,
-horizons, session options). :func:`resumable` gives the rows of an earlier run of the same
-configuration that can be kept: each group whose sessions are the same and whose model file
-is still there (a failed group's row is kept as it is: it ran). ``sysid batch --resume`` runs
-only the other groups.
+**Resuming** an interrupted batch (``sysid batch --resume``): :mod:`sysid.batch_resume`.
 """
 
 from __future__ import annotations
@@ -48,16 +44,13 @@ from sysid.errors import ClusterError, ParameterError, SysIdError, first_line
 from sysid.methods import Method, Options
 from sysid.session_io import SessionFileError, unique_name
 
-__all__ = ["CONFIG_FILE", "GROUP_BY", "BatchRow", "GroupBy", "check_model_paths",
-           "group_sessions", "model_path", "name_list", "resumable", "run_batch", "write_config",
-           "write_summary"]
+__all__ = ["GROUP_BY", "BatchRow", "GroupBy", "check_model_paths", "group_sessions",
+           "make_out_folder", "model_path", "name_list", "run_batch", "write_summary"]
 
 log = logging.getLogger(__name__)
 
 GroupBy = Literal["session", "vehicle", "day", "plan", "all"]
 GROUP_BY: tuple[str, ...] = ("session", "vehicle", "day", "plan", "all")
-CONFIG_FILE = "batch.json"
-_CONFIG_FORMAT = "cf-sysid-batch"
 
 
 @dataclass
@@ -84,21 +77,33 @@ class BatchRow:
 
     @classmethod
     def from_record(cls, rec: dict[str, Any]) -> BatchRow:
-        """The row :meth:`record` wrote (``summary.json``); ``KeyError``/``TypeError``/
-        ``ValueError`` for anything else."""
-        def opt(key: str, kind: type) -> Any:  # a file from elsewhere: typed, or refused
-            return None if rec[key] is None else kind(rec[key])
+        """The row :meth:`record` wrote (``summary.json``, a file from elsewhere): ``KeyError``,
+        ``TypeError`` or ``ValueError`` for anything else (a number that is not finite, a
+        ``stable`` that is not true, false or null)."""
+        def number(value: Any, kind: type = float) -> Any:
+            if isinstance(value, bool) or not np.isfinite(float(value)):
+                raise ValueError(f"{value!r} is not a finite number")
+            if kind is int and float(value) != int(value):
+                raise ValueError(f"{value!r} is not an integer")
+            return kind(value)
 
+        def opt(key: str, read: Callable[[Any], Any]) -> Any:
+            return None if rec[key] is None else read(rec[key])
+
+        if rec["stable"] not in (True, False, None):
+            raise ValueError(f"stable is {rec['stable']!r}")
         return cls(group=str(rec["group"]), sessions=[str(s) for s in rec["sessions"]],
-                   flights=int(rec["flights"]), past=opt("past", int),
-                   future=opt("future", int), order=opt("order", int),
+                   flights=number(rec["flights"], int),
+                   past=opt("past", lambda v: number(v, int)),
+                   future=opt("future", lambda v: number(v, int)),
+                   order=opt("order", lambda v: number(v, int)),
                    method=opt("method", str), focus=opt("focus", str),
-                   poles=[complex(float(re_), float(im)) for re_, im in rec["poles"]],
+                   poles=[complex(number(re_), number(im)) for re_, im in rec["poles"]],
                    outputs=[str(o) for o in rec["outputs"]],
-                   fit=[float(f) for f in rec["validation_fit_percent"]],
-                   score=opt("score_percent", float), stable=opt("stable", bool),
+                   fit=[number(f) for f in rec["validation_fit_percent"]],
+                   score=opt("score_percent", number), stable=rec["stable"],
                    model=opt("model", str), error=opt("error", str),
-                   warnings=[str(w) for w in rec["warnings"]], seconds=float(rec["seconds"]))
+                   warnings=[str(w) for w in rec["warnings"]], seconds=number(rec["seconds"]))
 
     def record(self) -> dict[str, Any]:
         return {"group": self.group, "sessions": self.sessions, "flights": self.flights,
@@ -200,62 +205,9 @@ def write_summary(rows: Sequence[BatchRow], out_dir: Path) -> None:
     tmp.replace(out_dir / "summary.csv")
 
 
-def write_config(out_dir: Path, config: dict[str, Any]) -> None:
-    """``out_dir/batch.json``: the configuration a later ``--resume`` must match (JSON values;
-    the folder is made if missing)."""
-    _make_folder(out_dir)
-    tmp = out_dir / f".{CONFIG_FILE}.tmp"
-    tmp.write_text(json.dumps({"format": _CONFIG_FORMAT, "version": 1,
-                               "configuration": config}, indent=1))
-    tmp.replace(out_dir / CONFIG_FILE)
-
-
-def resumable(out_dir: Path, groups: dict[str, list[Path]], config: dict[str, Any]
-              ) -> dict[str, BatchRow]:
-    """The rows of an earlier batch into ``out_dir`` that this one keeps (module docstring):
-    :class:`ParameterError` when there is no such batch or its configuration differs (naming
-    the options that do)."""
-    try:
-        saved = json.loads((out_dir / CONFIG_FILE).read_text())
-        records = json.loads((out_dir / "summary.json").read_text())
-        before = saved["configuration"] if saved.get("format") == _CONFIG_FORMAT else None
-        rows = [BatchRow.from_record(r) for r in records]
-    except FileNotFoundError as exc:
-        missing = Path(exc.filename or "").name
-        raise ParameterError(f"--resume: {out_dir} holds no batch to resume ({missing} "
-                             "missing); run without --resume") from None
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ParameterError(f"--resume: {out_dir}: its batch.json or summary.json cannot be "
-                             f"read ({first_line(exc)}); pass --force to run the batch again"
-                             ) from None
-    if not isinstance(before, dict):
-        raise ParameterError(f"--resume: {out_dir / CONFIG_FILE} is not a batch configuration; "
-                             "pass --force to run the batch again")
-    now = json.loads(json.dumps(config))  # as it would be stored
-    changed = sorted(k for k in {*before, *now} if before.get(k) != now.get(k))
-    if changed:
-        raise ParameterError(
-            f"--resume: the batch in {out_dir} ran with other settings ("
-            + ", ".join(f"{_option(k)} {before.get(k)!r} then, {now.get(k)!r} now"
-                        for k in changed)
-            + "); give the same options, or --force to run it again")
-    kept = {}
-    for row in rows:
-        paths = groups.get(row.group)
-        if paths is None or row.sessions != [str(p) for p in paths]:
-            continue
-        if row.error is None and not (row.model and Path(row.model).is_file()):
-            continue
-        kept[row.group] = row
-    return kept
-
-
-def _option(key: str) -> str:
-    """The command-line option a configuration key comes from (``windows``: ``--window``)."""
-    return "--window" if key == "windows" else "--" + key.replace("_", "-")
-
-
-def _make_folder(out_dir: Path) -> None:
+def make_out_folder(out_dir: Path) -> None:
+    """Make ``out_dir`` (and its parents) unless it exists; :class:`ParameterError` when it is
+    a file."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
@@ -348,7 +300,7 @@ def run_batch(
     done_rows = {n: r for n, r in (finished or {}).items() if n in groups}
     total, done = len(groups) - len(done_rows), 0
     check_model_paths(groups, out_dir=out_dir, rows=known)
-    _make_folder(out_dir)
+    make_out_folder(out_dir)
 
     def in_order() -> list[BatchRow]:
         return known + [done_rows[n] for n in names if n in done_rows]

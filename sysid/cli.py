@@ -9,6 +9,7 @@ and progress are for people (progress goes to stderr).
 from __future__ import annotations
 
 import contextlib
+import importlib.metadata
 import json
 import logging
 import sys
@@ -33,10 +34,9 @@ from sysid.batch import (
     group_sessions,
     model_path,
     name_list,
-    resumable,
     run_batch,
-    write_config,
 )
+from sysid.batch_resume import resumable, write_config
 from sysid.cli_compare import compare_cmd, resid
 from sysid.cli_identify import identify
 from sysid.cli_options import (
@@ -71,6 +71,14 @@ from sysid.session_io import read_metadata
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
+
+
+def _version() -> str:
+    """This sysid's version (``unknown`` when it runs from a checkout not installed)."""
+    try:
+        return importlib.metadata.version("cf-sysid")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -305,7 +313,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     check_model_paths(groups, out_dir=out_dir, rows=bad)  # never over an input session
     config = {"group_by": group_by, "method": None if method_chosen() else method,
               "order": order, "past": past, "future": future, "focus": focus,
-              "stability": stability, **opts}
+              "stability": stability, **opts, "sysid_version": _version()}
     finished = resumable(out_dir, groups, config) if resume else {}
     if resume:
         log.info("resuming %s: %d of %d group(s) finished", out_dir, len(finished), len(groups))
@@ -314,7 +322,10 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
         more = f" (and {len(taken) - 1} more model file(s))" if len(taken) > 1 else ""
         raise ParameterError(f"--out {out_dir}: {taken[0].name} exists{more}; pass --force to "
                              "replace the models or choose another folder")
-    write_config(out_dir, config)
+    if not resume and out_dir.is_dir():  # a run stopped before its first row: no old summary
+        for name in ("summary.json", "summary.csv"):
+            (out_dir / name).unlink(missing_ok=True)
+    write_config(out_dir, config, sessions=sessions)
     rows: list[Any] = []
     try:
         with scheduler_client(scheduler) as client, \

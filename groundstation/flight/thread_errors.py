@@ -9,11 +9,14 @@ stderr beside the ground station's own one-line abort. The flight's outcome is t
 station's (the link watch sees the link lost and aborts); the thread's end is a symptom of it.
 :func:`log_cflib_thread_errors` puts a hook in front of :data:`threading.excepthook` that logs
 such an exception as one warning (its traceback at debug level) and passes every other thread's
-exception on unchanged."""
+exception on unchanged, as it does one that passed through the ground station's own code (a
+callback of ours that a cflib thread ran)."""
 
 from __future__ import annotations
 
+import importlib
 import logging
+import sys
 import threading
 from pathlib import Path
 from types import TracebackType
@@ -23,23 +26,33 @@ __all__ = ["log_cflib_thread_errors"]
 log = logging.getLogger(__name__)
 
 
+_OURS = ("groundstation", "cfsession", "cfcommon", "sysid")
+"""This project's packages: an exception that passed through their code is never cflib's."""
+
+
 def _in_cflib(tb: TracebackType | None) -> bool:
-    """Whether the thread's code was cflib's (its outermost frame below ``threading``)."""
+    """Whether the exception is cflib's own: the thread's code (its outermost frame below
+    ``threading``) is cflib's and no frame on the way is this project's (a callback of ours
+    that cflib's thread ran raised: that is our bug, and keeps its traceback)."""
     import cflib
 
     root = Path(cflib.__file__).resolve().parent
+    ours = [Path(importlib.import_module(name).__file__ or "").resolve().parent
+            for name in _OURS if name in sys.modules]
+    started = None
     while tb is not None:
-        path = Path(tb.tb_frame.f_code.co_filename)
-        if path.name != "threading.py":
-            return path.resolve().is_relative_to(root)
+        path = Path(tb.tb_frame.f_code.co_filename).resolve()
+        if any(path.is_relative_to(p) for p in ours):
+            return False
+        if started is None and path.name != "threading.py":
+            started = path
         tb = tb.tb_next
-    return False
+    return started is not None and started.is_relative_to(root)
 
 
 def log_cflib_thread_errors() -> None:
-    """Put the hook in front of the current :data:`threading.excepthook` (idempotent: once per
-    hook it wraps; a test framework that swaps the hook per test gets it again on the next
-    connect)."""
+    """Put the hook in front of the current :data:`threading.excepthook` (idempotent; a hook
+    put in front of it later gets it in front again on the next connect)."""
     previous = threading.excepthook
     if getattr(previous, "_cflib_thread_errors", False):
         return

@@ -8,8 +8,17 @@ import threading
 
 import pytest
 from cflib.crtp.crtpstack import CRTPPacket
+from cflib.utils.callbacks import Caller
 
+from groundstation.errors import PlanError
 from groundstation.flight.thread_errors import log_cflib_thread_errors
+from groundstation.plan import parse_plan
+
+
+@pytest.fixture(autouse=True)
+def _own_hook(monkeypatch):
+    """The hook this test puts in is gone after it."""
+    monkeypatch.setattr(threading, "excepthook", threading.excepthook)
 
 
 def _run(target, *args) -> None:
@@ -41,3 +50,14 @@ def test_other_threads_exceptions_reach_the_previous_hook(monkeypatch):
 
     _run(ours)
     assert seen == [ValueError]
+
+
+def test_our_code_raising_in_a_cflib_thread_keeps_its_traceback(monkeypatch):
+    """A callback of the ground station that cflib's thread runs is our bug, not cflib's."""
+    seen = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: seen.append(args.exc_type))
+    log_cflib_thread_errors()
+    caller = Caller()
+    caller.add_callback(lambda: parse_plan(text="not a plan", source="x.toml"))
+    _run(caller.call)
+    assert seen == [PlanError]

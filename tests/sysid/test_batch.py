@@ -138,7 +138,7 @@ def test_ctrl_c_keeps_the_finished_groups(sessions, tmp_path, monkeypatch):
     assert [g["group"] for g in json.loads(res.stdout)["groups"]] == ["a0", "a1", "b0"]
 
 
-def test_resume_refuses_other_settings_and_reruns_a_changed_or_missing_group(sessions, tmp_path,
+def test_resume_runs_deleted_and_failed_groups_and_refuses_another_batch(sessions, tmp_path,
                                                                          monkeypatch):
     paths, _ = sessions
     out = tmp_path / "m"
@@ -151,6 +151,9 @@ def test_resume_refuses_other_settings_and_reruns_a_changed_or_missing_group(ses
     assert both.exit_code != 0 and "give one of them" in both.stderr
     none = run("batch", *paths[:2], "--out", tmp_path / "new", *FAST, "--resume")
     assert none.exit_code != 0 and "holds no batch to resume" in none.stderr
+    fewer = run("batch", paths[0], "--out", out, *FAST, "--resume")
+    assert fewer.exit_code != 0 and "also has group(s) a1, which this command does not" in \
+        fewer.stderr
 
     # a deleted model is made again, the others kept
     (out / "a1.h5").unlink()
@@ -161,17 +164,53 @@ def test_resume_refuses_other_settings_and_reruns_a_changed_or_missing_group(ses
     after = json.loads((out / "summary.json").read_text())
     assert len(counted) == 1 and after[0] == before[0] and (out / "a1.h5").exists()
 
-    # by vehicle: a group whose sessions changed (a second flight of A) runs again, B is kept
+    # a model file that is not the row's (another group's copied over it) is refused
+    (out / "a0.h5").write_bytes((out / "a1.h5").read_bytes())
+    swapped = run("batch", *paths[:2], "--out", out, *FAST, "--resume")
+    assert swapped.exit_code != 0 and "changed since the batch" in swapped.stderr
+    assert "a0 (a0.h5)" in swapped.stderr
+
+
+def test_resume_refuses_groups_whose_sessions_changed(sessions, tmp_path, monkeypatch):
+    paths, _ = sessions
     out = tmp_path / "by-vehicle"
     assert run("batch", paths[0], paths[2], "--out", out, "--group-by", "vehicle",
                *FAST).exit_code == 0
-    before = {r["sessions"][0]: r for r in json.loads((out / "summary.json").read_text())}
-    counted.clear()
     res = run("batch", *paths[:3], "--out", out, "--group-by", "vehicle", *FAST, "--resume")
+    assert res.exit_code != 0 and "changed since the batch" in res.stderr
+    assert "radio-0-80-2M-E7E7E7E7E7 (its sessions)" in res.stderr
+    # the same relative names in another folder are other files
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    for p in paths[:2]:
+        (elsewhere / p.name).write_bytes(p.read_bytes())
+    monkeypatch.chdir(paths[0].parent)
+    rel = tmp_path / "rel"
+    assert run("batch", paths[0].name, paths[1].name, "--out", rel, *FAST).exit_code == 0
+    monkeypatch.chdir(elsewhere)
+    moved = run("batch", paths[0].name, paths[1].name, "--out", rel, *FAST, "--resume")
+    assert moved.exit_code != 0 and "a0 (its sessions)" in moved.stderr
+
+
+def test_resume_runs_a_group_that_failed_again(sessions, tmp_path, monkeypatch):
+    paths, _ = sessions
+    out = tmp_path / "m"
+    real = sysid.StateSpaceModel.save
+
+    def full(self, path, *a, **k):
+        if path.name == "a1.h5":
+            raise OSError(28, "No space left on device")
+        return real(self, path, *a, **k)
+
+    monkeypatch.setattr(sysid.StateSpaceModel, "save", full)
+    res = run("batch", *paths[:2], "--out", out, *FAST)
+    assert res.exit_code == 1 and "No space left" in (out / "summary.csv").read_text()
+    monkeypatch.setattr(sysid.StateSpaceModel, "save", real)
+    counted = _count_groups(monkeypatch)
+    res = run("batch", *paths[:2], "--out", out, *FAST, "--resume")
     assert res.exit_code == 0, res.output
-    after = json.loads((out / "summary.json").read_text())
-    assert len(counted) == 1 and after[0]["sessions"] == [str(p) for p in paths[:2]]
-    assert after[1] == before[str(paths[2])]
+    assert len(counted) == 1 and (out / "a1.h5").exists()
+    assert [r["error"] for r in json.loads((out / "summary.json").read_text())] == [None, None]
 
 
 def _count_groups(monkeypatch) -> list[int]:
@@ -270,17 +309,20 @@ def test_flights_counts_sessions_not_the_experiments_in_them(tmp_path):
 
 
 @pytest.mark.parametrize("damage", [
-    lambda rows: [{**rows[0], "flights": "many"}],
-    lambda rows: [{**rows[0], "poles": [[1.0]]}],
-    lambda rows: [5],
-    lambda rows: {"rows": rows},
+    lambda rows: json.dumps([{**rows[0], "flights": "many"}]),
+    lambda rows: json.dumps([{**rows[0], "stable": "false"}]),
+    lambda rows: json.dumps([{**rows[0], "score_percent": float("nan")}]),
+    lambda rows: json.dumps([{**rows[0], "poles": [[1.0]]}]),
+    lambda rows: json.dumps([5]),
+    lambda rows: json.dumps({"rows": rows}),
+    lambda rows: "[" * 100_000,  # nested past the parser's recursion limit
 ])
 def test_resume_reads_a_damaged_summary_as_one_line(sessions, tmp_path, damage):
     paths, _ = sessions
     out = tmp_path / "m"
     assert run("batch", paths[0], "--out", out, *FAST).exit_code == 0
     summary = out / "summary.json"
-    summary.write_text(json.dumps(damage(json.loads(summary.read_text()))))
+    summary.write_text(damage(json.loads(summary.read_text())))
     res = run("batch", paths[0], "--out", out, *FAST, "--resume")
     assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
     [line] = res.stderr.strip().splitlines()
