@@ -141,7 +141,8 @@ class Link:
 
     def _on_lost(self, uri: str, message: str) -> None:
         self.lost = True
-        self._post(("lost", self.clock.now(), str(message).strip().splitlines()[0]))
+        lines = str(message).strip().splitlines()  # cflib may give no reason at all
+        self._post(("lost", self.clock.now(), lines[0] if lines else "no reason given"))
 
     # ------------------------------------------------------------------ TOC and metadata
     def toc_type(self, name: str) -> str | None:

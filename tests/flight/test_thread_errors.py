@@ -61,3 +61,20 @@ def test_our_code_raising_in_a_cflib_thread_keeps_its_traceback(monkeypatch):
     caller.add_callback(lambda: parse_plan(text="not a plan", source="x.toml"))
     _run(caller.call)
     assert seen == [PlanError]
+
+
+@pytest.mark.parametrize(("message", "reason"), [("", "no reason given"),
+                                                 ("Too many packets lost!\nmore", "Too many "
+                                                  "packets lost!")])
+def test_a_link_lost_without_a_reason_is_still_posted(message, reason):
+    """cflib's connection_lost with an empty message: the loss is posted, not an IndexError in
+    cflib's thread (which the hook above would have passed on as ours)."""
+    from types import SimpleNamespace
+
+    from groundstation.flight.clock import MonotonicClock
+    from groundstation.flight.link import Link
+
+    posted = []
+    link = SimpleNamespace(lost=False, clock=MonotonicClock(), _post=posted.append)
+    Link._on_lost(link, "radio://0/80/2M", message)
+    assert link.lost and [p[0] for p in posted] == ["lost"] and posted[0][2] == reason
