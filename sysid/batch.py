@@ -163,16 +163,18 @@ def identify_group(groups: list[list[IOData]], *, method: Method, options: Optio
                    grid: dict[str, list[int]], workers: int = 1,
                    choose_focus: bool = False,
                    choose_feedthrough: bool | Literal["open-loop"] = False,
-                   choose_method: bool = False) -> dict[str, Any]:
+                   choose_method: bool = False,
+                   progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Select and identify one group's model (:func:`sysid.auto.select`, with the focus
     chosen too when ``choose_focus`` and a direct term tried as ``choose_feedthrough`` says,
-    as ``sysid identify`` does); runs anywhere."""
+    as ``sysid identify`` does); runs anywhere (``progress(models done, models)`` only
+    here)."""
     from sysid.sweep import one_blas_thread
 
     with one_blas_thread():  # the same bits locally and on a Dask worker (sysid.sweep)
         sel = select(groups, method=method, options=options, workers=workers,
                      choose_focus=choose_focus, choose_feedthrough=choose_feedthrough,
-                     choose_method=choose_method, **grid)
+                     choose_method=choose_method, progress=progress, **grid)
     return {"model": sel.model, "past": sel.best.past, "future": sel.best.future,
             "order": sel.best.order, "focus": sel.model.provenance.get("focus"),
             "method": sel.model.provenance.get("method"),
@@ -279,6 +281,7 @@ def run_batch(
     rows: list[BatchRow] | None = None, progress: Callable[[int, int], None] | None = None,
     choose_focus: bool = False, choose_feedthrough: bool | Literal["open-loop"] = False,
     choose_method: bool = False, finished: dict[str, BatchRow] | None = None,
+    group_progress: Callable[[str, int, int], None] | None = None,
 ) -> list[BatchRow]:
     """Identify every group, saving ``out_dir/GROUP.h5`` and rewriting the summary as each
     group ends (``rows`` holds rows already known, e.g. unreadable sessions). Locally the
@@ -294,7 +297,9 @@ def run_batch(
     workers left) ends the batch with one line that counts the finished groups of ``groups``
     (kept in the summary with ``rows``, which are not counted: they never ran) and names the
     groups not run; those are no rows, they did not fail. ``finished`` holds rows of groups
-    kept from an earlier run (:func:`resumable`): those groups are not run again."""
+    kept from an earlier run (:func:`sysid.batch_resume.resumable`): those groups are not run
+    again. ``group_progress(group, models done, models)`` follows each group's selection when
+    the groups run here (not on a cluster)."""
     known = list(rows or [])
     names = list(groups)
     done_rows = {n: r for n, r in (finished or {}).items() if n in groups}
@@ -347,8 +352,10 @@ def run_batch(
                 data = load(paths)
                 row.flights = sum(1 for g in data if g)  # sessions read, not experiments
                 if client is None:
+                    report = None if group_progress is None else (
+                        lambda d, t, name=name: group_progress(name, d, t))
                     outcome: dict[str, Any] | BaseException = _group_task(
-                        data, workers=workers, **task_options)
+                        data, workers=workers, progress=report, **task_options)
                 else:
                     fut = client.submit(_group_task, data, pure=False, **task_options)
                     futures[fut] = name

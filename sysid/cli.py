@@ -334,6 +334,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
                              load=lambda paths: load_groups(paths, opts=opts),
                              method=meth, options=options, grid=grid, workers=workers,
                              client=client, progress=update,
+                             group_progress=lambda g, d, t: update(detail=f"{g}: {d}/{t} models"),
                              choose_focus=focus is None, choose_feedthrough="open-loop",
                              choose_method=method_chosen())
     except ClusterError as exc:

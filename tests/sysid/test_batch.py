@@ -327,3 +327,20 @@ def test_resume_reads_a_damaged_summary_as_one_line(sessions, tmp_path, damage):
     assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
     [line] = res.stderr.strip().splitlines()
     assert "batch.json or summary.json cannot be read" in line and "--force" in line
+
+
+def test_progress_follows_each_groups_models(sessions, tmp_path, monkeypatch):
+    """Not on a terminal, a long group says which it is and how far its selection got (here
+    every time: the heartbeat set to 0 s)."""
+    import sysid.cli_progress
+
+    paths, _ = sessions
+    monkeypatch.setattr(sysid.cli_progress, "HEARTBEAT_S", 0.0)
+    res = run("batch", *paths[:2], "--out", tmp_path / "m", "--order", "4")
+    assert res.exit_code == 0, res.output
+    lines = [ln for ln in res.stderr.splitlines() if " models" in ln]
+    assert any(ln.startswith("batch: 0/2 (0 %)") and ", a0: " in ln for ln in lines)
+    assert any(ln.startswith("batch: 1/2 (50 %)") and ", a1: " in ln for ln in lines)
+    last = [ln for ln in lines if ", a0: " in ln][-1].rsplit(", a0: ", 1)[1]
+    done, total = map(int, last.removesuffix(" models").split("/"))
+    assert 0 < done <= total

@@ -68,3 +68,23 @@ def test_work_that_grows_counts_against_the_new_total() -> None:
     assert "12/20" in bar.getvalue()
     with progress("sweep", total=4, stream=io.StringIO(), quiet=True) as update:
         update(5, 8)  # quiet takes the same arguments
+
+
+def test_a_long_unit_of_work_says_where_it_is_every_heartbeat() -> None:
+    """A batch's group that takes minutes: not on a terminal, a line with the detail once the
+    heartbeat passed without a line (counted on the given clock), none more often."""
+    out, now = io.StringIO(), [0.0]
+    with progress("batch", total=4, stream=out, heartbeat_s=30.0, clock=lambda: now[0]) as update:
+        for k in range(1, 101):  # group 1's models, one a second
+            now[0] = float(k)
+            update(detail=f"a0: {k}/100 models")
+        update(1)
+    lines = out.getvalue().splitlines()
+    assert lines[:3] == ["batch: 0/4 (0 %), 30 s, a0: 30/100 models",
+                         "batch: 0/4 (0 %), 60 s, a0: 60/100 models",
+                         "batch: 0/4 (0 %), 90 s, a0: 90/100 models"]
+    assert lines[3].startswith("batch: 1/4 (25 %), 100 s, eta")
+    tty = _Tty()
+    with progress("batch", total=4, stream=tty) as update:
+        update(detail="a0: 3/100 models")
+    assert "batch (a0: 3/100 models)" in tty.getvalue()
