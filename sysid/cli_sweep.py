@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -147,7 +148,7 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
                  f"{sel.tolerance:.2f} points ({sel.tolerance_basis})")
               + " of the best stable score (score = mean fit with each channel floored at 0 %)")
     for note in (sel.feedback.describe() if sel.feedback else "", sel.focus_note,
-                 sel.feedthrough_note, sel.method_note):
+                 sel.feedthrough_note, sel.method_note, slow_mode_note(sel)):
         if note:
             con.print(note)
     for w in sel.warnings:
@@ -156,6 +157,34 @@ def print_selection(con: Console, sel: Selection, *, top: int = TOP) -> None:
     if bad:
         con.print(f"[yellow]no candidate predicts {', '.join(bad)} (fit <= 0 %): consider "
                   "dropping it from --outputs[/]")
+
+
+def slowest_time_constant(sel: Selection) -> float | None:
+    """The chosen model's slowest time constant ``-dt / ln|z|``, seconds (None without poles;
+    ``inf`` for a pole on the unit circle)."""
+    poles = np.abs(sel.model.poles())
+    if not poles.size:
+        return None
+    slowest = float(np.max(poles))
+    return math.inf if slowest >= 1.0 else -sel.model.dt / math.log(max(slowest, 1e-300))
+
+
+def slow_mode_note(sel: Selection) -> str:
+    """What the held-out score does not check: the chosen model's slowest mode when it is
+    slower than the scoring windows (a near-integrating plant, a slow drift). The score
+    simulates each window from its own fitted initial state, so it sees the model's response
+    above about 1 / window Hz and not its gain below: on closed-loop data the measured input
+    is the controller's answer to the integrated disturbance, and models whose low-frequency
+    gains differ several times score alike (the true plant may score below a wrong one).
+    Empty when the mode is faster than the windows."""
+    tau, window = slowest_time_constant(sel), sel.window_s
+    if tau is None or window is None or tau <= window:
+        return ""
+    slow = "an integrator" if math.isinf(tau) else f"time constant {tau:.3g} s"
+    return (f"slowest mode: {slow}, longer than the {window:.3g} s scoring windows: the "
+            f"held-out score checks the model above about {1 / window:.2g} Hz, not its gain "
+            "below (in closed loop the data may not fix it); `sysid compare --window-s` with "
+            "longer windows on another flight shows more there")
 
 
 def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
@@ -173,7 +202,14 @@ def selection_json(sel: Selection, *, top: int = TOP) -> dict[str, Any]:
                 "p_values": dict(zip(sel.feedback.input_names,
                                      map(float, sel.feedback.p_values), strict=True)),
                 "note": sel.feedback.describe()},
+            "slowest_time_constant_s": _json_number(slowest_time_constant(sel)),
+            "score_window_s": sel.window_s, "slow_mode_note": slow_mode_note(sel),
             "candidates": [r.to_record() for r in sel.top(top)]}
+
+
+def _json_number(value: float | None) -> float | str | None:
+    """A number for JSON: ``"inf"`` for infinity (JSON has none)."""
+    return "inf" if value is not None and math.isinf(value) else value
 
 
 def sweep_command(*, session: Path, method: Method, options: Options, choose_focus: bool,
