@@ -71,7 +71,11 @@ def main() -> int:
     if not CRAZYPAD.is_dir():
         print(f"skipped: {CRAZYPAD} not present")
         return 0
-    folder = Path(tempfile.mkdtemp(prefix="crazypad-"))
+    with tempfile.TemporaryDirectory(prefix="crazypad-") as tmp:  # the imports, removed after
+        return _figures(Path(tmp))
+
+
+def _figures(folder: Path) -> int:
     paths = [usd_to_session(source=CRAZYPAD / n, out=folder / f"{n}.h5")
              for n in ("controller_E8_log00", "controller_E8_log01")]
     try:
