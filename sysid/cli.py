@@ -269,8 +269,9 @@ def sweep_cmd(session: Path, method: str, pasts: str | None, futures: str | None
 @session_options
 @FORCE_OPTION
 @click.option("--resume", is_flag=True,
-              help="Finish an interrupted batch in --out: run only the groups its summary does "
-                   "not hold (same sessions and options; finished groups kept).")
+              help="Finish an interrupted batch in --out: run the groups it did not identify "
+                   "(not run, or failed), keeping the others; the same sessions and options, "
+                   "or it refuses.")
 @JSON_OPTION
 def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: str,
           order: int | None, past: int | None, future: int | None, workers: int,
@@ -286,7 +287,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     its reason; the batch goes on, and exits with 1 when some groups failed (2 when all did).
     The summary is rewritten as each group finishes: Ctrl-C keeps the finished groups, and so
     does a --scheduler cluster that fails mid-run (one line names the groups not run); the
-    same command with --resume then runs only those.
+    same command with --resume then runs those (and any that failed).
 
     \b
     Examples:
