@@ -129,7 +129,8 @@ class SimVehicle:
         self._stop_requested = False     # a CRTP emergency stop: until a restart
         self._stop_watchdog_ms = -1      # the emergency-stop watchdog's last notification
         self._low_s = 0.0                # seconds the battery has been below pm.lowVoltage
-        self.stop_count = 0
+        self.stop_count = 0              # stops: stop setpoints and the supervisor's locks
+        self.stop_setpoints = 0          # stop setpoints received (the ground station's)
         self._console: list[str] = [
             "SYS: ----------------------------\n",
             "SYS: Crazyflie 2.1 (simulated by groundstation.sim) is up and running!\n",
@@ -249,6 +250,7 @@ class SimVehicle:
         """The stop setpoint: motors off."""
         self.commander.stop(now_ms=self._tick)
         self.stop_count += 1
+        self.stop_setpoints += 1
 
     def commander_notify_stop(self, *, remain_valid_ms: int) -> None:
         """Hand priority back; the last setpoint stays valid for ``remain_valid_ms``."""

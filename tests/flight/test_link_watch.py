@@ -313,7 +313,9 @@ def test_a_link_lost_just_before_the_landing_stop_is_no_complete_flight(sim_uri,
     cut = CutAfterTheLastSetpoint()
     result = fly_plan(plan="hover-check", out=tmp_path, uri=uri, listeners=[cut])
     assert cut.done and result.aborted and result.cause.startswith("link lost"), result.cause
-    assert gsim.instance(uri).vehicle.stop_count == 0  # indeed, the stop never arrived
+    # indeed, the stop never arrived (the vehicle's own watchdog may have stopped it since: 2 s
+    # of its time after the link closed, 50-100 ms of wall time flat out, a count of stop_count)
+    assert gsim.instance(uri).vehicle.stop_setpoints == 0
 
 
 def test_a_vehicle_locked_in_flight_is_never_reported_landed(sim_uri, tmp_path):
