@@ -98,9 +98,14 @@ def test_an_aborted_flight_restores_them_after_the_stop(sim_uri, tmp_path):
 def test_a_lost_link_leaves_them_set_and_says_so(sim_uri, tmp_path):
     """No link after the flight: nothing can be written back; a warning names the values the
     firmware keeps until it restarts (they were never left unrecorded)."""
-    uri = sim_uri(cut_at=3.0)
-    result = fly_plan(plan=_plan(), out=tmp_path, uri=uri)
-    assert result.aborted and "link lost" in result.cause
+    uri = sim_uri()
+
+    def cut(k: int) -> None:  # in flight, whatever the connect and the writes took (a cut at a
+        if k == 10:  # fixed simulated time could come before them on a busy host)
+            gsim.instance(uri).cut_link()
+
+    result = fly_plan(plan=_plan(), out=tmp_path, uri=uri, tick_hook=cut)
+    assert result.aborted and "link lost" in result.cause, result.cause
     events = [e for e in check_closed_with_stop(result).events()
               if e.text.startswith("parameters not restored")]
     assert len(events) == 1 and events[0].level == "warning" and events[0].source == "safety"
