@@ -9,7 +9,6 @@ and progress are for people (progress goes to stderr).
 from __future__ import annotations
 
 import contextlib
-import importlib.metadata
 import json
 import logging
 import sys
@@ -66,19 +65,12 @@ from sysid.cli_support import (
 from sysid.cli_sweep import sweep_command
 from sysid.errors import ClusterError, DataError, ParameterError
 from sysid.model import load_model
+from sysid.realize import software_versions
 from sysid.session_io import read_metadata
 
 __all__ = ["main", "parse_grid", "parse_window", "pole_table"]
 
 log = logging.getLogger(__name__)
-
-
-def _version() -> str:
-    """This sysid's version (``unknown`` when it runs from a checkout not installed)."""
-    try:
-        return importlib.metadata.version("cf-sysid")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -314,7 +306,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     check_model_paths(groups, out_dir=out_dir, rows=bad)  # never over an input session
     config = {"group_by": group_by, "method": None if method_chosen() else method,
               "order": order, "past": past, "future": future, "focus": focus,
-              "stability": stability, **opts, "sysid_version": _version()}
+              "stability": stability, **opts, "sysid_version": software_versions()["cf-sysid"]}
     finished = resumable(out_dir, groups, config) if resume else {}
     if resume:
         log.info("resuming %s: %d of %d group(s) finished", out_dir, len(finished), len(groups))
@@ -345,7 +337,7 @@ def batch(sessions: tuple[Path, ...], out_dir: Path, group_by: GroupBy, method: 
     except KeyboardInterrupt:
         unread = {r.group for r in bad}  # rows from the start: they did not run
         ended = {r["group"] for r in json.loads(summary.read_text())
-                    if r["group"] in groups and r["group"] not in unread} \
+                 if r["group"] in groups and r["group"] not in unread} \
             if summary.exists() else set()
         left = [name for name in groups if name not in ended]
         click.echo(f"interrupted: {len(ended)} finished group(s) kept in {summary} and "

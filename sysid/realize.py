@@ -59,6 +59,7 @@ __all__ = [
     "lstsq_coords",
     "predictor_fit",
     "refine_predictor",
+    "software_versions",
 ]
 
 log = logging.getLogger(__name__)
@@ -366,7 +367,7 @@ def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
     """
     su_inv = 1.0 / u_scale
     prov = dict(provenance)
-    prov.setdefault("software", _software())
+    prov.setdefault("software", software_versions())
     prov["scaling"] = {"u_scale": u_scale.tolist(), "y_scale": y_scale.tolist(),
                        "note": "identification ran on channels divided by these; undone"}
     model = StateSpaceModel(
@@ -380,14 +381,15 @@ def build_model(*, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray,
 
 
 @functools.cache
-def _software_versions() -> tuple[tuple[str, str], ...]:
+def _cached_versions() -> tuple[tuple[str, str], ...]:
     return tuple(_software_uncached().items())
 
 
-def _software() -> dict[str, str]:
-    """Versions for the provenance (looked up once: a metadata lookup costs milliseconds,
-    which a grid of hundreds of models would pay every time)."""
-    return dict(_software_versions())
+def software_versions() -> dict[str, str]:
+    """``{"cf-sysid": ..., "numpy": ..., "scipy": ...}``: versions for the provenance (looked
+    up once: a metadata lookup costs milliseconds, which a grid of hundreds of models would pay
+    every time)."""
+    return dict(_cached_versions())
 
 
 def _software_uncached() -> dict[str, str]:

@@ -14,7 +14,6 @@ callback of ours that a cflib thread ran)."""
 
 from __future__ import annotations
 
-import importlib
 import logging
 import sys
 import threading
@@ -37,8 +36,8 @@ def _in_cflib(tb: TracebackType | None) -> bool:
     import cflib
 
     root = Path(cflib.__file__).resolve().parent
-    ours = [Path(importlib.import_module(name).__file__ or "").resolve().parent
-            for name in _OURS if name in sys.modules]
+    ours = [Path(file).resolve().parent for name in _OURS
+            if (file := getattr(sys.modules.get(name), "__file__", None))]
     started = None
     while tb is not None:
         path = Path(tb.tb_frame.f_code.co_filename).resolve()
